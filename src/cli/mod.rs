@@ -1,0 +1,154 @@
+//! The command line: one file per command turns clap arguments into library calls and prints results.
+//!
+//! Exit codes, decided in one place ([`main`]): 0 success; 1 the command finished but some items failed
+//! (invalid traces skipped, a stage failed at run time); 2 bad input or configuration (a malformed file,
+//! an unknown option value, an invalid pipeline); broken pipes exit quietly with 0.
+//!
+//! The environment is read here only: `ANNOTRACE_LOG` (log filter, e.g. `debug`) and `ANNOTRACE_FAULT`
+//! (a test switch that stops a run on purpose, see `docs/pipelines.md`).
+
+mod export;
+mod import;
+mod progress;
+mod query;
+mod run;
+mod stages;
+mod tables;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// An error with the exit code it maps to.
+#[derive(Debug)]
+pub struct CliError {
+    pub code: u8,
+    pub error: anyhow::Error,
+}
+
+impl CliError {
+    /// Bad input or configuration (exit 2).
+    pub fn input(error: impl Into<anyhow::Error>) -> Self {
+        CliError {
+            code: 2,
+            error: error.into(),
+        }
+    }
+    /// A run-time failure (exit 1).
+    pub fn failed(error: impl Into<anyhow::Error>) -> Self {
+        CliError {
+            code: 1,
+            error: error.into(),
+        }
+    }
+}
+
+/// Every command returns the exit code it wants on success (0, or 1 for partial failure).
+pub type CliResult = Result<u8, CliError>;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "annotrace",
+    version,
+    about = "Discover high-level patterns in physics simulation traces",
+    long_about = "annotrace stores simulation traces as Parquet tables in a run folder, runs pipelines of stages \
+                  over them, and answers SQL over the results.\n\nExit codes: 0 success, 1 finished with failed \
+                  items, 2 bad input or configuration."
+)]
+struct Cli {
+    /// Print only errors (no progress, no summaries on stderr).
+    #[arg(long, short, global = true)]
+    quiet: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Run a pipeline file (resumes where an interrupted run stopped; skips finished stages).
+    Run(run::Args),
+    /// List the stage kinds a pipeline can use, with their parameters.
+    Stages(stages::Args),
+    /// Import traces in the paper's JSON format into a run.
+    Import(import::Args),
+    /// Write one trace of a run back in the paper's JSON format.
+    Export(export::Args),
+    /// Run SQL over a run's tables.
+    Query(query::Args),
+    /// List a run's tables with row counts and schemas.
+    Tables(tables::Args),
+}
+
+/// Parses arguments, runs the command, prints errors and returns the exit code.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    init_logging(cli.quiet);
+    let result = match cli.command {
+        Command::Run(a) => run::run(a, cli.quiet),
+        Command::Stages(a) => stages::run(a),
+        Command::Import(a) => import::run(a, cli.quiet),
+        Command::Export(a) => export::run(a),
+        Command::Query(a) => query::run(a),
+        Command::Tables(a) => tables::run(a),
+    };
+    match result {
+        Ok(code) => ExitCode::from(code),
+        Err(e) => {
+            if is_broken_pipe(&e.error) {
+                return ExitCode::SUCCESS;
+            }
+            eprintln!("error: {:#}", e.error);
+            ExitCode::from(e.code)
+        }
+    }
+}
+
+fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}
+
+fn init_logging(quiet: bool) {
+    let default = if quiet { "error" } else { "warn" };
+    let filter = tracing_subscriber::EnvFilter::try_from_env("ANNOTRACE_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .try_init();
+}
+
+/// The fault plan from `ANNOTRACE_FAULT`, for tests of resumption.
+pub(crate) fn fault_from_env() -> Result<Option<annotrace::pipeline::FaultPlan>, CliError> {
+    match std::env::var("ANNOTRACE_FAULT") {
+        Ok(s) if !s.is_empty() => s
+            .parse()
+            .map(Some)
+            .map_err(|e: String| CliError::input(anyhow::anyhow!("ANNOTRACE_FAULT: {e}"))),
+        _ => Ok(None),
+    }
+}
+
+/// Maps a runner error to an exit code: bad input or configuration is 2, anything else 1.
+pub(crate) fn run_error(e: annotrace::pipeline::RunError) -> CliError {
+    use annotrace::pipeline::{RunError, StageError};
+    let code = match &e {
+        RunError::Spec(_) | RunError::UnknownStage { .. } => 2,
+        RunError::Stage {
+            source: StageError::InvalidTrace(_) | StageError::Source(_) | StageError::Input(_),
+            ..
+        } => 2,
+        RunError::Stage {
+            source: StageError::Query(_),
+            ..
+        } => 2,
+        _ => 1,
+    };
+    CliError {
+        code,
+        error: e.into(),
+    }
+}

@@ -1,0 +1,43 @@
+//! `annotrace tables`: a run's tables with row counts, file counts and schemas.
+
+use std::path::PathBuf;
+
+use annotrace::query::RunQuery;
+use annotrace::store::RunDir;
+
+use super::{CliError, CliResult};
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Run folder.
+    #[arg(long)]
+    run: PathBuf,
+    /// Only names and row counts, no schemas.
+    #[arg(long)]
+    brief: bool,
+}
+
+pub fn run(args: Args) -> CliResult {
+    let run = RunDir::new(&args.run);
+    if !run.root().is_dir() {
+        return Err(CliError::input(anyhow::anyhow!(
+            "{}: no such run folder",
+            run.root().display()
+        )));
+    }
+    let q = RunQuery::open(&run).map_err(CliError::failed)?;
+    for t in q.tables().map_err(CliError::failed)? {
+        println!("{}: {} rows in {} file(s)", t.name, t.rows, t.files);
+        if !args.brief {
+            for f in t.schema.fields() {
+                println!(
+                    "  {:<20} {}{}",
+                    f.name(),
+                    f.data_type(),
+                    if f.is_nullable() { "" } else { " not null" }
+                );
+            }
+        }
+    }
+    Ok(0)
+}

@@ -1,0 +1,20 @@
+//! annotrace discovers high-level patterns in physics simulation traces.
+//!
+//! A simulator (or an import) produces **traces**: dense object states plus a sparse event log, stored
+//! as Parquet tables in a **run directory**. Pipelines of **stages** read tables and write tables; SQL
+//! over a run's tables makes the paper's figures and tables.
+//!
+//! Modules, bottom to top (each depends only on those above it in this list):
+//! - [`trace`]: the trace model, its Arrow schemas and the paper's JSON format;
+//! - [`store`]: the run directory on disk — atomic files, Parquet datasets, staging and commit;
+//! - [`query`]: DataFusion over a run's tables, and result formats (table, CSV, Markdown, LaTeX, JSON);
+//! - [`pipeline`]: pipeline files, the stage registry, fingerprints, the runner and its manifest.
+#![warn(missing_docs)]
+
+pub mod pipeline;
+pub mod query;
+pub mod store;
+pub mod trace;
+
+/// The crate version recorded in manifests and stage fingerprints.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");

@@ -1,0 +1,7 @@
+//! The `annotrace` command: parses arguments and hands them to `cli`.
+
+mod cli;
+
+fn main() -> std::process::ExitCode {
+    cli::main()
+}

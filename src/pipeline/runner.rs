@@ -1,0 +1,528 @@
+//! The runner: the only place that orders stages, compares fingerprints, skips finished work, resumes
+//! interrupted stages and writes `manifest.json`.
+//!
+//! For each stage, in dependency order:
+//! 1. its fingerprint is the SHA-256 of its kind, parameters (defaults filled, keys sorted), its inputs'
+//!    fingerprints, the annotrace version and what the stage adds ([`Stage::fingerprint_extra`]);
+//! 2. a stage whose manifest record is `finished` with the same fingerprint and whose outputs all exist is
+//!    skipped (unless `--force` names it or a stage upstream of it);
+//! 3. a stage recorded as `running` with the same fingerprint was interrupted: its finished shards are
+//!    kept and the rest is redone; any other earlier output of the stage is deleted first;
+//! 4. the stage runs, writing into its staging area; then the manifest says `committing` with the list of
+//!    files, the files are moved into place, and the manifest says `finished`.
+//!
+//! NOTE: the manifest is written before and after every state change, so a run killed at any moment
+//! resumes with the same command and never reads a partial file.
+
+use std::collections::BTreeMap;
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicUsize;
+use std::time::Instant;
+
+use serde_json::{Map, Value};
+use sha2::{Digest, Sha256};
+
+use super::SpecError;
+use super::manifest::{Manifest, PipelineInfo, StageRecord, StageStatus, now};
+use super::progress::Progress;
+use super::spec::{PipelineSpec, hex};
+use super::stage::{FaultPlan, Stage, StageContext, StageError};
+use crate::store::{RunDir, StoreError, remove_files};
+
+/// Options of one `annotrace run`.
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Run folder (default: the pipeline's).
+    pub run_dir: Option<PathBuf>,
+    /// Rerun this stage and everything downstream of it even if cached.
+    pub force: Option<String>,
+    /// Run only this stage and what it depends on.
+    pub until: Option<String>,
+    /// Stop on purpose at a point (tests of resumption).
+    pub fault: Option<FaultPlan>,
+    /// Record the pipeline as the run's pipeline in the manifest (off for one-off CLI commands).
+    pub record_pipeline: bool,
+}
+
+/// A run could not complete.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RunError {
+    /// The pipeline file is invalid.
+    #[error(transparent)]
+    Spec(#[from] SpecError),
+    /// `--force` or `--until` names no stage.
+    #[error("{option} {id:?}: no such stage (stages: {known})")]
+    UnknownStage {
+        /// `--force` or `--until`.
+        option: &'static str,
+        /// The id given.
+        id: String,
+        /// The pipeline's stage ids.
+        known: String,
+    },
+    /// Another process holds the run folder.
+    #[error("{}: another annotrace process is using this run folder", run.display())]
+    Locked {
+        /// The run folder.
+        run: PathBuf,
+    },
+    /// The run folder could not be read or written.
+    #[error(transparent)]
+    Store(#[from] StoreError),
+    /// A stage failed.
+    #[error("stage {id} failed")]
+    Stage {
+        /// The stage.
+        id: String,
+        /// Why.
+        #[source]
+        source: StageError,
+    },
+}
+
+/// What the runner will do with a stage.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Action {
+    /// Finished with the same fingerprint: skipped.
+    Cached,
+    /// Will run, for this reason.
+    Run(&'static str),
+    /// Not selected (`--until`).
+    Skipped,
+}
+
+/// One line of `annotrace run --explain`.
+#[derive(Clone, Debug)]
+pub struct PlannedStage {
+    /// Stage id.
+    pub id: String,
+    /// Kind.
+    pub kind: &'static str,
+    /// Fingerprint.
+    pub fingerprint: String,
+    /// Inputs.
+    pub inputs: Vec<String>,
+    /// What will happen.
+    pub action: Action,
+}
+
+impl std::fmt::Display for PlannedStage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let action = match &self.action {
+            Action::Cached => "cached".to_string(),
+            Action::Run(why) => format!("run ({why})"),
+            Action::Skipped => "not selected".to_string(),
+        };
+        write!(
+            f,
+            "{:<24} {:<8} {}  {:<28}",
+            self.id,
+            self.kind,
+            &self.fingerprint[..12],
+            action
+        )?;
+        if !self.inputs.is_empty() {
+            write!(f, " <- {}", self.inputs.join(", "))?;
+        }
+        Ok(())
+    }
+}
+
+/// What happened to one stage.
+#[derive(Clone, Debug)]
+pub struct StageReport {
+    /// Stage id.
+    pub id: String,
+    /// Whether it was skipped as cached.
+    pub cached: bool,
+    /// Rows written per table (of the run that produced the outputs).
+    pub rows: BTreeMap<String, u64>,
+    /// The stage's summary.
+    pub summary: Value,
+    /// Wall time in seconds (0 when cached).
+    pub seconds: f64,
+}
+
+/// The outcome of a run.
+#[derive(Clone, Debug)]
+pub struct RunReport {
+    /// The run folder.
+    pub run_dir: PathBuf,
+    /// Stages in the order they were considered.
+    pub stages: Vec<StageReport>,
+}
+
+/// An error and its causes on one line, as `{:#}` prints them.
+pub fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut out = e.to_string();
+    let mut cur = e.source();
+    while let Some(s) = cur {
+        out.push_str(": ");
+        out.push_str(&s.to_string());
+        cur = s.source();
+    }
+    out
+}
+
+/// Sorts object keys recursively so that equal parameters hash equally.
+fn canonical(v: &Value) -> Value {
+    match v {
+        Value::Object(m) => {
+            let mut keys: Vec<&String> = m.keys().collect();
+            keys.sort();
+            Value::Object(
+                keys.into_iter()
+                    .map(|k| (k.clone(), canonical(&m[k])))
+                    .collect::<Map<_, _>>(),
+            )
+        }
+        Value::Array(a) => Value::Array(a.iter().map(canonical).collect()),
+        other => other.clone(),
+    }
+}
+
+struct Built {
+    stages: Vec<Box<dyn Stage>>,
+    fingerprints: BTreeMap<String, String>,
+    order: Vec<usize>,
+}
+
+fn build(spec: &PipelineSpec) -> Result<Built, RunError> {
+    let order = spec.order()?;
+    let mut stages: Vec<Option<Box<dyn Stage>>> = (0..spec.stages.len()).map(|_| None).collect();
+    let mut fingerprints = BTreeMap::new();
+    for &i in &order {
+        let def = &spec.stages[i];
+        let stage = (def.kind.build)(def, spec).map_err(|e| SpecError::Invalid {
+            file: spec.file.clone(),
+            line: e.param.map_or(def.line, |p| def.line_of(p)),
+            message: format!("stage \"{}\": {}", def.id, e.message),
+        })?;
+        let extra = stage
+            .fingerprint_extra()
+            .map_err(|source| RunError::Stage {
+                id: def.id.clone(),
+                source,
+            })?;
+        let material = serde_json::json!({
+            "kind": def.kind.name,
+            "params": canonical(&Value::Object(def.params.clone())),
+            "inputs": def.inputs.iter().map(|i| fingerprints.get(i).cloned().unwrap_or_default()).collect::<Vec<String>>(),
+            "version": crate::VERSION,
+            "extra": canonical(&extra),
+        });
+        fingerprints.insert(
+            def.id.clone(),
+            hex(&Sha256::digest(material.to_string().as_bytes())),
+        );
+        stages[i] = Some(stage);
+    }
+    Ok(Built {
+        stages: stages
+            .into_iter()
+            .map(|s| s.expect("every stage is built"))
+            .collect(),
+        fingerprints,
+        order,
+    })
+}
+
+fn check_stage_option(
+    spec: &PipelineSpec,
+    option: &'static str,
+    id: &Option<String>,
+) -> Result<(), RunError> {
+    match id {
+        Some(id) if spec.stage(id).is_none() => Err(RunError::UnknownStage {
+            option,
+            id: id.clone(),
+            known: spec
+                .stages
+                .iter()
+                .map(|s| s.id.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
+        }),
+        _ => Ok(()),
+    }
+}
+
+fn plan_with(
+    spec: &PipelineSpec,
+    opts: &RunOptions,
+    built: &Built,
+    run: &RunDir,
+    manifest: &Manifest,
+) -> Vec<PlannedStage> {
+    let selected = opts.until.as_ref().map(|u| spec.upstream(u));
+    let forced = opts
+        .force
+        .as_ref()
+        .map(|f| spec.downstream(f))
+        .unwrap_or_default();
+    built
+        .order
+        .iter()
+        .map(|&i| {
+            let def = &spec.stages[i];
+            let fp = built.fingerprints[&def.id].clone();
+            let action = if selected.as_ref().is_some_and(|s| !s.contains(&def.id)) {
+                Action::Skipped
+            } else if forced.contains(&def.id) {
+                Action::Run("forced")
+            } else {
+                match manifest.stages.get(&def.id) {
+                    None => Action::Run("new"),
+                    Some(r) if r.fingerprint != fp => Action::Run("changed"),
+                    Some(r) => match r.status {
+                        StageStatus::Finished if manifest.outputs_present(run, &def.id) => {
+                            Action::Cached
+                        }
+                        StageStatus::Finished => Action::Run("outputs missing"),
+                        StageStatus::Running | StageStatus::Committing => Action::Run("resume"),
+                        StageStatus::Failed => Action::Run("failed before"),
+                    },
+                }
+            };
+            PlannedStage {
+                id: def.id.clone(),
+                kind: def.kind.name,
+                fingerprint: fp,
+                inputs: def.inputs.clone(),
+                action,
+            }
+        })
+        .collect()
+}
+
+/// What `run` would do, without doing it.
+pub fn explain(
+    spec: &PipelineSpec,
+    opts: &RunOptions,
+) -> Result<(PathBuf, Vec<PlannedStage>), RunError> {
+    check_stage_option(spec, "--force", &opts.force)?;
+    check_stage_option(spec, "--until", &opts.until)?;
+    let built = build(spec)?;
+    let run = RunDir::new(
+        opts.run_dir
+            .clone()
+            .unwrap_or_else(|| spec.default_run_dir()),
+    );
+    let manifest = Manifest::load(&run)?.unwrap_or_default();
+    let plan = plan_with(spec, opts, &built, &run, &manifest);
+    Ok((run.root().to_path_buf(), plan))
+}
+
+fn relative(run: &RunDir, path: &Path) -> String {
+    path.strip_prefix(run.root())
+        .unwrap_or(path)
+        .to_string_lossy()
+        .replace('\\', "/")
+}
+
+/// Runs a pipeline.
+pub fn run(
+    spec: &PipelineSpec,
+    opts: &RunOptions,
+    progress: &dyn Progress,
+) -> Result<RunReport, RunError> {
+    check_stage_option(spec, "--force", &opts.force)?;
+    check_stage_option(spec, "--until", &opts.until)?;
+    let built = build(spec)?;
+    let run = RunDir::new(
+        opts.run_dir
+            .clone()
+            .unwrap_or_else(|| spec.default_run_dir()),
+    );
+    let existed = run.root().exists();
+    fs::create_dir_all(run.root()).map_err(|e| StoreError::Io {
+        path: run.root().to_path_buf(),
+        source: e,
+    })?;
+    let lock_path = run.root().join(".lock");
+    let lock = fs::File::create(&lock_path).map_err(|e| StoreError::Io {
+        path: lock_path.clone(),
+        source: e,
+    })?;
+    if lock.try_lock().is_err() {
+        return Err(RunError::Locked {
+            run: run.root().to_path_buf(),
+        });
+    }
+
+    let result = run_locked(spec, opts, progress, &built, &run);
+    if result.is_err() && !existed {
+        // A run folder this invocation created and that holds no finished stage is removed whole, so a
+        // failed first import leaves nothing behind.
+        let finished = Manifest::load(&run)
+            .ok()
+            .flatten()
+            .is_some_and(|m| m.stages.values().any(|s| s.status == StageStatus::Finished));
+        if !finished {
+            drop(lock);
+            let _ = fs::remove_dir_all(run.root());
+        }
+    }
+    result
+}
+
+fn run_locked(
+    spec: &PipelineSpec,
+    opts: &RunOptions,
+    progress: &dyn Progress,
+    built: &Built,
+    run: &RunDir,
+) -> Result<RunReport, RunError> {
+    let mut manifest = Manifest::load(run)?.unwrap_or_default();
+    if opts.record_pipeline {
+        manifest.pipeline = Some(PipelineInfo {
+            name: spec.name.clone(),
+            file: spec.file.to_string_lossy().into_owned(),
+            sha256: spec.sha256.clone(),
+            seed: spec.seed,
+        });
+    }
+    let plan = plan_with(spec, opts, built, run, &manifest);
+    let mut reports = Vec::new();
+    for (planned, &i) in plan.iter().zip(&built.order) {
+        let def = &spec.stages[i];
+        match planned.action {
+            Action::Skipped => continue,
+            Action::Cached => {
+                progress.stage_cached(&def.id);
+                let r = &manifest.stages[&def.id];
+                reports.push(StageReport {
+                    id: def.id.clone(),
+                    cached: true,
+                    rows: r.rows.clone(),
+                    summary: r.summary.clone(),
+                    seconds: 0.0,
+                });
+                continue;
+            }
+            Action::Run(_) => {}
+        }
+        let staging = run.staging(&def.id);
+        let previous = manifest.stages.get(&def.id).cloned();
+        let resuming = previous.as_ref().is_some_and(|p| {
+            p.fingerprint == planned.fingerprint && planned.action == Action::Run("resume")
+        });
+        if let Some(prev) = previous
+            .as_ref()
+            .filter(|p| resuming && p.status == StageStatus::Committing)
+        {
+            // Killed while moving files into place: finish the move.
+            staging.commit()?;
+            let mut rec = prev.clone();
+            rec.status = StageStatus::Finished;
+            rec.finished = Some(now());
+            manifest.stages.insert(def.id.clone(), rec.clone());
+            manifest.save(run)?;
+            progress.stage_finished(&def.id, "resumed commit");
+            reports.push(StageReport {
+                id: def.id.clone(),
+                cached: false,
+                rows: rec.rows,
+                summary: rec.summary,
+                seconds: 0.0,
+            });
+            continue;
+        }
+        if resuming {
+            let dropped = staging.discard_unfinished()?;
+            progress.note(
+                &def.id,
+                &format!("resuming: finished shards kept, {dropped} partial file(s) dropped"),
+            );
+        } else {
+            if let Some(prev) = &previous {
+                let files: Vec<PathBuf> = prev.outputs.iter().map(|o| run.root().join(o)).collect();
+                remove_files(&files)?;
+            }
+            staging.remove()?;
+        }
+
+        let started = Instant::now();
+        let mut record = StageRecord {
+            kind: def.kind.name.to_string(),
+            status: StageStatus::Running,
+            fingerprint: planned.fingerprint.clone(),
+            params: Value::Object(def.params.clone()),
+            inputs: def.inputs.clone(),
+            seed: spec.seed,
+            annotrace_version: crate::VERSION.to_string(),
+            started: Some(now()),
+            finished: None,
+            seconds: None,
+            rows: BTreeMap::new(),
+            outputs: Vec::new(),
+            summary: Value::Null,
+            error: None,
+        };
+        manifest.stages.insert(def.id.clone(), record.clone());
+        manifest.save(run)?;
+
+        let ctx = StageContext {
+            run,
+            stage_id: &def.id,
+            seed: spec.seed,
+            project_dir: &spec.project_dir,
+            staging: staging.clone(),
+            progress,
+            fault: opts.fault.as_ref(),
+            shards_finished: AtomicUsize::new(0),
+            shards_started: AtomicUsize::new(0),
+        };
+        progress.stage_started(&def.id, def.kind.name, None);
+        let output = match built.stages[i].run(&ctx) {
+            Ok(out) => out,
+            Err(source) => {
+                staging.remove()?;
+                record.status = StageStatus::Failed;
+                record.error = Some(error_chain(&source));
+                record.finished = Some(now());
+                manifest.stages.insert(def.id.clone(), record);
+                manifest.save(run)?;
+                return Err(RunError::Stage {
+                    id: def.id.clone(),
+                    source,
+                });
+            }
+        };
+
+        // NOTE: the file list is recorded before the move, so that a crash during the move can finish it.
+        let mut outputs: Vec<String> = staging
+            .pending()?
+            .iter()
+            .map(|p| relative(run, p))
+            .collect();
+        outputs.extend(output.files.iter().map(|p| relative(run, p)));
+        record.status = StageStatus::Committing;
+        record.outputs = outputs;
+        record.rows = output.rows.clone();
+        record.summary = output.summary.clone();
+        manifest.stages.insert(def.id.clone(), record.clone());
+        manifest.save(run)?;
+        staging.commit()?;
+        let seconds = started.elapsed().as_secs_f64();
+        record.status = StageStatus::Finished;
+        record.finished = Some(now());
+        record.seconds = Some(seconds);
+        manifest.stages.insert(def.id.clone(), record);
+        manifest.save(run)?;
+        progress.stage_finished(&def.id, &output.line);
+        reports.push(StageReport {
+            id: def.id.clone(),
+            cached: false,
+            rows: output.rows,
+            summary: output.summary,
+            seconds,
+        });
+    }
+    Ok(RunReport {
+        run_dir: run.root().to_path_buf(),
+        stages: reports,
+    })
+}

@@ -1,0 +1,230 @@
+//! The [`Stage`] trait every stage kind implements, the context a stage runs in, and what it returns.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use serde_json::Value;
+
+use super::progress::Progress;
+use crate::query::QueryError;
+use crate::store::{RunDir, Staging, StoreError};
+use crate::trace::json::{SourceError, TraceError};
+
+/// A stage of a pipeline, built from its validated parameters.
+pub trait Stage: Send + Sync {
+    /// Material beyond kind, parameters and inputs that decides whether cached output is still valid
+    /// (input files' sizes and times, the text of an SQL file). Default: nothing.
+    fn fingerprint_extra(&self) -> Result<Value, StageError> {
+        Ok(Value::Null)
+    }
+
+    /// Does the work: writes tables through `ctx.staging()` (committed by the runner) or files under
+    /// `exports/` (listed in the output).
+    fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError>;
+}
+
+/// What a finished stage reports.
+#[derive(Clone, Debug, Default)]
+pub struct StageOutput {
+    /// Rows written per table.
+    pub rows: BTreeMap<String, u64>,
+    /// Files written outside the table folders (exports), as absolute or run-relative paths.
+    pub files: Vec<PathBuf>,
+    /// Stage-specific details for the manifest.
+    pub summary: Value,
+    /// One human line for the terminal.
+    pub line: String,
+}
+
+/// A stage failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum StageError {
+    /// An input trace is invalid (and `skip_invalid` is off).
+    #[error("{0}")]
+    InvalidTrace(Box<TraceError>),
+    /// An input file could not be read.
+    #[error(transparent)]
+    Source(#[from] SourceError),
+    /// Reading or writing the run failed.
+    #[error(transparent)]
+    Store(#[from] StoreError),
+    /// A query failed.
+    #[error(transparent)]
+    Query(#[from] QueryError),
+    /// Building a batch failed (an annotrace bug if it happens).
+    #[error("internal error, please report it: {0}")]
+    Internal(String),
+    /// The input is unusable for another reason the message explains.
+    #[error("{0}")]
+    Input(String),
+    /// A fault injected for testing.
+    #[error("injected fault: {0}")]
+    Injected(String),
+}
+
+impl From<arrow::error::ArrowError> for StageError {
+    fn from(e: arrow::error::ArrowError) -> Self {
+        StageError::Internal(e.to_string())
+    }
+}
+
+/// Where to stop a run on purpose, to test resumption: after a stage has finished `n` shards (in this
+/// process), or in the middle of writing its shard number `n`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FaultPlan {
+    /// The stage to stop in.
+    pub stage: String,
+    /// When to stop.
+    pub point: FaultPoint,
+    /// How to stop.
+    pub action: FaultAction,
+}
+
+/// When a [`FaultPlan`] fires.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FaultPoint {
+    /// After this many shards were finished by this process.
+    AfterShards(usize),
+    /// Half-way through writing the shard with this index (0-based, counting shards this process starts).
+    MidShard(usize),
+}
+
+/// What a [`FaultPlan`] does when it fires.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FaultAction {
+    /// `abort()` the process: no destructor runs, as with `kill -9`.
+    Abort,
+    /// Return an error from the stage.
+    Fail,
+}
+
+impl std::str::FromStr for FaultPlan {
+    type Err = String;
+
+    /// `STAGE:after-shards=N`, `STAGE:mid-shard=N`, optionally followed by `:fail` (default: abort).
+    fn from_str(s: &str) -> Result<Self, String> {
+        let usage = || {
+            format!(
+                "bad fault plan {s:?}: expected STAGE:after-shards=N or STAGE:mid-shard=N, optionally :fail"
+            )
+        };
+        let mut parts = s.split(':');
+        let stage = parts
+            .next()
+            .filter(|p| !p.is_empty())
+            .ok_or_else(usage)?
+            .to_string();
+        let (key, n) = parts
+            .next()
+            .and_then(|p| p.split_once('='))
+            .ok_or_else(usage)?;
+        let n: usize = n.parse().map_err(|_| usage())?;
+        let point = match key {
+            "after-shards" => FaultPoint::AfterShards(n),
+            "mid-shard" => FaultPoint::MidShard(n),
+            _ => return Err(usage()),
+        };
+        let action = match parts.next() {
+            None | Some("abort") => FaultAction::Abort,
+            Some("fail") => FaultAction::Fail,
+            Some(_) => return Err(usage()),
+        };
+        Ok(FaultPlan {
+            stage,
+            point,
+            action,
+        })
+    }
+}
+
+/// Everything a stage may use while it runs.
+pub struct StageContext<'a> {
+    pub(crate) run: &'a RunDir,
+    pub(crate) stage_id: &'a str,
+    pub(crate) seed: u64,
+    pub(crate) project_dir: &'a Path,
+    pub(crate) staging: Staging,
+    pub(crate) progress: &'a dyn Progress,
+    pub(crate) fault: Option<&'a FaultPlan>,
+    pub(crate) shards_finished: AtomicUsize,
+    pub(crate) shards_started: AtomicUsize,
+}
+
+impl<'a> StageContext<'a> {
+    /// The run folder.
+    pub fn run(&self) -> &RunDir {
+        self.run
+    }
+
+    /// This stage's id.
+    pub fn stage_id(&self) -> &str {
+        self.stage_id
+    }
+
+    /// The pipeline's seed.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    /// The folder relative paths were resolved against.
+    pub fn project_dir(&self) -> &Path {
+        self.project_dir
+    }
+
+    /// The stage's staging area: tables written here appear in the run when the stage finishes.
+    pub fn staging(&self) -> &Staging {
+        &self.staging
+    }
+
+    /// Progress reporting.
+    pub fn progress(&self) -> &dyn Progress {
+        self.progress
+    }
+
+    /// The record of a shard finished by an earlier, interrupted attempt, if any.
+    pub fn finished_shard(&self, shard: &str) -> Result<Option<Value>, StageError> {
+        Ok(self.staging.shard_record(shard)?)
+    }
+
+    fn fire(&self, what: String) -> Result<(), StageError> {
+        match self.fault.map(|f| f.action) {
+            Some(FaultAction::Abort) => {
+                eprintln!("annotrace: injected fault: {what}; aborting");
+                std::process::abort();
+            }
+            _ => Err(StageError::Injected(what)),
+        }
+    }
+
+    /// Call when a shard starts writing; returns the shard's ordinal in this process.
+    pub fn shard_started(&self) -> usize {
+        self.shards_started.fetch_add(1, Ordering::SeqCst)
+    }
+
+    /// Call half-way through writing a shard (after some of its files are open and written): the
+    /// `mid-shard` fault fires here.
+    pub fn checkpoint_mid_shard(&self, ordinal: usize) -> Result<(), StageError> {
+        match self.fault {
+            Some(f) if f.stage == self.stage_id && f.point == FaultPoint::MidShard(ordinal) => self
+                .fire(format!(
+                    "stage {} stopped in the middle of shard #{ordinal}",
+                    self.stage_id
+                )),
+            _ => Ok(()),
+        }
+    }
+
+    /// Marks a shard finished after its files were committed to staging; a later attempt skips it.
+    pub fn finish_shard(&self, shard: &str, record: &Value) -> Result<(), StageError> {
+        self.staging.mark_done(shard, record)?;
+        let n = self.shards_finished.fetch_add(1, Ordering::SeqCst) + 1;
+        match self.fault {
+            Some(f) if f.stage == self.stage_id && f.point == FaultPoint::AfterShards(n) => {
+                self.fire(format!("stage {} stopped after {n} shards", self.stage_id))
+            }
+            _ => Ok(()),
+        }
+    }
+}

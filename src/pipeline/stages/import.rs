@@ -1,0 +1,502 @@
+//! `import`: reads traces in the paper's JSON format into the trace tables, streaming and sharded.
+//!
+//! Each input file is read once, a trace at a time; every `traces_per_shard` traces of a file make one
+//! shard, written as one Parquet file per table and marked done, so a killed import resumes at the
+//! first unfinished shard. Trace ids come from a trace's `trace_id` field, else from the file name
+//! (`<stem>`, `<stem>-L<line>` for JSON Lines, `<stem>-<position>` for arrays); a duplicate id, within
+//! the import or against traces already in the run, rejects the trace. Without `skip_invalid` the first
+//! invalid trace fails the stage and nothing is written; with it, invalid traces are listed in the
+//! stage summary (file, trace, JSON path, category, message) and the rest is imported.
+
+use std::collections::{BTreeMap, HashSet};
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+
+use arrow::array::{AsArray, RecordBatch};
+use serde_json::{Value, json};
+
+use crate::pipeline::params::{ParamSpec, ParamType};
+use crate::pipeline::registry::{BuildError, StageKind};
+use crate::pipeline::spec::{PipelineSpec, StageDef};
+use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
+use crate::store::{ParquetSink, read_file};
+use crate::trace::json::{
+    self, Fault, FaultKind, TraceConsumer, TraceError, TraceHeader, TraceLocation,
+    default_trace_id, expand_paths,
+};
+use crate::trace::schema;
+use crate::trace::{Env, Timestep, TraceBatchBuilder, TraceMeta};
+
+/// The `import` stage kind.
+pub static KIND: StageKind = StageKind {
+    name: "import",
+    summary: "import traces in the paper's JSON format (files, folders, JSON Lines)",
+    doc: "Reads traces in the per-environment JSON layout of the paper (docs/trace-format.md) from .json files \
+          (one trace or an array), .jsonl files (one trace per line) or folders of them, streaming, and writes \
+          the scenes, traces, timesteps, frames and events tables. Invalid traces fail the stage unless \
+          skip_invalid is set, in which case they are listed with the reason.",
+    writes: "scenes, traces, timesteps, frames, events",
+    params: &[
+        ParamSpec::required(
+            "env",
+            ParamType::Choice(&["pooltool", "phyre", "iphyre"]),
+            "environment of the traces",
+        ),
+        ParamSpec::required(
+            "paths",
+            ParamType::StrList,
+            "files or folders to import, relative to the project folder",
+        ),
+        ParamSpec::optional(
+            "skip_invalid",
+            ParamType::Bool,
+            "false",
+            "import the valid traces and list the invalid ones instead of failing",
+        ),
+        ParamSpec::optional(
+            "traces_per_shard",
+            ParamType::Count,
+            "1000",
+            "traces per output file; a resumed import redoes at most one shard per input file",
+        ),
+    ],
+    build,
+};
+
+fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
+    let env: Env = def.params["env"]
+        .as_str()
+        .unwrap_or_default()
+        .parse()
+        .map_err(|e: crate::trace::UnknownEnv| BuildError::param("env", e.to_string()))?;
+    let mut paths = Vec::new();
+    for p in def.params["paths"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(Value::as_str)
+    {
+        let resolved = spec.project_dir.join(p);
+        if !resolved.exists() {
+            return Err(BuildError::param(
+                "paths",
+                format!("{} does not exist", resolved.display()),
+            ));
+        }
+        paths.push(resolved);
+    }
+    if paths.is_empty() {
+        return Err(BuildError::param("paths", "no paths given"));
+    }
+    let per_shard = def.params["traces_per_shard"]
+        .as_u64()
+        .unwrap_or(1000)
+        .max(1) as usize;
+    Ok(Box::new(ImportStage {
+        env,
+        paths,
+        skip_invalid: def.params["skip_invalid"].as_bool().unwrap_or(false),
+        per_shard,
+        project_dir: spec.project_dir.clone(),
+    }))
+}
+
+/// The `import` stage.
+#[derive(Debug)]
+pub struct ImportStage {
+    env: Env,
+    paths: Vec<PathBuf>,
+    skip_invalid: bool,
+    per_shard: usize,
+    project_dir: PathBuf,
+}
+
+impl Stage for ImportStage {
+    /// The files behind the paths, with their sizes and modification times: editing an input reruns.
+    fn fingerprint_extra(&self) -> Result<Value, StageError> {
+        let files = expand_paths(&self.paths)?;
+        let mut out = Vec::with_capacity(files.len());
+        for f in files {
+            let meta = std::fs::metadata(&f).map_err(|source| json::SourceError {
+                path: f.clone(),
+                source,
+            })?;
+            let mtime = meta
+                .modified()
+                .ok()
+                .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+                .map_or(0, |d| d.as_nanos());
+            let shown = f
+                .strip_prefix(&self.project_dir)
+                .unwrap_or(&f)
+                .to_string_lossy()
+                .into_owned();
+            out.push(json!({"path": shown, "bytes": meta.len(), "mtime_ns": mtime.to_string()}));
+        }
+        Ok(Value::Array(out))
+    }
+
+    fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
+        let files = expand_paths(&self.paths)?;
+        ctx.progress().set_total(ctx.stage_id(), files.len() as u64);
+        let mut trace_ids = string_column(ctx, "traces", "trace_id")?;
+        let mut scene_ids = string_column(ctx, "scenes", "scene_id")?;
+        let mut totals = Totals::default();
+        for (fi, file) in files.iter().enumerate() {
+            let stem = file
+                .file_stem()
+                .and_then(|s| s.to_str())
+                .unwrap_or("trace")
+                .to_string();
+            let mut consumer = Importer {
+                ctx,
+                stage: self,
+                file_index: fi,
+                file,
+                stem,
+                builder: TraceBatchBuilder::new(),
+                first_step: None,
+                next_ordinal: 0,
+                shard: None,
+                trace_ids: &mut trace_ids,
+                scene_ids: &mut scene_ids,
+                totals: &mut totals,
+                failure: None,
+            };
+            json::read_file(file, self.env, &mut consumer)?;
+            if let Some(err) = consumer.failure.take() {
+                return Err(err);
+            }
+            consumer.close_shard()?;
+            ctx.progress().advance(ctx.stage_id(), 1);
+        }
+        let line = format!(
+            "{} traces, {} frame rows from {} file(s){}",
+            totals.traces,
+            totals.rows.get("frames").copied().unwrap_or(0),
+            files.len(),
+            if totals.rejected_count > 0 {
+                format!("; {} invalid trace(s) skipped", totals.rejected_count)
+            } else {
+                String::new()
+            }
+        );
+        Ok(StageOutput {
+            rows: totals.rows.clone(),
+            files: Vec::new(),
+            summary: json!({
+                "env": self.env.as_str(),
+                "files": files.len(),
+                "traces": totals.traces,
+                "rejected_count": totals.rejected_count,
+                "rejected": totals.rejected,
+            }),
+            line,
+        })
+    }
+}
+
+/// The values of a string column over the run's published files and this stage's finished shards.
+fn string_column(
+    ctx: &StageContext<'_>,
+    table: &str,
+    column: &str,
+) -> Result<HashSet<String>, StageError> {
+    let mut out = HashSet::new();
+    let mut files: Vec<PathBuf> = ctx
+        .run()
+        .table(table)?
+        .files
+        .into_iter()
+        .map(|f| f.path)
+        .collect();
+    files.extend(ctx.staging().table_files(table)?);
+    for f in files {
+        for batch in read_file(&f)? {
+            if let Some(col) = batch
+                .column_by_name(column)
+                .and_then(|c| c.as_string_opt::<i32>())
+            {
+                out.extend(col.iter().flatten().map(str::to_owned));
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// At most this many rejected traces are listed in the manifest; all are counted.
+const MAX_LISTED_REJECTIONS: usize = 1000;
+
+#[derive(Default)]
+struct Totals {
+    traces: u64,
+    rows: BTreeMap<String, u64>,
+    rejected_count: u64,
+    rejected: Vec<Value>,
+}
+
+impl Totals {
+    fn add_record(&mut self, record: &Value) {
+        self.traces += record["traces"].as_u64().unwrap_or(0);
+        if let Some(rows) = record["rows"].as_object() {
+            for (t, n) in rows {
+                *self.rows.entry(t.clone()).or_default() += n.as_u64().unwrap_or(0);
+            }
+        }
+        for r in record["rejected"].as_array().into_iter().flatten() {
+            self.rejected_count += 1;
+            if self.rejected.len() < MAX_LISTED_REJECTIONS {
+                self.rejected.push(r.clone());
+            }
+        }
+    }
+}
+
+/// A rejected trace as a JSON row of the stage summary.
+pub fn rejection_row(e: &TraceError) -> Value {
+    json!({
+        "file": e.location.file.to_string_lossy(),
+        "line": e.location.line,
+        "trace": e.location.ordinal,
+        "task_id": e.task_id,
+        "path": e.fault.path,
+        "kind": e.fault.kind.as_str(),
+        "message": e.fault.message,
+    })
+}
+
+/// The shard being written.
+struct OpenShard {
+    name: String,
+    /// Whether an earlier attempt finished it (its traces are read and dropped).
+    done: bool,
+    ordinal: usize,
+    sinks: BTreeMap<&'static str, ParquetSink>,
+    traces: u64,
+    rejected: Vec<Value>,
+}
+
+struct Importer<'a, 'c> {
+    ctx: &'a StageContext<'c>,
+    stage: &'a ImportStage,
+    file_index: usize,
+    file: &'a Path,
+    stem: String,
+    builder: TraceBatchBuilder,
+    first_step: Option<Timestep>,
+    next_ordinal: usize,
+    shard: Option<OpenShard>,
+    trace_ids: &'a mut HashSet<String>,
+    scene_ids: &'a mut HashSet<String>,
+    totals: &'a mut Totals,
+    failure: Option<StageError>,
+}
+
+impl Importer<'_, '_> {
+    fn shard_name(&self, chunk: usize) -> String {
+        format!("{:05}-{chunk:05}", self.file_index)
+    }
+
+    /// Makes `chunk` the open shard, closing the previous one.
+    fn enter_chunk(&mut self, chunk: usize) -> Result<(), StageError> {
+        let name = self.shard_name(chunk);
+        if self.shard.as_ref().is_some_and(|s| s.name == name) {
+            return Ok(());
+        }
+        self.close_shard()?;
+        let done = match self.ctx.finished_shard(&name)? {
+            Some(record) => {
+                self.totals.add_record(&record);
+                true
+            }
+            None => false,
+        };
+        let ordinal = if done {
+            usize::MAX
+        } else {
+            self.ctx.shard_started()
+        };
+        self.shard = Some(OpenShard {
+            name,
+            done,
+            ordinal,
+            sinks: BTreeMap::new(),
+            traces: 0,
+            rejected: Vec::new(),
+        });
+        Ok(())
+    }
+
+    /// Commits the open shard's files and marks it done.
+    fn close_shard(&mut self) -> Result<(), StageError> {
+        let Some(shard) = self.shard.take() else {
+            return Ok(());
+        };
+        if shard.done {
+            return Ok(());
+        }
+        let mut rows = BTreeMap::new();
+        for (table, sink) in shard.sinks {
+            let (_, n) = sink.commit()?;
+            rows.insert(table.to_string(), n as u64);
+        }
+        let record = json!({"traces": shard.traces, "rows": rows, "rejected": shard.rejected});
+        self.totals.add_record(&record);
+        self.ctx.finish_shard(&shard.name, &record)
+    }
+
+    fn write(&mut self, table: &'static str, batch: &RecordBatch) -> Result<(), StageError> {
+        if batch.num_rows() == 0 {
+            return Ok(());
+        }
+        let shard = self
+            .shard
+            .as_mut()
+            .expect("a shard is open while traces arrive");
+        if !shard.sinks.contains_key(table) {
+            let schema = schema::table_schema(table).expect("trace tables have schemas");
+            let sink = self
+                .ctx
+                .staging()
+                .sink(table, Some(self.stage.env), &shard.name, schema)?;
+            shard.sinks.insert(table, sink);
+        }
+        shard
+            .sinks
+            .get_mut(table)
+            .expect("inserted above")
+            .write(batch)?;
+        Ok(())
+    }
+
+    fn accept(&mut self, loc: &TraceLocation, h: TraceHeader) -> Result<(), StageError> {
+        let trace_id = h
+            .trace_id
+            .clone()
+            .unwrap_or_else(|| default_trace_id(&self.stem, loc));
+        if self.trace_ids.contains(&trace_id) {
+            self.builder.discard();
+            let fault = Fault::new(
+                "$.trace_id",
+                FaultKind::DuplicateTrace,
+                format!(
+                    "trace id {trace_id:?} is already in the run (set a distinct `trace_id` field, or import into another run)"
+                ),
+            );
+            return self.reject(TraceError {
+                location: loc.clone(),
+                task_id: Some(h.task_id),
+                fault,
+            });
+        }
+        let source = match loc.line {
+            Some(line) => format!("{}:{line}", self.file.display()),
+            None => format!("{}#{}", self.file.display(), loc.ordinal),
+        };
+        let batches = self.builder.finish(&TraceMeta {
+            trace_id: &trace_id,
+            scene_id: &h.task_id,
+            task_id: &h.task_id,
+            events: &h.events,
+            outcome: &h.outcome,
+            extra: &h.extra,
+            source: &source,
+        })?;
+        if !self.scene_ids.contains(&h.task_id) {
+            let step = self
+                .first_step
+                .as_ref()
+                .map(json::timestep_to_value)
+                .unwrap_or(Value::Null);
+            let n = self.first_step.as_ref().map_or(0, |s| s.objects.len());
+            let spec = json!({"initial_timestep": step, "from_trace": trace_id});
+            let scene = crate::trace::batch::scene_batch(
+                &h.task_id,
+                &h.task_id,
+                &format!("import:{}", self.ctx.stage_id()),
+                n,
+                &spec,
+            )?;
+            self.write("scenes", &scene)?;
+            self.scene_ids.insert(h.task_id.clone());
+        }
+        self.write("traces", &batches.traces)?;
+        self.write("timesteps", &batches.timesteps)?;
+        self.write("frames", &batches.frames)?;
+        let ordinal = self.shard.as_ref().map_or(0, |s| s.ordinal);
+        // The mid-shard fault fires with some of the shard's files half written.
+        self.ctx.checkpoint_mid_shard(ordinal)?;
+        self.write("events", &batches.events)?;
+        self.trace_ids.insert(trace_id);
+        if let Some(s) = self.shard.as_mut() {
+            s.traces += 1;
+        }
+        Ok(())
+    }
+
+    fn reject(&mut self, e: TraceError) -> Result<(), StageError> {
+        if !self.stage.skip_invalid {
+            return Err(StageError::InvalidTrace(Box::new(e)));
+        }
+        if let Some(s) = self.shard.as_mut() {
+            s.rejected.push(rejection_row(&e));
+        }
+        Ok(())
+    }
+}
+
+impl TraceConsumer for Importer<'_, '_> {
+    fn timestep(&mut self, ts: Timestep) {
+        if self.failure.is_some() {
+            return;
+        }
+        let chunk = self.next_ordinal / self.stage.per_shard;
+        if let Err(e) = self.enter_chunk(chunk) {
+            self.failure = Some(e);
+            return;
+        }
+        if self.shard.as_ref().is_some_and(|s| s.done) {
+            return;
+        }
+        self.builder.push_timestep(&ts);
+        if self.first_step.is_none() {
+            self.first_step = Some(ts);
+        }
+    }
+
+    fn finish(
+        &mut self,
+        loc: &TraceLocation,
+        result: Result<TraceHeader, TraceError>,
+    ) -> ControlFlow<()> {
+        self.next_ordinal = loc.ordinal + 1;
+        let first_step = self.first_step.take();
+        if self.failure.is_some() {
+            return ControlFlow::Break(());
+        }
+        let outcome = (|| {
+            self.enter_chunk(loc.ordinal / self.stage.per_shard)?;
+            if self.shard.as_ref().is_some_and(|s| s.done) {
+                self.builder.discard();
+                return Ok(());
+            }
+            self.first_step = first_step;
+            let r = match result {
+                Ok(h) => self.accept(loc, h),
+                Err(e) => {
+                    self.builder.discard();
+                    self.reject(e)
+                }
+            };
+            self.first_step = None;
+            r
+        })();
+        match outcome {
+            Ok(()) => ControlFlow::Continue(()),
+            Err(e) => {
+                self.failure = Some(e);
+                ControlFlow::Break(())
+            }
+        }
+    }
+}

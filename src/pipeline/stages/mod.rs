@@ -1,0 +1,87 @@
+//! The stage kinds, one file each: `import` (paper-format JSON into the trace tables), `sql` (a query
+//! over the run stored as a table) and `export` (a table or query written to `exports/`).
+
+pub mod export;
+pub mod import;
+pub mod sql;
+
+use std::path::{Path, PathBuf};
+
+use serde_json::{Map, Value};
+
+use super::registry::BuildError;
+
+/// Where a stage's SQL comes from: a file under the project's `sql/` folder, or inline text.
+#[derive(Clone, Debug)]
+pub(crate) enum SqlSource {
+    /// A file (resolved path).
+    File(PathBuf),
+    /// Inline SQL.
+    Inline(String),
+}
+
+impl SqlSource {
+    /// Reads `query` (a file name under `<project>/sql/`, or a path relative to the project) or `sql`
+    /// (inline text) from the parameters; exactly one must be given unless `table` stands in for both.
+    pub(crate) fn from_params(
+        params: &Map<String, Value>,
+        project: &Path,
+        optional: bool,
+    ) -> Result<Option<Self>, BuildError> {
+        let query = params.get("query").and_then(Value::as_str);
+        let inline = params.get("sql").and_then(Value::as_str);
+        match (query, inline) {
+            (Some(_), Some(_)) => Err(BuildError::param(
+                "sql",
+                "give either `query` (a file in sql/) or `sql` (inline), not both",
+            )),
+            (Some(q), None) => {
+                let candidates = [project.join("sql").join(q), project.join(q)];
+                candidates
+                    .iter()
+                    .find(|p| p.is_file())
+                    .map(|p| Some(SqlSource::File(p.clone())))
+                    .ok_or_else(|| {
+                        BuildError::param(
+                            "query",
+                            format!(
+                                "SQL file {q:?} not found (looked for {})",
+                                candidates
+                                    .iter()
+                                    .map(|c| c.display().to_string())
+                                    .collect::<Vec<_>>()
+                                    .join(" and ")
+                            ),
+                        )
+                    })
+            }
+            (None, Some(s)) if s.trim().is_empty() => {
+                Err(BuildError::param("sql", "`sql` is empty"))
+            }
+            (None, Some(s)) => Ok(Some(SqlSource::Inline(s.to_string()))),
+            (None, None) if optional => Ok(None),
+            (None, None) => Err(BuildError {
+                param: None,
+                message: "needs `query` (a file in sql/) or `sql` (inline SQL)".into(),
+            }),
+        }
+    }
+
+    /// The SQL text.
+    pub(crate) fn text(&self) -> Result<String, super::StageError> {
+        match self {
+            SqlSource::Inline(s) => Ok(s.clone()),
+            SqlSource::File(p) => std::fs::read_to_string(p)
+                .map_err(|e| super::StageError::Input(format!("{}: {e}", p.display()))),
+        }
+    }
+}
+
+/// Checks a table name given by a user: lower-case letters, digits and `_`, not starting with a digit.
+pub(crate) fn valid_table_name(name: &str) -> bool {
+    !name.is_empty()
+        && name
+            .chars()
+            .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_')
+        && !name.starts_with(|c: char| c.is_ascii_digit())
+}

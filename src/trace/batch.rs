@@ -1,0 +1,831 @@
+//! Conversion between the trace model and Arrow record batches of the trace tables.
+//!
+//! [`TraceBatchBuilder`] turns one trace into one batch per table, timestep by timestep, so an importer
+//! can stream a trace into columns without keeping its JSON. [`decode_trace`] does the reverse for
+//! export and for building detector input.
+
+use std::sync::Arc;
+
+use arrow::array::{
+    Array, ArrayRef, AsArray, BooleanArray, BooleanBuilder, DictionaryArray, Float64Array,
+    Float64Builder, Int32Array, Int32Builder, Int64Array, Int64Builder, ListBuilder, RecordBatch,
+    StringArray, StringBuilder, StringDictionaryBuilder,
+};
+use arrow::compute::cast;
+use arrow::datatypes::{DataType, Int32Type};
+use arrow::error::ArrowError;
+use serde_json::Value;
+
+use super::Env;
+use super::model::{
+    Body, Event, IphyreObject, JsonMap, Object, Outcome, PhyreObject, PoolBall, Timestep, Trace,
+};
+use super::schema::{EVENTS, FRAMES, SCENES, TIMESTEPS, TRACES};
+
+/// One trace as one batch per table.
+#[derive(Clone, Debug)]
+pub struct TraceBatches {
+    /// One row for `traces`.
+    pub traces: RecordBatch,
+    /// One row per timestep.
+    pub timesteps: RecordBatch,
+    /// One row per timestep × object.
+    pub frames: RecordBatch,
+    /// One row per event.
+    pub events: RecordBatch,
+}
+
+/// What a trace row holds besides the timesteps.
+#[derive(Clone, Debug)]
+pub struct TraceMeta<'a> {
+    /// Trace id.
+    pub trace_id: &'a str,
+    /// The scene it starts from.
+    pub scene_id: &'a str,
+    /// Task id.
+    pub task_id: &'a str,
+    /// The event log.
+    pub events: &'a [Event],
+    /// The outcome.
+    pub outcome: &'a Outcome,
+    /// Unknown top-level fields.
+    pub extra: &'a JsonMap,
+    /// Where it came from (`file:line`, `simulate:<stage>`, …).
+    pub source: &'a str,
+}
+
+fn json_or_null(map: &JsonMap) -> Option<String> {
+    (!map.is_empty()).then(|| Value::Object(map.clone()).to_string())
+}
+
+fn constant_dict(value: &str, len: usize) -> ArrayRef {
+    let keys = Int32Array::from(vec![0; len]);
+    let values = StringArray::from(vec![value]);
+    Arc::new(
+        DictionaryArray::<Int32Type>::try_new(keys, Arc::new(values)).expect("key 0 is in range"),
+    )
+}
+
+/// Column builders for the frames of one trace.
+#[derive(Default)]
+struct FrameColumns {
+    step: Int64Builder,
+    t: Float64Builder,
+    slot: Int32Builder,
+    object_id: StringDictionaryBuilder<Int32Type>,
+    x: Float64Builder,
+    y: Float64Builder,
+    z: Float64Builder,
+    vx: Float64Builder,
+    vy: Float64Builder,
+    vz: Float64Builder,
+    angle: Float64Builder,
+    wx: Float64Builder,
+    wy: Float64Builder,
+    wz: Float64Builder,
+    kind: StringDictionaryBuilder<Int32Type>,
+    motion_state_code: Int32Builder,
+    motion_state: StringDictionaryBuilder<Int32Type>,
+    radius: Float64Builder,
+    diameter: Float64Builder,
+    shape: StringDictionaryBuilder<Int32Type>,
+    color: StringDictionaryBuilder<Int32Type>,
+    is_user_input: BooleanBuilder,
+    x1: Float64Builder,
+    y1: Float64Builder,
+    x2: Float64Builder,
+    y2: Float64Builder,
+    eliminable: Float64Builder,
+    dynamic: Float64Builder,
+    joint: Int64Builder,
+    spring: Int64Builder,
+    extra: StringBuilder,
+    rows: usize,
+}
+
+impl FrameColumns {
+    fn push(&mut self, step: i64, t: f64, slot: i32, obj: &Object) {
+        self.rows += 1;
+        self.step.append_value(step);
+        self.t.append_value(t);
+        self.slot.append_value(slot);
+        self.extra.append_option(json_or_null(&obj.extra));
+        match &obj.body {
+            Body::Pool(b) => self.push_pool(b),
+            Body::Phyre(o) => self.push_phyre(o),
+            Body::Iphyre(o) => self.push_iphyre(o),
+        }
+    }
+
+    fn push_pool(&mut self, b: &PoolBall) {
+        self.object_id.append_value(&b.ball_id);
+        let [x, y, z] = b.position;
+        let [vx, vy, vz] = b.velocity;
+        let [wx, wy, wz] = b.angular_velocity;
+        self.x.append_value(x);
+        self.y.append_value(y);
+        self.z.append_value(z);
+        self.vx.append_value(vx);
+        self.vy.append_value(vy);
+        self.vz.append_value(vz);
+        self.angle.append_null();
+        self.wx.append_value(wx);
+        self.wy.append_value(wy);
+        self.wz.append_value(wz);
+        self.kind.append_value(&b.kind);
+        // Motion-state codes are 0..=4; an out-of-range code from a foreign producer is kept as null
+        // would lose it, so it is clamped into i32 only when it fits and rejected at import otherwise.
+        self.motion_state_code
+            .append_value(i32::try_from(b.motion_state_code).unwrap_or(i32::MAX));
+        self.motion_state.append_value(&b.motion_state);
+        self.radius.append_value(b.radius);
+        self.diameter.append_null();
+        self.shape.append_null();
+        self.color.append_null();
+        self.is_user_input.append_null();
+        self.x1.append_null();
+        self.y1.append_null();
+        self.x2.append_null();
+        self.y2.append_null();
+        self.eliminable.append_null();
+        self.dynamic.append_null();
+        self.joint.append_null();
+        self.spring.append_null();
+    }
+
+    fn push_phyre(&mut self, o: &PhyreObject) {
+        self.object_id.append_value(o.object_index.to_string());
+        self.x.append_value(o.x);
+        self.y.append_value(o.y);
+        self.z.append_null();
+        self.vx.append_value(o.vx);
+        self.vy.append_value(o.vy);
+        self.vz.append_null();
+        self.angle.append_value(o.angle);
+        self.wx.append_null();
+        self.wy.append_null();
+        self.wz.append_value(o.angular_velocity);
+        self.kind.append_null();
+        self.motion_state_code.append_null();
+        self.motion_state.append_null();
+        self.radius.append_null();
+        self.diameter.append_value(o.diameter);
+        self.shape.append_value(&o.shape);
+        self.color.append_value(&o.color);
+        self.is_user_input.append_value(o.is_user_input);
+        self.x1.append_null();
+        self.y1.append_null();
+        self.x2.append_null();
+        self.y2.append_null();
+        self.eliminable.append_null();
+        self.dynamic.append_null();
+        self.joint.append_null();
+        self.spring.append_null();
+    }
+
+    fn push_iphyre(&mut self, o: &IphyreObject) {
+        self.object_id.append_value(o.index.to_string());
+        self.x.append_value((o.x1 + o.x2) / 2.0);
+        self.y.append_value((o.y1 + o.y2) / 2.0);
+        self.z.append_null();
+        self.vx.append_option(o.vx);
+        self.vy.append_option(o.vy);
+        self.vz.append_null();
+        self.angle.append_option(o.angle);
+        self.wx.append_null();
+        self.wy.append_null();
+        self.wz.append_option(o.angular_velocity);
+        self.kind.append_null();
+        self.motion_state_code.append_null();
+        self.motion_state.append_null();
+        self.radius.append_value(o.radius);
+        self.diameter.append_null();
+        self.shape.append_null();
+        self.color.append_null();
+        self.is_user_input.append_null();
+        self.x1.append_value(o.x1);
+        self.y1.append_value(o.y1);
+        self.x2.append_value(o.x2);
+        self.y2.append_value(o.y2);
+        self.eliminable.append_value(o.eliminable);
+        self.dynamic.append_value(o.dynamic);
+        self.joint.append_value(o.joint);
+        self.spring.append_value(o.spring);
+    }
+
+    fn finish(&mut self, trace_id: &str) -> Result<RecordBatch, ArrowError> {
+        let rows = std::mem::take(&mut self.rows);
+        let cols: Vec<ArrayRef> = vec![
+            constant_dict(trace_id, rows),
+            Arc::new(self.step.finish()),
+            Arc::new(self.t.finish()),
+            Arc::new(self.slot.finish()),
+            Arc::new(self.object_id.finish()),
+            Arc::new(self.x.finish()),
+            Arc::new(self.y.finish()),
+            Arc::new(self.z.finish()),
+            Arc::new(self.vx.finish()),
+            Arc::new(self.vy.finish()),
+            Arc::new(self.vz.finish()),
+            Arc::new(self.angle.finish()),
+            Arc::new(self.wx.finish()),
+            Arc::new(self.wy.finish()),
+            Arc::new(self.wz.finish()),
+            Arc::new(self.kind.finish()),
+            Arc::new(self.motion_state_code.finish()),
+            Arc::new(self.motion_state.finish()),
+            Arc::new(self.radius.finish()),
+            Arc::new(self.diameter.finish()),
+            Arc::new(self.shape.finish()),
+            Arc::new(self.color.finish()),
+            Arc::new(self.is_user_input.finish()),
+            Arc::new(self.x1.finish()),
+            Arc::new(self.y1.finish()),
+            Arc::new(self.x2.finish()),
+            Arc::new(self.y2.finish()),
+            Arc::new(self.eliminable.finish()),
+            Arc::new(self.dynamic.finish()),
+            Arc::new(self.joint.finish()),
+            Arc::new(self.spring.finish()),
+            Arc::new(self.extra.finish()),
+        ];
+        RecordBatch::try_new(FRAMES.clone(), cols)
+    }
+}
+
+/// Builds the batches of one trace at a time, timestep by timestep.
+#[derive(Default)]
+pub struct TraceBatchBuilder {
+    frames: FrameColumns,
+    step: Int64Builder,
+    t: Float64Builder,
+    n_objects: Int32Builder,
+    step_extra: StringBuilder,
+    steps: usize,
+    distinct_objects: std::collections::BTreeSet<String>,
+    t_range: Option<(f64, f64)>,
+}
+
+impl TraceBatchBuilder {
+    /// An empty builder.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Adds the next timestep of the current trace.
+    pub fn push_timestep(&mut self, ts: &Timestep) {
+        self.steps += 1;
+        self.step.append_value(ts.index);
+        self.t.append_value(ts.t);
+        self.n_objects
+            .append_value(i32::try_from(ts.objects.len()).unwrap_or(i32::MAX));
+        self.step_extra.append_option(json_or_null(&ts.extra));
+        for (slot, obj) in ts.objects.iter().enumerate() {
+            self.frames
+                .push(ts.index, ts.t, i32::try_from(slot).unwrap_or(i32::MAX), obj);
+            if !self
+                .distinct_objects
+                .contains(obj.body.object_id().as_str())
+            {
+                self.distinct_objects.insert(obj.object_id());
+            }
+        }
+        self.t_range = Some(match self.t_range {
+            None => (ts.t, ts.t),
+            Some((a, _)) => (a, ts.t),
+        });
+    }
+
+    /// Drops the timesteps pushed so far (the trace was rejected).
+    pub fn discard(&mut self) {
+        let _ = self.finish_columns("");
+    }
+
+    fn finish_columns(&mut self, trace_id: &str) -> Result<(RecordBatch, RecordBatch), ArrowError> {
+        let steps = std::mem::take(&mut self.steps);
+        self.distinct_objects.clear();
+        self.t_range = None;
+        let timesteps = RecordBatch::try_new(
+            TIMESTEPS.clone(),
+            vec![
+                constant_dict(trace_id, steps),
+                Arc::new(self.step.finish()),
+                Arc::new(self.t.finish()),
+                Arc::new(self.n_objects.finish()),
+                Arc::new(self.step_extra.finish()),
+            ],
+        )?;
+        let frames = self.frames.finish(trace_id)?;
+        Ok((timesteps, frames))
+    }
+
+    /// Finishes the current trace and resets the builder for the next one.
+    pub fn finish(&mut self, meta: &TraceMeta<'_>) -> Result<TraceBatches, ArrowError> {
+        let n_objects = self.distinct_objects.len() as i64;
+        let t_range = self.t_range;
+        let (timesteps, frames) = self.finish_columns(meta.trace_id)?;
+        let o = meta.outcome;
+        let traces = RecordBatch::try_new(
+            TRACES.clone(),
+            vec![
+                Arc::new(StringArray::from(vec![meta.trace_id])),
+                Arc::new(StringArray::from(vec![meta.scene_id])),
+                Arc::new(StringArray::from(vec![meta.task_id])),
+                Arc::new(Int64Array::from(vec![timesteps.num_rows() as i64])),
+                Arc::new(Int64Array::from(vec![n_objects])),
+                Arc::new(Int64Array::from(vec![frames.num_rows() as i64])),
+                Arc::new(Int64Array::from(vec![meta.events.len() as i64])),
+                Arc::new(Float64Array::from(vec![t_range.map(|r| r.0)])),
+                Arc::new(Float64Array::from(vec![t_range.map(|r| r.1)])),
+                Arc::new(BooleanArray::from(vec![o.success])),
+                Arc::new(StringArray::from(vec![o.terminal_status.as_str()])),
+                Arc::new(StringArray::from(vec![
+                    Value::Object(o.metrics.clone()).to_string(),
+                ])),
+                Arc::new(StringArray::from(vec![json_or_null(&o.extra)])),
+                Arc::new(StringArray::from(vec![json_or_null(meta.extra)])),
+                Arc::new(StringArray::from(vec![meta.source])),
+            ],
+        )?;
+        let events = events_batch(meta.trace_id, meta.events)?;
+        Ok(TraceBatches {
+            traces,
+            timesteps,
+            frames,
+            events,
+        })
+    }
+
+    /// Converts a whole in-memory trace.
+    pub fn from_trace(
+        trace: &Trace,
+        scene_id: &str,
+        source: &str,
+    ) -> Result<TraceBatches, ArrowError> {
+        let mut b = TraceBatchBuilder::new();
+        for ts in &trace.timesteps {
+            b.push_timestep(ts);
+        }
+        b.finish(&TraceMeta {
+            trace_id: &trace.trace_id,
+            scene_id,
+            task_id: &trace.task_id,
+            events: &trace.events,
+            outcome: &trace.outcome,
+            extra: &trace.extra,
+            source,
+        })
+    }
+}
+
+/// The agents an event names: `payload.agents` when it is an array of strings or numbers.
+pub fn event_agents(e: &Event) -> Option<Vec<String>> {
+    let agents = e.payload.as_ref()?.get("agents")?.as_array()?;
+    agents
+        .iter()
+        .map(|a| match a {
+            Value::String(s) => Some(s.clone()),
+            Value::Number(n) => Some(n.to_string()),
+            _ => None,
+        })
+        .collect()
+}
+
+fn events_batch(trace_id: &str, events: &[Event]) -> Result<RecordBatch, ArrowError> {
+    let mut seq = Int32Builder::with_capacity(events.len());
+    let mut kind = StringDictionaryBuilder::<Int32Type>::new();
+    let mut t = Float64Builder::with_capacity(events.len());
+    let mut agents = ListBuilder::new(StringBuilder::new());
+    let mut payload = StringBuilder::new();
+    let mut extra = StringBuilder::new();
+    for (i, e) in events.iter().enumerate() {
+        seq.append_value(i32::try_from(i).unwrap_or(i32::MAX));
+        kind.append_value(&e.kind);
+        t.append_option(e.t);
+        match event_agents(e) {
+            Some(list) => {
+                for a in list {
+                    agents.values().append_value(a);
+                }
+                agents.append(true);
+            }
+            None => agents.append(false),
+        }
+        payload.append_option(e.payload.as_ref().map(Value::to_string));
+        extra.append_option(json_or_null(&e.extra));
+    }
+    RecordBatch::try_new(
+        EVENTS.clone(),
+        vec![
+            constant_dict(trace_id, events.len()),
+            Arc::new(seq.finish()),
+            Arc::new(kind.finish()),
+            Arc::new(t.finish()),
+            Arc::new(agents.finish()),
+            Arc::new(payload.finish()),
+            Arc::new(extra.finish()),
+        ],
+    )
+}
+
+/// One row of `scenes`.
+pub fn scene_batch(
+    scene_id: &str,
+    task_id: &str,
+    source: &str,
+    n_objects: usize,
+    spec: &Value,
+) -> Result<RecordBatch, ArrowError> {
+    RecordBatch::try_new(
+        SCENES.clone(),
+        vec![
+            Arc::new(StringArray::from(vec![scene_id])),
+            Arc::new(StringArray::from(vec![task_id])),
+            Arc::new(StringArray::from(vec![source])),
+            Arc::new(Int64Array::from(vec![n_objects as i64])),
+            Arc::new(StringArray::from(vec![spec.to_string()])),
+        ],
+    )
+}
+
+/// A trace table's rows could not be turned back into a trace.
+#[derive(Debug, thiserror::Error)]
+pub enum DecodeError {
+    /// A column the decoder needs is missing or has another type.
+    #[error("table {table}: column `{column}` is missing or is not {expected}")]
+    Column {
+        /// Table name.
+        table: &'static str,
+        /// Column name.
+        column: String,
+        /// Expected Arrow type.
+        expected: &'static str,
+    },
+    /// A value that the format requires is null.
+    #[error(
+        "table {table}: column `{column}` is null in row {row} of trace {trace_id:?}, but {env} traces require it"
+    )]
+    Null {
+        /// Table name.
+        table: &'static str,
+        /// Column name.
+        column: String,
+        /// Row within the trace's rows.
+        row: usize,
+        /// The trace.
+        trace_id: String,
+        /// Its environment.
+        env: Env,
+    },
+    /// A JSON column does not hold JSON.
+    #[error("table {table}: column `{column}` of trace {trace_id:?} holds invalid JSON: {source}")]
+    Json {
+        /// Table name.
+        table: &'static str,
+        /// Column name.
+        column: &'static str,
+        /// The trace.
+        trace_id: String,
+        /// Parser error.
+        source: serde_json::Error,
+    },
+    /// The `traces` table has no row for the trace.
+    #[error("no trace {0:?} in the traces table")]
+    NotFound(String),
+    /// An Arrow kernel failed.
+    #[error(transparent)]
+    Arrow(#[from] ArrowError),
+}
+
+/// Reads named columns of one batch, converting dictionary strings to plain strings.
+struct Cols<'a> {
+    table: &'static str,
+    batch: &'a RecordBatch,
+}
+
+impl<'a> Cols<'a> {
+    fn col(&self, name: &str) -> Option<&'a ArrayRef> {
+        self.batch.column_by_name(name)
+    }
+
+    fn err(&self, column: &str, expected: &'static str) -> DecodeError {
+        DecodeError::Column {
+            table: self.table,
+            column: column.to_string(),
+            expected,
+        }
+    }
+
+    fn f64(&self, name: &str) -> Result<&'a Float64Array, DecodeError> {
+        self.col(name)
+            .and_then(|c| c.as_primitive_opt())
+            .ok_or_else(|| self.err(name, "Float64"))
+    }
+
+    fn i64(&self, name: &str) -> Result<&'a Int64Array, DecodeError> {
+        self.col(name)
+            .and_then(|c| c.as_primitive_opt())
+            .ok_or_else(|| self.err(name, "Int64"))
+    }
+
+    fn i32(&self, name: &str) -> Result<&'a Int32Array, DecodeError> {
+        self.col(name)
+            .and_then(|c| c.as_primitive_opt())
+            .ok_or_else(|| self.err(name, "Int32"))
+    }
+
+    fn bool(&self, name: &str) -> Result<&'a BooleanArray, DecodeError> {
+        self.col(name)
+            .and_then(|c| c.as_boolean_opt())
+            .ok_or_else(|| self.err(name, "Boolean"))
+    }
+
+    /// A string column (plain or dictionary-encoded) as a plain string array.
+    fn str(&self, name: &str) -> Result<StringArray, DecodeError> {
+        let c = self.col(name).ok_or_else(|| self.err(name, "Utf8"))?;
+        let plain = match c.data_type() {
+            DataType::Utf8 => c.clone(),
+            DataType::Dictionary(_, v) if **v == DataType::Utf8 => cast(c, &DataType::Utf8)?,
+            _ => return Err(self.err(name, "Utf8")),
+        };
+        Ok(plain.as_string::<i32>().clone())
+    }
+}
+
+fn opt<A: Array + ?Sized, T>(a: &A, i: usize, get: impl Fn(usize) -> T) -> Option<T> {
+    (!a.is_null(i)).then(|| get(i))
+}
+
+fn parse_map(
+    text: Option<&str>,
+    table: &'static str,
+    column: &'static str,
+    trace_id: &str,
+) -> Result<JsonMap, DecodeError> {
+    match text {
+        None => Ok(JsonMap::new()),
+        Some(s) => serde_json::from_str(s).map_err(|source| DecodeError::Json {
+            table,
+            column,
+            trace_id: trace_id.to_string(),
+            source,
+        }),
+    }
+}
+
+/// The rows of one trace, read from the tables, each sorted in table order (`timesteps` by step,
+/// `frames` by step then slot, `events` by seq).
+pub struct TraceRows<'a> {
+    /// The environment (from the `env=` partition).
+    pub env: Env,
+    /// The trace's single `traces` row.
+    pub trace: &'a RecordBatch,
+    /// Its `timesteps` rows.
+    pub timesteps: &'a RecordBatch,
+    /// Its `frames` rows.
+    pub frames: &'a RecordBatch,
+    /// Its `events` rows.
+    pub events: &'a RecordBatch,
+}
+
+/// Rebuilds a trace from its rows: the inverse of [`TraceBatchBuilder`].
+pub fn decode_trace(rows: &TraceRows<'_>) -> Result<Trace, DecodeError> {
+    let env = rows.env;
+    let tr = Cols {
+        table: "traces",
+        batch: rows.trace,
+    };
+    if rows.trace.num_rows() == 0 {
+        return Err(DecodeError::NotFound(String::new()));
+    }
+    let trace_id = tr.str("trace_id")?.value(0).to_string();
+    let outcome_extra = tr.str("outcome_extra")?;
+    let extra = tr.str("extra")?;
+    let outcome = Outcome {
+        success: tr.bool("success")?.value(0),
+        terminal_status: tr.str("terminal_status")?.value(0).to_string(),
+        metrics: parse_map(
+            Some(tr.str("metrics")?.value(0)),
+            "traces",
+            "metrics",
+            &trace_id,
+        )?,
+        extra: parse_map(
+            opt(&outcome_extra, 0, |i| outcome_extra.value(i)),
+            "traces",
+            "outcome_extra",
+            &trace_id,
+        )?,
+    };
+    let top_extra = parse_map(
+        opt(&extra, 0, |i| extra.value(i)),
+        "traces",
+        "extra",
+        &trace_id,
+    )?;
+
+    // Timesteps.
+    let ts = Cols {
+        table: "timesteps",
+        batch: rows.timesteps,
+    };
+    let (steps, times, step_extra) = (ts.i64("step")?, ts.f64("t")?, ts.str("extra")?);
+    let mut timesteps: Vec<Timestep> = Vec::with_capacity(steps.len());
+    for i in 0..steps.len() {
+        timesteps.push(Timestep {
+            index: steps.value(i),
+            t: times.value(i),
+            objects: Vec::new(),
+            extra: parse_map(
+                opt(&step_extra, i, |i| step_extra.value(i)),
+                "timesteps",
+                "extra",
+                &trace_id,
+            )?,
+        });
+    }
+
+    // Frames: rows arrive sorted by (step, slot); walk them alongside the timesteps.
+    let fr = Cols {
+        table: "frames",
+        batch: rows.frames,
+    };
+    let fstep = fr.i64("step")?;
+    let oid = fr.str("object_id")?;
+    let (x, y, z) = (fr.f64("x")?, fr.f64("y")?, fr.f64("z")?);
+    let (vx, vy, vz) = (fr.f64("vx")?, fr.f64("vy")?, fr.f64("vz")?);
+    let (angle, wx, wy, wz) = (
+        fr.f64("angle")?,
+        fr.f64("wx")?,
+        fr.f64("wy")?,
+        fr.f64("wz")?,
+    );
+    let (kind, msc, ms) = (
+        fr.str("kind")?,
+        fr.i32("motion_state_code")?,
+        fr.str("motion_state")?,
+    );
+    let (radius, diameter, shape, color) = (
+        fr.f64("radius")?,
+        fr.f64("diameter")?,
+        fr.str("shape")?,
+        fr.str("color")?,
+    );
+    let user = fr.bool("is_user_input")?;
+    let (x1, y1, x2, y2) = (fr.f64("x1")?, fr.f64("y1")?, fr.f64("x2")?, fr.f64("y2")?);
+    let (elim, dynamic, joint, spring) = (
+        fr.f64("eliminable")?,
+        fr.f64("dynamic")?,
+        fr.i64("joint")?,
+        fr.i64("spring")?,
+    );
+    let fextra = fr.str("extra")?;
+
+    let need_f = |a: &Float64Array, col: &str, i: usize| -> Result<f64, DecodeError> {
+        if a.is_null(i) {
+            Err(DecodeError::Null {
+                table: "frames",
+                column: col.into(),
+                row: i,
+                trace_id: trace_id.clone(),
+                env,
+            })
+        } else {
+            Ok(a.value(i))
+        }
+    };
+    let need_s = |a: &StringArray, col: &str, i: usize| -> Result<String, DecodeError> {
+        if a.is_null(i) {
+            Err(DecodeError::Null {
+                table: "frames",
+                column: col.into(),
+                row: i,
+                trace_id: trace_id.clone(),
+                env,
+            })
+        } else {
+            Ok(a.value(i).to_string())
+        }
+    };
+    let null = |col: &str, i: usize| DecodeError::Null {
+        table: "frames",
+        column: col.into(),
+        row: i,
+        trace_id: trace_id.clone(),
+        env,
+    };
+
+    let mut cursor = 0usize;
+    for i in 0..fstep.len() {
+        let step = fstep.value(i);
+        while cursor < timesteps.len() && timesteps[cursor].index < step {
+            cursor += 1;
+        }
+        let Some(target) = timesteps.get_mut(cursor).filter(|t| t.index == step) else {
+            return Err(null("step", i));
+        };
+        let body = match env {
+            Env::Pooltool => Body::Pool(PoolBall {
+                kind: need_s(&kind, "kind", i)?,
+                ball_id: oid.value(i).to_string(),
+                position: [x.value(i), y.value(i), need_f(z, "z", i)?],
+                velocity: [
+                    need_f(vx, "vx", i)?,
+                    need_f(vy, "vy", i)?,
+                    need_f(vz, "vz", i)?,
+                ],
+                angular_velocity: [
+                    need_f(wx, "wx", i)?,
+                    need_f(wy, "wy", i)?,
+                    need_f(wz, "wz", i)?,
+                ],
+                motion_state_code: opt(msc, i, |i| msc.value(i) as i64)
+                    .ok_or_else(|| null("motion_state_code", i))?,
+                motion_state: need_s(&ms, "motion_state", i)?,
+                radius: need_f(radius, "radius", i)?,
+            }),
+            Env::Phyre => Body::Phyre(PhyreObject {
+                object_index: oid.value(i).parse().map_err(|_| null("object_id", i))?,
+                shape: need_s(&shape, "shape", i)?,
+                color: need_s(&color, "color", i)?,
+                diameter: need_f(diameter, "diameter", i)?,
+                x: x.value(i),
+                y: y.value(i),
+                angle: need_f(angle, "angle", i)?,
+                vx: need_f(vx, "vx", i)?,
+                vy: need_f(vy, "vy", i)?,
+                angular_velocity: need_f(wz, "wz", i)?,
+                is_user_input: opt(user, i, |i| user.value(i))
+                    .ok_or_else(|| null("is_user_input", i))?,
+            }),
+            Env::Iphyre => Body::Iphyre(IphyreObject {
+                index: oid.value(i).parse().map_err(|_| null("object_id", i))?,
+                x1: need_f(x1, "x1", i)?,
+                y1: need_f(y1, "y1", i)?,
+                x2: need_f(x2, "x2", i)?,
+                y2: need_f(y2, "y2", i)?,
+                radius: need_f(radius, "radius", i)?,
+                eliminable: need_f(elim, "eliminable", i)?,
+                dynamic: need_f(dynamic, "dynamic", i)?,
+                joint: opt(joint, i, |i| joint.value(i)).ok_or_else(|| null("joint", i))?,
+                spring: opt(spring, i, |i| spring.value(i)).ok_or_else(|| null("spring", i))?,
+                angle: opt(angle, i, |i| angle.value(i)),
+                vx: opt(vx, i, |i| vx.value(i)),
+                vy: opt(vy, i, |i| vy.value(i)),
+                angular_velocity: opt(wz, i, |i| wz.value(i)),
+            }),
+        };
+        let extra = parse_map(
+            opt(&fextra, i, |i| fextra.value(i)),
+            "frames",
+            "extra",
+            &trace_id,
+        )?;
+        target.objects.push(Object { body, extra });
+    }
+
+    // Events.
+    let ev = Cols {
+        table: "events",
+        batch: rows.events,
+    };
+    let (ekind, et, payload, eextra) = (
+        ev.str("kind")?,
+        ev.f64("t")?,
+        ev.str("payload")?,
+        ev.str("extra")?,
+    );
+    let mut events = Vec::with_capacity(ekind.len());
+    for i in 0..ekind.len() {
+        let payload = match opt(&payload, i, |i| payload.value(i)) {
+            None => None,
+            Some(s) => Some(serde_json::from_str(s).map_err(|source| DecodeError::Json {
+                table: "events",
+                column: "payload",
+                trace_id: trace_id.clone(),
+                source,
+            })?),
+        };
+        events.push(Event {
+            kind: ekind.value(i).to_string(),
+            t: opt(et, i, |i| et.value(i)),
+            payload,
+            extra: parse_map(
+                opt(&eextra, i, |i| eextra.value(i)),
+                "events",
+                "extra",
+                &trace_id,
+            )?,
+        });
+    }
+
+    Ok(Trace {
+        trace_id,
+        env,
+        task_id: tr.str("task_id")?.value(0).to_string(),
+        timesteps,
+        events,
+        outcome,
+        extra: top_extra,
+    })
+}

@@ -1,0 +1,191 @@
+//! Writes a [`Trace`] in the paper's JSON layout, streaming, without building a JSON tree first.
+//!
+//! Field order: `trace_id`, `environment`, `task_id`, the trace's unknown top-level fields, `timesteps`,
+//! `events`, `outcome`. Inside objects the format's fields come first in the paper's order, then the
+//! unknown ones in their input order. Floats are written in their shortest round-trip form, so reading
+//! the output gives back the same `f64` values.
+
+use std::io::Write;
+
+use serde::ser::{Serialize, SerializeMap, SerializeSeq, Serializer};
+use serde_json::Value;
+
+use crate::trace::model::{Body, Event, JsonMap, Object, Outcome, Timestep, Trace};
+
+/// A borrowed trace that serialises in the paper's layout.
+pub struct PaperTrace<'a>(pub &'a Trace);
+
+/// Writes one trace as compact JSON (no trailing newline).
+pub fn write_trace(out: &mut impl Write, trace: &Trace, pretty: bool) -> serde_json::Result<()> {
+    if pretty {
+        serde_json::to_writer_pretty(out, &PaperTrace(trace))
+    } else {
+        serde_json::to_writer(out, &PaperTrace(trace))
+    }
+}
+
+/// The trace as a JSON value (for tests and small traces).
+pub fn to_value(trace: &Trace) -> Value {
+    serde_json::to_value(PaperTrace(trace))
+        .expect("a trace always serialises: its floats are finite")
+}
+
+/// One timestep as a JSON value in the paper's layout (scene specs keep the initial timestep this way).
+pub fn timestep_to_value(ts: &Timestep) -> Value {
+    serde_json::to_value(StepJson(ts)).expect("a timestep always serialises: its floats are finite")
+}
+
+fn extras<M: SerializeMap>(m: &mut M, extra: &JsonMap) -> Result<(), M::Error> {
+    for (k, v) in extra {
+        m.serialize_entry(k, v)?;
+    }
+    Ok(())
+}
+
+impl Serialize for PaperTrace<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let t = self.0;
+        let mut m = s.serialize_map(None)?;
+        m.serialize_entry("trace_id", &t.trace_id)?;
+        m.serialize_entry("environment", t.env.as_str())?;
+        m.serialize_entry("task_id", &t.task_id)?;
+        extras(&mut m, &t.extra)?;
+        m.serialize_entry("timesteps", &Steps(&t.timesteps))?;
+        m.serialize_entry("events", &Events(&t.events))?;
+        m.serialize_entry("outcome", &OutcomeJson(&t.outcome))?;
+        m.end()
+    }
+}
+
+struct Steps<'a>(&'a [Timestep]);
+struct StepJson<'a>(&'a Timestep);
+struct Objects<'a>(&'a [Object]);
+struct ObjectJson<'a>(&'a Object);
+struct Events<'a>(&'a [Event]);
+struct EventJson<'a>(&'a Event);
+struct OutcomeJson<'a>(&'a Outcome);
+
+impl Serialize for Steps<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let mut seq = s.serialize_seq(Some(self.0.len()))?;
+        for ts in self.0 {
+            seq.serialize_element(&StepJson(ts))?;
+        }
+        seq.end()
+    }
+}
+
+impl Serialize for StepJson<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let ts = self.0;
+        let mut m = s.serialize_map(None)?;
+        m.serialize_entry("index", &ts.index)?;
+        m.serialize_entry("t", &ts.t)?;
+        m.serialize_entry("objects", &Objects(&ts.objects))?;
+        extras(&mut m, &ts.extra)?;
+        m.end()
+    }
+}
+
+impl Serialize for Objects<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let mut seq = s.serialize_seq(Some(self.0.len()))?;
+        for o in self.0 {
+            seq.serialize_element(&ObjectJson(o))?;
+        }
+        seq.end()
+    }
+}
+
+impl Serialize for ObjectJson<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let mut m = s.serialize_map(None)?;
+        match &self.0.body {
+            Body::Pool(b) => {
+                m.serialize_entry("kind", &b.kind)?;
+                m.serialize_entry("ball_id", &b.ball_id)?;
+                m.serialize_entry("position", &b.position)?;
+                m.serialize_entry("velocity", &b.velocity)?;
+                m.serialize_entry("angular_velocity", &b.angular_velocity)?;
+                m.serialize_entry("motion_state_code", &b.motion_state_code)?;
+                m.serialize_entry("motion_state", &b.motion_state)?;
+                m.serialize_entry("radius", &b.radius)?;
+            }
+            Body::Phyre(o) => {
+                m.serialize_entry("object_index", &o.object_index)?;
+                m.serialize_entry("shape", &o.shape)?;
+                m.serialize_entry("color", &o.color)?;
+                m.serialize_entry("diameter", &o.diameter)?;
+                m.serialize_entry("x", &o.x)?;
+                m.serialize_entry("y", &o.y)?;
+                m.serialize_entry("angle", &o.angle)?;
+                m.serialize_entry("vx", &o.vx)?;
+                m.serialize_entry("vy", &o.vy)?;
+                m.serialize_entry("angular_velocity", &o.angular_velocity)?;
+                m.serialize_entry("is_user_input", &o.is_user_input)?;
+            }
+            Body::Iphyre(o) => {
+                m.serialize_entry("index", &o.index)?;
+                m.serialize_entry("x1", &o.x1)?;
+                m.serialize_entry("y1", &o.y1)?;
+                m.serialize_entry("x2", &o.x2)?;
+                m.serialize_entry("y2", &o.y2)?;
+                m.serialize_entry("radius", &o.radius)?;
+                m.serialize_entry("eliminable", &o.eliminable)?;
+                m.serialize_entry("dynamic", &o.dynamic)?;
+                m.serialize_entry("joint", &o.joint)?;
+                m.serialize_entry("spring", &o.spring)?;
+                for (key, v) in [
+                    ("angle", o.angle),
+                    ("vx", o.vx),
+                    ("vy", o.vy),
+                    ("angular_velocity", o.angular_velocity),
+                ] {
+                    if let Some(v) = v {
+                        m.serialize_entry(key, &v)?;
+                    }
+                }
+            }
+        }
+        extras(&mut m, &self.0.extra)?;
+        m.end()
+    }
+}
+
+impl Serialize for Events<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let mut seq = s.serialize_seq(Some(self.0.len()))?;
+        for e in self.0 {
+            seq.serialize_element(&EventJson(e))?;
+        }
+        seq.end()
+    }
+}
+
+impl Serialize for EventJson<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let e = self.0;
+        let mut m = s.serialize_map(None)?;
+        m.serialize_entry("kind", &e.kind)?;
+        if let Some(t) = e.t {
+            m.serialize_entry("t", &t)?;
+        }
+        if let Some(p) = &e.payload {
+            m.serialize_entry("payload", p)?;
+        }
+        extras(&mut m, &e.extra)?;
+        m.end()
+    }
+}
+
+impl Serialize for OutcomeJson<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let o = self.0;
+        let mut m = s.serialize_map(None)?;
+        m.serialize_entry("success", &o.success)?;
+        m.serialize_entry("terminal_status", &o.terminal_status)?;
+        m.serialize_entry("metrics", &o.metrics)?;
+        extras(&mut m, &o.extra)?;
+        m.end()
+    }
+}

@@ -1,0 +1,22 @@
+//! The trace model and its two representations: the paper's JSON layout and the Arrow tables.
+//!
+//! **Owns:** the types of a trace ([`Trace`], [`Timestep`], [`Object`], [`Event`], [`Outcome`]), the
+//! environments ([`Env`]), the Arrow schemas of the trace tables ([`schema`]), conversion between traces
+//! and record batches ([`batch`]) and the JSON import/export format ([`json`]).
+//! **Does not:** read or write files of a run directory (`store/`), run SQL (`query/`) or order stages
+//! (`pipeline/`). It imports no other annotrace module.
+//!
+//! Entry points: [`json::read_file`] streams traces out of JSON; [`TraceBatchBuilder`] turns them into
+//! columns; [`decode_trace`] turns columns back into a trace; [`json::write_trace`] writes JSON.
+
+pub mod batch;
+mod env;
+pub mod json;
+mod model;
+pub mod schema;
+
+pub use batch::{TraceBatchBuilder, TraceBatches, TraceMeta, TraceRows, decode_trace};
+pub use env::{Env, UnknownEnv};
+pub use model::{
+    Body, Event, IphyreObject, JsonMap, Object, Outcome, PhyreObject, PoolBall, Timestep, Trace,
+};
