@@ -16,5 +16,8 @@ pub mod query;
 pub mod store;
 pub mod trace;
 
+#[doc(hidden)]
+pub mod testutil;
+
 /// The crate version recorded in manifests and stage fingerprints.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

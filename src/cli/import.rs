@@ -95,6 +95,7 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
     let opts = RunOptions {
         run_dir: Some(args.run.clone()),
         fault: fault_from_env()?,
+        remove_new_run_on_failure: true,
         ..RunOptions::default()
     };
     let report = run_pipeline(&spec, &opts, &Terminal::new(quiet)).map_err(run_error)?;

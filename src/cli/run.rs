@@ -33,6 +33,7 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
         until: args.until,
         fault: fault_from_env()?,
         record_pipeline: true,
+        remove_new_run_on_failure: false,
     };
     if args.explain {
         let (dir, plan) = explain(&spec, &opts).map_err(run_error)?;

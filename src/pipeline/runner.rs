@@ -43,6 +43,10 @@ pub struct RunOptions {
     pub fault: Option<FaultPlan>,
     /// Record the pipeline as the run's pipeline in the manifest (off for one-off CLI commands).
     pub record_pipeline: bool,
+    /// When the run folder did not exist and no stage finishes, remove it on failure (one-off CLI
+    /// commands such as `annotrace import`, which must leave nothing behind when they fail). Pipelines
+    /// keep the folder, so the manifest shows the failed stage and its error.
+    pub remove_new_run_on_failure: bool,
 }
 
 /// A run could not complete.
@@ -353,7 +357,7 @@ pub fn run(
     }
 
     let result = run_locked(spec, opts, progress, &built, &run);
-    if result.is_err() && !existed {
+    if result.is_err() && !existed && opts.remove_new_run_on_failure {
         // A run folder this invocation created and that holds no finished stage is removed whole, so a
         // failed first import leaves nothing behind.
         let finished = Manifest::load(&run)

@@ -69,7 +69,7 @@ pub struct StageDef {
     pub description: Option<String>,
     /// Line of its `[[stage]]` table (of its `id` key).
     pub line: usize,
-    /// Line of each parameter given in the file.
+    /// Line of each parameter (and of `inputs`) given in the file.
     pub param_lines: Vec<(String, usize)>,
 }
 
@@ -296,8 +296,11 @@ impl PipelineSpec {
                 .iter()
                 .filter(|e| !matches!(e.key.as_str(), "id" | "kind" | "inputs" | "description"))
                 .collect();
-            let (params, param_lines) =
+            let (params, mut param_lines) =
                 params::resolve(file, &id, line, kind.name, kind.params, &param_entries)?;
+            if let Some(e) = get("inputs") {
+                param_lines.push(("inputs".to_string(), e.key_line));
+            }
             stages.push(StageDef {
                 id,
                 kind,
@@ -314,7 +317,6 @@ impl PipelineSpec {
             for input in &s.inputs {
                 if !stages.iter().any(|o| &o.id == input) {
                     let line = s.line_of("inputs");
-                    let line = if line == s.line { s.line } else { line };
                     return Err(SpecError::MissingInput {
                         file: file.to_path_buf(),
                         line,
@@ -510,8 +512,8 @@ mod tests {
     fn errors_name_file_line_and_key() {
         let e = parse(&format!("[[stage]]\nid = \"a\"\n{SQL}colour = 3\n")).unwrap_err();
         assert_eq!(
-            e.to_string().lines().next().unwrap(),
-            "pipelines/t.toml:5: unknown key `colour` in stage \"a\" (kind sql)"
+            e.to_string(),
+            "pipelines/t.toml:5: unknown key `colour` in stage \"a\" (kind sql) (known: id, kind, inputs, description, query, sql, output)"
         );
         let e = parse("[[stage]]\nid = \"a\"\nkind = \"anotate\"\n").unwrap_err();
         assert!(
@@ -533,7 +535,7 @@ mod tests {
             matches!(
                 e,
                 SpecError::DuplicateId {
-                    line: 6,
+                    line: 7,
                     first_line: 2,
                     ..
                 }

@@ -1,1 +1,8 @@
+//! Integration tests: one binary, one file per command users type (ripgrep's and uv's layout).
 
+mod common;
+
+mod export;
+mod import;
+mod query;
+mod run;

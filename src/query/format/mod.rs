@@ -267,13 +267,13 @@ mod tests {
         let (schema, batches) = sample();
         let out = render_string(&schema, &batches, Format::Table, &RenderOptions::default());
         insta::assert_snapshot!(out, @r#"
-        +--------------------+----+------------+
-        | label              | n  | mean_speed |
-        +--------------------+----+------------+
-        | cushion_rebound    | 12 |     1.2346 |
-        | a, "quoted" & 50%  |  3 |     0.5000 |
-        |                    |  0 |            |
-        +--------------------+----+------------+
+        +-------------------+----+------------+
+        | label             | n  | mean_speed |
+        +-------------------+----+------------+
+        | cushion_rebound   | 12 |     1.2346 |
+        | a, "quoted" & 50% |  3 |     0.5000 |
+        |                   |  0 |            |
+        +-------------------+----+------------+
         3 rows
         "#);
     }
