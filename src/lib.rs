@@ -7,10 +7,12 @@
 //! Modules, bottom to top (each depends only on those above it in this list):
 //! - [`trace`]: the trace model, its Arrow schemas and the paper's JSON format;
 //! - [`store`]: the run directory on disk — atomic files, Parquet datasets, staging and commit;
+//! - [`envs`]: simulators behind one `Environment` trait (billiards: pooltool 0.6.0 physics), producing traces;
 //! - [`query`]: DataFusion over a run's tables, and result formats (table, CSV, Markdown, LaTeX, JSON);
 //! - [`pipeline`]: pipeline files, the stage registry, fingerprints, the runner and its manifest.
 #![warn(missing_docs)]
 
+pub mod envs;
 pub mod pipeline;
 pub mod query;
 pub mod store;

@@ -1,0 +1,93 @@
+//! Simulation environments that produce traces: one module per environment behind [`Environment`].
+//!
+//! **Owns:** the [`Environment`] trait (scenes, action validation, simulate → [`Trace`], success,
+//! rendering) and its implementations: [`pool`] (billiards, pooltool 0.6.0 physics). PHYRE and I-PHYRE
+//! arrive later as `phyre/` and `iphyre/`.
+//! **Does not:** write run folders or order stages (`pipeline/`), parse command lines (`cli/`). It uses
+//! only [`crate::trace`] below it.
+//!
+//! **Entry point:** [`pool::PoolEnv`]:
+//!
+//! ```
+//! use annotrace::envs::{Environment, pool::{PoolEnv, Shot}};
+//! let env = PoolEnv::default();
+//! let scene = &env.scenes(1, 42).unwrap()[0];
+//! let trace = env.simulate(scene, &Shot { v0: 4.0, phi: 80.0, theta: 0.0, a: 0.0, b: 0.2 }).unwrap();
+//! assert_eq!(trace.events[1].kind, "physics_stick_ball");
+//! ```
+
+pub mod pool;
+
+use crate::trace::{Env, Trace};
+
+/// One dimension of an environment's continuous action space.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ActionDim {
+    /// Name as it appears in action JSON (`V0`, `phi`, …).
+    pub name: &'static str,
+    /// Unit (`m/s`, `deg`, `R`).
+    pub unit: &'static str,
+    /// Smallest allowed value.
+    pub low: f64,
+    /// Largest allowed value (exclusive where the doc says so).
+    pub high: f64,
+    /// What it means.
+    pub doc: &'static str,
+}
+
+/// Why an environment could not do what was asked.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum EnvError {
+    /// The environment does not offer this operation.
+    #[error("{env} does not support {what}")]
+    Unsupported {
+        /// The environment.
+        env: Env,
+        /// The operation (`rendering`, …).
+        what: &'static str,
+    },
+    /// A billiards scene, shot or simulation failed.
+    #[error(transparent)]
+    Pool(#[from] pool::PoolError),
+    /// Rendering failed.
+    #[error("rendering: {0}")]
+    Render(String),
+}
+
+/// A simulator that turns (scene, action) into a [`Trace`]; what `TableProvider` is to DataFusion.
+pub trait Environment: Send + Sync {
+    /// An initial condition.
+    type Scene;
+    /// What an agent chooses.
+    type Action;
+
+    /// The environment's name in traces and run folders.
+    fn env(&self) -> Env;
+
+    /// `n` generated scenes; scene `i` depends only on (`seed`, `i`).
+    fn scenes(&self, n: usize, seed: u64) -> Result<Vec<Self::Scene>, EnvError>;
+
+    /// The continuous action space, one entry per parameter.
+    fn action_space(&self) -> Vec<ActionDim>;
+
+    /// Checks an action against a scene without simulating; the error names the bad field.
+    fn validate(&self, scene: &Self::Scene, action: &Self::Action) -> Result<(), EnvError>;
+
+    /// Simulates `action` from `scene` into a trace.
+    fn simulate(&self, scene: &Self::Scene, action: &Self::Action) -> Result<Trace, EnvError>;
+
+    /// Whether a trace met its scene's success rule (by default, what its outcome says).
+    fn success(&self, trace: &Trace) -> bool {
+        trace.outcome.success
+    }
+
+    /// A PNG image of `trace` at time `t` (seconds). Default: not supported.
+    fn render(&self, trace: &Trace, t: f64) -> Result<Vec<u8>, EnvError> {
+        let _ = (trace, t);
+        Err(EnvError::Unsupported {
+            env: self.env(),
+            what: "rendering",
+        })
+    }
+}

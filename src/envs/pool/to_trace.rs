@@ -1,0 +1,358 @@
+//! A finished [`Simulation`] as an annotrace [`Trace`] in the paper's PoolTool layout.
+//!
+//! * **Timesteps** lie on pooltool's `continuize` grid, t = 0, dt, 2·dt, … plus the time of the last
+//!   event ([`sample_times`]); every ball's state at each of them is evaluated from the closed-form
+//!   motion after the latest event ([`state_at`]), not re-simulated. Every ball appears at every step
+//!   (pocketed balls with `motion_state = "pocketed"`), as `kind, ball_id, position, velocity,
+//!   angular_velocity, motion_state_code, motion_state, radius`.
+//! * **Events** are `shot_prepared` (t = 0, the shot), then one `physics_<kind>` per simulated event
+//!   (pooltool's kinds: `physics_stick_ball`, `physics_ball_ball`, `physics_ball_linear_cushion`,
+//!   `physics_ball_circular_cushion`, `physics_ball_pocket`, `physics_sliding_rolling`,
+//!   `physics_rolling_spinning`, `physics_rolling_stationary`, `physics_spinning_stationary`), then
+//!   `shot_outcome` (t = end). Each payload has `agents` in pooltool's `ids` order (`"cue_stick"`, ball
+//!   ids, cushion ids like `"12"` or `"8t"`, pocket ids like `"rt"`) plus the event's details.
+//! * **Outcome**: see [`outcome`].
+
+use serde_json::{Value, json};
+
+use super::events::{Agent, EventKind};
+use super::sample::sample_times;
+use super::scene::Scene;
+use super::shot::Shot;
+use super::simulate::{Simulation, Status, state_at};
+use crate::trace::{Body, Env, Event, JsonMap, Object, Outcome, PoolBall, Timestep, Trace};
+
+/// Options of the conversion.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TraceOptions {
+    /// Spacing of the timesteps (s). Default 0.01 s, the dt of pooltool's reference traces
+    /// (`tools/pooltool/gen_traces.py`): a 5 s shot gives about 500 timesteps.
+    pub dt: f64,
+}
+
+impl Default for TraceOptions {
+    fn default() -> Self {
+        TraceOptions { dt: 0.01 }
+    }
+}
+
+/// The event-kind string of the trace format: `physics_` + pooltool's name.
+pub fn event_kind_name(kind: EventKind) -> String {
+    format!("physics_{}", kind.name())
+}
+
+fn shot_json(shot: &Shot) -> Value {
+    json!({"V0": shot.v0, "phi": shot.phi, "theta": shot.theta, "a": shot.a, "b": shot.b})
+}
+
+fn map(v: Value) -> JsonMap {
+    match v {
+        Value::Object(m) => m,
+        _ => JsonMap::new(),
+    }
+}
+
+/// The trace of `sim`, which simulated `shot` on `scene`. `trace_id` names it; `task_id` is the scene id.
+pub fn trace_of(
+    sim: &Simulation,
+    scene: &Scene,
+    shot: &Shot,
+    trace_id: &str,
+    opts: &TraceOptions,
+) -> Trace {
+    let mut times = sample_times(sim.t_end, opts.dt);
+    // The final sample is the last event's time; drop it when it repeats the grid (t_end = k·dt, or
+    // a shot without events), so that times stay strictly increasing.
+    times.dedup_by(|later, earlier| *later <= *earlier);
+    let timesteps = times
+        .iter()
+        .enumerate()
+        .map(|(index, &t)| Timestep {
+            index: index as i64,
+            t,
+            objects: (0..sim.ball_ids.len())
+                .filter_map(|b| {
+                    let s = state_at(sim, b, t)?;
+                    Some(Object {
+                        body: Body::Pool(PoolBall {
+                            kind: "ball".into(),
+                            ball_id: sim.ball_ids[b].clone(),
+                            position: s.r,
+                            velocity: s.v,
+                            angular_velocity: s.w,
+                            motion_state_code: i64::from(s.s.as_int()),
+                            motion_state: s.s.name().into(),
+                            radius: sim.ball_params[b].r,
+                        }),
+                        extra: JsonMap::new(),
+                    })
+                })
+                .collect(),
+            extra: JsonMap::new(),
+        })
+        .collect();
+
+    let out = outcome(sim, scene, shot, opts.dt);
+    let mut events = Vec::with_capacity(sim.events.len() + 2);
+    let mut prepared =
+        json!({"agents": [scene.cue_ball], "cue_ball": scene.cue_ball, "goal": scene.goal});
+    prepared["shot"] = shot_json(shot);
+    events.push(Event {
+        kind: "shot_prepared".into(),
+        t: Some(0.0),
+        payload: Some(prepared),
+        extra: JsonMap::new(),
+    });
+    for e in &sim.events {
+        let ids: Vec<&str> = sim.event_ids(e);
+        let mut payload = json!({"agents": ids});
+        match (e.kind, e.agents()) {
+            (EventKind::StickBall, _) => {
+                payload["ball"] = json!(ids[1]);
+                if let Value::Object(s) = shot_json(shot) {
+                    payload.as_object_mut().expect("an object").extend(s);
+                }
+            }
+            (EventKind::BallBall, _) => {
+                let (a, b) = (&e.balls[0], &e.balls[1]);
+                let dv = [a.1.v[0] - b.1.v[0], a.1.v[1] - b.1.v[1]];
+                let n = [b.1.r[0] - a.1.r[0], b.1.r[1] - a.1.r[1]];
+                let nn = (n[0] * n[0] + n[1] * n[1]).sqrt().max(f64::MIN_POSITIVE);
+                payload["approach_speed"] = json!((dv[0] * n[0] + dv[1] * n[1]) / nn);
+            }
+            (EventKind::BallLinearCushion | EventKind::BallCircularCushion, _) => {
+                payload["ball"] = json!(ids[0]);
+                payload["cushion"] = json!(ids[1]);
+                let before = e.balls[0].1.v;
+                payload["speed"] = json!((before[0] * before[0] + before[1] * before[1]).sqrt());
+            }
+            (EventKind::BallPocket, _) => {
+                payload["ball"] = json!(ids[0]);
+                payload["pocket"] = json!(ids[1]);
+            }
+            (_, [Agent::Ball(_), ..]) => {
+                payload["ball"] = json!(ids[0]);
+                if let Some((_, before, after)) = e.balls.first() {
+                    payload["from"] = json!(before.s.name());
+                    payload["to"] = json!(after.s.name());
+                }
+            }
+            _ => {}
+        }
+        events.push(Event {
+            kind: event_kind_name(e.kind),
+            t: Some(e.time),
+            payload: Some(payload),
+            extra: JsonMap::new(),
+        });
+    }
+    let pocketed: Vec<Value> = out.metrics["pocketed"]
+        .as_array()
+        .map(|a| a.iter().map(|p| p["ball"].clone()).collect())
+        .unwrap_or_default();
+    events.push(Event {
+        kind: "shot_outcome".into(),
+        t: Some(sim.t_end),
+        payload: Some(json!({
+            "agents": pocketed,
+            "success": out.success,
+            "terminal_status": out.terminal_status,
+        })),
+        extra: JsonMap::new(),
+    });
+
+    Trace {
+        trace_id: trace_id.to_string(),
+        env: Env::Pooltool,
+        task_id: scene.scene_id.clone(),
+        timesteps,
+        events,
+        outcome: out,
+        extra: JsonMap::new(),
+    }
+}
+
+/// The outcome of a shot.
+///
+/// * `success`: the scene's goal ball (the 9-ball for 9-ball scenes; any object ball for `"any"`) was
+///   pocketed, in the goal's pocket if it names one. A scratch does not undo it (DeepPHY's rule).
+/// * `terminal_status`: `max_events` or `max_time` when a cap stopped the run; otherwise
+///   `potted_<ball>` on success (`potted_9`), `scratch` when the cue ball was pocketed, `pocketed_other`
+///   when other balls were, and `no_pocket`.
+/// * `metrics`: `balls_pocketed`, `pocketed` (`[{ball, pocket, t}]` in order), `cue_ball_pocketed`,
+///   `first_contact` (the first ball the cue ball hits, or null), `n_events` (physics events),
+///   `n_ball_ball`, `n_cushion`, `duration_s`, `shot` (`{V0, phi, theta, a, b}`), `dt`, `sim_status`.
+pub fn outcome(sim: &Simulation, scene: &Scene, shot: &Shot, dt: f64) -> Outcome {
+    let cue = scene.cue_ball.as_str();
+    let mut pocketed = Vec::new();
+    let mut first_contact: Option<&str> = None;
+    let (mut n_bb, mut n_cushion) = (0u64, 0u64);
+    for e in &sim.events {
+        let ids = sim.event_ids(e);
+        match e.kind {
+            EventKind::BallPocket => {
+                pocketed.push(json!({"ball": ids[0], "pocket": ids[1], "t": e.time}))
+            }
+            EventKind::BallBall => {
+                n_bb += 1;
+                if first_contact.is_none() && ids.contains(&cue) {
+                    first_contact = ids.iter().copied().find(|b| *b != cue);
+                }
+            }
+            EventKind::BallLinearCushion | EventKind::BallCircularCushion => n_cushion += 1,
+            _ => {}
+        }
+    }
+    let goal_hit = pocketed.iter().find(|p| {
+        let ball = p["ball"].as_str().unwrap_or_default();
+        let ball_ok = if scene.goal.pot == "any" {
+            ball != cue
+        } else {
+            ball == scene.goal.pot
+        };
+        ball_ok
+            && scene
+                .goal
+                .pocket
+                .as_ref()
+                .is_none_or(|k| p["pocket"].as_str() == Some(k.as_str()))
+    });
+    let success = goal_hit.is_some();
+    let cue_pocketed = pocketed.iter().any(|p| p["ball"] == cue);
+    let terminal_status = match sim.status {
+        Status::MaxEvents => "max_events".to_string(),
+        Status::MaxTime => "max_time".to_string(),
+        Status::Settled => match goal_hit {
+            Some(p) => format!("potted_{}", p["ball"].as_str().unwrap_or_default()),
+            None if cue_pocketed => "scratch".into(),
+            None if !pocketed.is_empty() => "pocketed_other".into(),
+            None => "no_pocket".into(),
+        },
+    };
+    let sim_status = match sim.status {
+        Status::Settled => "settled",
+        Status::MaxEvents => "max_events",
+        Status::MaxTime => "max_time",
+    };
+    let metrics = map(json!({
+        "balls_pocketed": pocketed.len(),
+        "pocketed": pocketed,
+        "cue_ball_pocketed": cue_pocketed,
+        "first_contact": first_contact,
+        "n_events": sim.events.len(),
+        "n_ball_ball": n_bb,
+        "n_cushion": n_cushion,
+        "duration_s": sim.t_end,
+        "shot": shot_json(shot),
+        "dt": dt,
+        "sim_status": sim_status,
+    }));
+    Outcome {
+        success,
+        terminal_status,
+        metrics,
+        extra: JsonMap::new(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::envs::pool::{PoolConfig, SimOptions, simulate};
+
+    fn straight_pot() -> (Scene, Shot) {
+        // The 9-ball 0.3 m in front of the right-top pocket's line, the cue ball behind it.
+        let c = PoolConfig::default_7ft();
+        let scene = Scene::from_json_str(
+            r#"{"balls":[{"id":"cue","x":0.5,"y":1.2},{"id":"9","x":0.75,"y":1.6}]}"#,
+            &c,
+        )
+        .unwrap();
+        let phi = crate::envs::pool::aim::ghost_ball(&scene, &c, "9", "rt").unwrap();
+        (
+            scene,
+            Shot {
+                v0: 2.5,
+                phi,
+                theta: 0.0,
+                a: 0.0,
+                b: 0.0,
+            },
+        )
+    }
+
+    #[test]
+    fn a_potted_nine_is_a_success_with_the_pocket_named() {
+        let c = PoolConfig::default_7ft();
+        let (scene, shot) = straight_pot();
+        let sim = simulate(&scene.system(&c).unwrap(), &shot, &SimOptions::default()).unwrap();
+        let tr = trace_of(&sim, &scene, &shot, "t0", &TraceOptions::default());
+        assert!(tr.outcome.success, "{:?}", tr.outcome);
+        assert_eq!(tr.outcome.terminal_status, "potted_9");
+        assert_eq!(tr.outcome.metrics["pocketed"][0]["pocket"], "rt");
+        assert_eq!(tr.outcome.metrics["first_contact"], "9");
+        // Timesteps: the continuize grid, strictly increasing, every ball at every step.
+        assert_eq!(tr.timesteps[1].t, 0.01);
+        assert!(tr.timesteps.windows(2).all(|w| w[0].t < w[1].t));
+        assert!(tr.timesteps.iter().all(|s| s.objects.len() == 2));
+        assert_eq!(tr.timesteps.last().unwrap().t, sim.t_end);
+        // Events: shot_prepared, the physics events in order, shot_outcome.
+        assert_eq!(tr.events[0].kind, "shot_prepared");
+        assert_eq!(tr.events[1].kind, "physics_stick_ball");
+        assert_eq!(
+            tr.events[1].payload.as_ref().unwrap()["agents"],
+            json!(["cue_stick", "cue"])
+        );
+        let pocket = tr
+            .events
+            .iter()
+            .find(|e| e.kind == "physics_ball_pocket")
+            .unwrap();
+        assert_eq!(
+            pocket.payload.as_ref().unwrap()["agents"],
+            json!(["9", "rt"])
+        );
+        assert_eq!(tr.events.last().unwrap().kind, "shot_outcome");
+        let Body::Pool(nine) = &tr.timesteps.last().unwrap().objects[1].body else {
+            panic!("a pool ball")
+        };
+        assert_eq!(
+            (nine.motion_state_code, nine.motion_state.as_str()),
+            (4, "pocketed")
+        );
+    }
+
+    #[test]
+    fn a_still_cue_gives_one_timestep_and_no_pocket() {
+        let c = PoolConfig::default_7ft();
+        let (scene, shot) = straight_pot();
+        let shot = Shot { v0: 0.0, ..shot };
+        let sim = simulate(&scene.system(&c).unwrap(), &shot, &SimOptions::default()).unwrap();
+        let tr = trace_of(&sim, &scene, &shot, "t0", &TraceOptions::default());
+        assert_eq!(tr.timesteps.len(), 1);
+        assert_eq!(tr.outcome.terminal_status, "no_pocket");
+        assert!(!tr.outcome.success);
+    }
+
+    #[test]
+    fn a_capped_run_says_so() {
+        let c = PoolConfig::default_7ft();
+        let (scene, shot) = straight_pot();
+        let opts = SimOptions {
+            max_events: 1,
+            t_final: None,
+        };
+        let sim = simulate(&scene.system(&c).unwrap(), &shot, &opts).unwrap();
+        let tr = trace_of(&sim, &scene, &shot, "t0", &TraceOptions::default());
+        assert_eq!(tr.outcome.terminal_status, "max_events");
+        let opts = SimOptions {
+            max_events: 0,
+            t_final: Some(0.2),
+        };
+        let sim = simulate(&scene.system(&c).unwrap(), &shot, &opts).unwrap();
+        assert_eq!(
+            outcome(&sim, &scene, &shot, 0.01).terminal_status,
+            "max_time"
+        );
+    }
+}
