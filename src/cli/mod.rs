@@ -11,7 +11,9 @@ mod export;
 mod import;
 mod progress;
 mod query;
+mod render;
 mod run;
+mod simulate;
 mod stages;
 mod tables;
 
@@ -69,6 +71,10 @@ enum Command {
     Run(run::Args),
     /// List the stage kinds a pipeline can use, with their parameters.
     Stages(stages::Args),
+    /// Simulate billiards shots into a run (random 9-ball racks, or one scene and shot).
+    Simulate(simulate::Args),
+    /// Draw a billiards trace of a run as a PNG (one instant or a strip of frames).
+    Render(render::Args),
     /// Import traces in the paper's JSON format into a run.
     Import(import::Args),
     /// Write one trace of a run back in the paper's JSON format.
@@ -86,6 +92,8 @@ pub fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run(a) => run::run(a, cli.quiet),
         Command::Stages(a) => stages::run(a),
+        Command::Simulate(a) => simulate::run(a, cli.quiet),
+        Command::Render(a) => render::run(a),
         Command::Import(a) => import::run(a, cli.quiet),
         Command::Export(a) => export::run(a),
         Command::Query(a) => query::run(a),

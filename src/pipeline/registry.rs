@@ -47,6 +47,7 @@ pub struct StageKind {
 /// Every stage kind, in the order `annotrace stages` lists them.
 pub static STAGE_KINDS: &[&StageKind] = &[
     &stages::import::KIND,
+    &stages::simulate::KIND,
     &stages::sql::KIND,
     &stages::export::KIND,
 ];

@@ -1,7 +1,7 @@
 //! Seeded 9-ball rack (reference/pooltool-physics.md §2.4 "9-ball rack"; pooltool
 //! `layouts.py`): a diamond with the 1-ball at the apex (table fraction (0.5, 0.75)), the
 //! 9-ball in the middle, the other balls in random order, every ball jittered by up to
-//! R·1e-3 around tight-packed positions; the cue ball behind the head string at (0.85, 0.23)
+//! R·0.5e-3 per axis (pooltool: R·1e-3, which can overlap balls) around tight-packed positions; the cue ball behind the head string at (0.85, 0.23)
 //! fractions. Uses a small self-contained SplitMix64 PRNG (positions do not reproduce
 //! pooltool's `random`-based racks bit for bit; replays read positions from traces).
 
@@ -80,8 +80,10 @@ pub fn nine_ball_positions(table: &Table, r: f64, seed: u64) -> Vec<(String, f64
                 id
             }
         };
-        let jx = rng.uniform(-1.0, 1.0) * r * 1e-3;
-        let jy = rng.uniform(-1.0, 1.0) * r * 1e-3;
+        // NOTE: pooltool jitters each axis by up to R·1e-3, which can close a 2R·1e-3 gap by
+        // 2√2·R·1e-3 and overlap two balls by a micrometre; half that jitter never overlaps.
+        let jx = rng.uniform(-1.0, 1.0) * r * 0.5e-3;
+        let jy = rng.uniform(-1.0, 1.0) * r * 0.5e-3;
         out.push((id, x + jx, y + jy));
     }
     out
@@ -161,6 +163,7 @@ pub fn dataset_shot(scene: &super::scene::Scene, rng: &mut SplitMix64) -> Shot {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::envs::pool::{PoolConfig, Scene};
 
     /// Rack sanity: 10 balls, no overlaps, 1 at the apex, 9 in the middle, cue behind the
     /// head string (y < l/4), deterministic per seed.
@@ -168,6 +171,13 @@ mod tests {
     fn rack_layout() {
         let t = Table::default_7ft();
         let r = 0.028575;
+        for seed in 0..2000 {
+            let c = PoolConfig::default_7ft();
+            assert!(
+                Scene::nine_ball(&c, seed).validate(&c).is_ok(),
+                "rack {seed} overlaps"
+            );
+        }
         let a = nine_ball_positions(&t, r, 7);
         let b = nine_ball_positions(&t, r, 7);
         assert_eq!(a, b);

@@ -11,8 +11,8 @@
 //! few glyphs needed (digits, `t = . s`, pocket letters), so no font file ships with annotrace.
 
 use tiny_skia::{
-    Color, FillRule, LineCap, LineJoin, Paint, PathBuilder, Pixmap, PixmapPaint, Rect, Stroke,
-    Transform,
+    Color, FillRule, LineCap, LineJoin, Mask, Paint, PathBuilder, Pixmap, PixmapPaint, Rect,
+    Stroke, Transform,
 };
 
 use super::config::PoolConfig;
@@ -418,15 +418,18 @@ fn frame(
     let cushion = 0.0508;
     let rail = 0.045;
     let outer = cushion + rail;
-    // Fit the outer rail box (w + 2·outer) × (l + 2·outer) into the frame with a margin.
-    let margin = size as f32 * 0.04;
-    let avail = size as f32 - 2.0 * margin;
+    // Fit the outer rail box (w + 2·outer) × (l + 2·outer) into the frame below a title line.
+    let margin = size as f32 * 0.02;
+    let label_h = (size as f32 / 40.0).max(7.0);
+    let title_h = 1.3 * label_h;
+    let avail_h = size as f32 - 3.0 * margin - title_h;
+    let avail_w = size as f32 - 2.0 * margin;
     let scale =
-        (avail / (table.l + 2.0 * outer) as f32).min(avail / (table.w + 2.0 * outer) as f32);
+        (avail_h / (table.l + 2.0 * outer) as f32).min(avail_w / (table.w + 2.0 * outer) as f32);
     let view = View {
         scale,
         ox: size as f32 / 2.0 - table.w as f32 * scale / 2.0,
-        oy: size as f32 / 2.0 + table.l as f32 * scale / 2.0,
+        oy: (size as f32 + 2.0 * margin + title_h) / 2.0 + table.l as f32 * scale / 2.0,
     };
     let (x0, y0) = view.px(-outer, -outer);
     let (x1, y1) = view.px(table.w + outer, table.l + outer);
@@ -452,9 +455,30 @@ fn frame(
             circle(&mut p, cx, cy, 1.6, [235, 225, 200]);
         }
     }
+    // Pockets, clipped to the rail box (pooltool's pocket circles reach past the rails).
+    let (x0, y0) = view.px(-outer, -outer);
+    let (x1, y1) = view.px(table.w + outer, table.l + outer);
+    let mut clip = Mask::new(size, size)
+        .ok_or_else(|| EnvError::Render(format!("cannot make a {size}×{size} mask")))?;
+    if let Some(r) = Rect::from_ltrb(x0.min(x1), y0.min(y1), x0.max(x1), y0.max(y1)) {
+        clip.fill_path(
+            &PathBuilder::from_rect(r),
+            FillRule::Winding,
+            false,
+            Transform::identity(),
+        );
+    }
     for pk in &table.pockets {
         let (cx, cy) = view.px(pk.center[0], pk.center[1]);
-        circle(&mut p, cx, cy, pk.radius as f32 * scale, [8, 8, 8]);
+        if let Some(path) = PathBuilder::from_circle(cx, cy, pk.radius as f32 * scale) {
+            p.fill_path(
+                &path,
+                &paint([8, 8, 8]),
+                FillRule::Winding,
+                Transform::identity(),
+                Some(&clip),
+            );
+        }
     }
     // Cushion noses: the linear segments and the jaws, as thin light lines.
     let mut pb = PathBuilder::new();
@@ -483,7 +507,6 @@ fn frame(
         circle(&mut p, cx, cy, jaw.radius as f32 * scale, [22, 96, 52]);
     }
     // Pocket labels outside the rails, on the side of the pocket.
-    let label_h = (size as f32 / 40.0).max(7.0);
     for pk in &table.pockets {
         let (_, cy) = view.px(pk.center[0], pk.center[1]);
         let w = text_width(&pk.id, label_h);
@@ -530,11 +553,12 @@ fn frame(
         draw_ball(&mut p, tray_x, cy, r, &b.ball_id);
     }
     let label = format!("t={:.2}s", step.t);
+    let w = text_width(&label, title_h);
     text(
         &mut p,
-        margin * 0.6,
-        margin * 0.6,
-        label_h * 1.3,
+        (size as f32 - w) / 2.0,
+        margin,
+        title_h,
         &label,
         [20, 20, 20],
         None,

@@ -1,8 +1,10 @@
-//! The stage kinds, one file each: `import` (paper-format JSON into the trace tables), `sql` (a query
-//! over the run stored as a table) and `export` (a table or query written to `exports/`).
+//! The stage kinds, one file each: `import` (paper-format JSON into the trace tables), `simulate` (an
+//! environment's simulator into the trace tables), `sql` (a query over the run stored as a table) and
+//! `export` (a table or query written to `exports/`).
 
 pub mod export;
 pub mod import;
+pub mod simulate;
 pub mod sql;
 
 use std::path::{Path, PathBuf};

@@ -1,0 +1,483 @@
+//! `simulate`: runs an environment's simulator and writes the trace tables, sharded and resumable.
+//!
+//! Two modes. **Dataset**: `scenes` seeded 9-ball racks × `shots` random shots each; scene `i` and shot
+//! `k` draw from RNGs derived from (`seed`, `i`) and (`seed`, `i`, `k`) alone, and every
+//! `scenes_per_shard` scenes make one shard (one Parquet file per table, marked done when committed), so
+//! the tables are byte-identical whatever the thread count and a killed run resumes at the first
+//! unfinished shard. Shards run in parallel on rayon's pool. **Replay**: `scene_file` (scene JSON, see
+//! `envs::pool::Scene`) and `shot` (`{V0, phi, theta, a, b}`) give exactly one trace. Bad input (a scene
+//! that is not JSON, a ball off the table, overlapping balls, an invalid shot, an unreadable table file)
+//! is caught when the stage is built, before anything is written.
+//!
+//! Ids: dataset scenes are `pool-<seed>-<index:06>` and their traces `<scene_id>-<shot:03>`; a replayed
+//! trace is `<scene_id>-<first 8 hex digits of the shot's hash>`.
+
+use std::collections::BTreeMap;
+
+use arrow::array::RecordBatch;
+use rayon::prelude::*;
+use serde_json::{Value, json};
+use sha2::{Digest, Sha256};
+
+use crate::envs::pool::{
+    PoolConfig, Scene, Shot, SimOptions, TraceOptions, rack, simulate, trace_of,
+};
+use crate::pipeline::params::{ParamSpec, ParamType};
+use crate::pipeline::registry::{BuildError, StageKind};
+use crate::pipeline::spec::{PipelineSpec, StageDef, hex};
+use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
+use crate::store::ParquetSink;
+use crate::trace::batch::scene_batch;
+use crate::trace::{Env, TraceBatchBuilder, schema};
+
+/// The `simulate` stage kind.
+pub static KIND: StageKind = StageKind {
+    name: "simulate",
+    summary: "simulate scenes × shots into the trace tables (billiards: pooltool 0.6.0 physics)",
+    doc: "Simulates an environment and writes the scenes, traces, timesteps, frames and events tables. \
+          Dataset mode: `scenes` seeded 9-ball racks with `shots` random shots each (half aimed at an object \
+          ball, V0 0.5-6 m/s, spin on a disc of radius 0.6), deterministic in `seed` whatever the thread \
+          count, sharded by `scenes_per_shard` and resumable. Replay mode: `scene_file` (scene JSON) and \
+          `shot` ({V0, phi, theta, a, b}) give one trace. Timesteps are resampled every `dt` seconds from \
+          the exact event-based solution; `max_events` / `max_time` stop runaway shots with terminal_status \
+          max_events / max_time. See docs/envs/pool.md.",
+    writes: "scenes, traces, timesteps, frames, events",
+    params: &[
+        ParamSpec::optional(
+            "env",
+            ParamType::Choice(&["pooltool"]),
+            "\"pooltool\"",
+            "environment to simulate",
+        ),
+        ParamSpec::optional(
+            "scenes",
+            ParamType::Count,
+            "10",
+            "dataset mode: number of random 9-ball racks",
+        ),
+        ParamSpec::optional(
+            "shots",
+            ParamType::Count,
+            "1",
+            "dataset mode: random shots per scene",
+        ),
+        ParamSpec::maybe(
+            "seed",
+            ParamType::Count,
+            "dataset mode: seed of racks and shots (default: the pipeline's seed)",
+        ),
+        ParamSpec::maybe(
+            "scene_file",
+            ParamType::Str,
+            "replay mode: scene JSON file, relative to the project folder",
+        ),
+        ParamSpec::maybe(
+            "shot",
+            ParamType::Str,
+            "replay mode: the shot as JSON, e.g. '{\"V0\": 3, \"phi\": 90, \"theta\": 0, \"a\": 0, \"b\": 0.2}'",
+        ),
+        ParamSpec::maybe(
+            "table",
+            ParamType::Str,
+            "table file (geometry, ball and cue parameters), relative to the project folder (default: data/tables/pooltool_7ft.json, built in)",
+        ),
+        ParamSpec::optional(
+            "dt",
+            ParamType::Float,
+            "0.01",
+            "timestep spacing of the traces (s)",
+        ),
+        ParamSpec::optional(
+            "max_events",
+            ParamType::Count,
+            "100000",
+            "stop a shot after this many events (terminal_status max_events); 0 = no cap",
+        ),
+        ParamSpec::maybe(
+            "max_time",
+            ParamType::Float,
+            "stop a shot at the first event at or after this time (s) (terminal_status max_time)",
+        ),
+        ParamSpec::optional(
+            "scenes_per_shard",
+            ParamType::Count,
+            "100",
+            "scenes per output file; a resumed run redoes at most the unfinished shards",
+        ),
+    ],
+    build,
+};
+
+/// What to simulate.
+#[derive(Debug)]
+enum Work {
+    /// Random racks and shots.
+    Dataset { scenes: u64, shots: u64, seed: u64 },
+    /// One scene, one shot.
+    Replay { scene: Box<Scene>, shot: Shot },
+}
+
+/// The `simulate` stage.
+#[derive(Debug)]
+pub struct SimulateStage {
+    config: PoolConfig,
+    /// The table file's text, when one was given (enters the fingerprint).
+    table_text: Option<String>,
+    work: Work,
+    sim: SimOptions,
+    trace: TraceOptions,
+    per_shard: u64,
+}
+
+fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
+    let p = &def.params;
+    let (config, table_text) = match p.get("table").and_then(Value::as_str) {
+        None => (PoolConfig::default_7ft(), None),
+        Some(t) => {
+            let path = spec.project_dir.join(t);
+            let text = std::fs::read_to_string(&path).map_err(|e| {
+                BuildError::param("table", format!("{}: cannot read: {e}", path.display()))
+            })?;
+            let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("table");
+            let config = PoolConfig::from_json_str(name, &text)
+                .map_err(|e| BuildError::param("table", format!("{}: {e}", path.display())))?;
+            (config, Some(text))
+        }
+    };
+    let dt = p["dt"].as_f64().unwrap_or(0.01);
+    if !(dt > 0.0 && dt.is_finite()) {
+        return Err(BuildError::param(
+            "dt",
+            format!("dt must be > 0, found {dt}"),
+        ));
+    }
+    let max_time = p.get("max_time").and_then(Value::as_f64);
+    if let Some(t) = max_time
+        && !(t > 0.0)
+    {
+        return Err(BuildError::param(
+            "max_time",
+            format!("max_time must be > 0, found {t}"),
+        ));
+    }
+    let work = match (
+        p.get("scene_file").and_then(Value::as_str),
+        p.get("shot").and_then(Value::as_str),
+    ) {
+        (Some(file), Some(shot_text)) => {
+            let path = spec.project_dir.join(file);
+            let text = std::fs::read_to_string(&path).map_err(|e| {
+                BuildError::param(
+                    "scene_file",
+                    format!("{}: cannot read: {e}", path.display()),
+                )
+            })?;
+            let scene = Scene::from_json_str(&text, &config)
+                .map_err(|e| BuildError::param("scene_file", format!("{}: {e}", path.display())))?;
+            let shot = parse_shot(shot_text).map_err(|m| BuildError::param("shot", m))?;
+            Work::Replay {
+                scene: Box::new(scene),
+                shot,
+            }
+        }
+        (Some(_), None) => {
+            return Err(BuildError::param(
+                "shot",
+                "replay mode needs `shot` with `scene_file`",
+            ));
+        }
+        (None, Some(_)) => {
+            return Err(BuildError::param(
+                "scene_file",
+                "replay mode needs `scene_file` with `shot`",
+            ));
+        }
+        (None, None) => Work::Dataset {
+            scenes: p["scenes"].as_u64().unwrap_or(10),
+            shots: p["shots"].as_u64().unwrap_or(1),
+            seed: p.get("seed").and_then(Value::as_u64).unwrap_or(spec.seed),
+        },
+    };
+    Ok(Box::new(SimulateStage {
+        config,
+        table_text,
+        work,
+        sim: SimOptions {
+            max_events: p["max_events"].as_u64().unwrap_or(100_000) as usize,
+            t_final: max_time,
+        },
+        trace: TraceOptions { dt },
+        per_shard: p["scenes_per_shard"].as_u64().unwrap_or(100).max(1),
+    }))
+}
+
+/// Parses and validates a shot given as JSON (`{"V0": …, "phi": …, "theta": …, "a": …, "b": …}`).
+pub fn parse_shot(text: &str) -> Result<Shot, String> {
+    #[derive(serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct ShotJson {
+        #[serde(rename = "V0")]
+        v0: f64,
+        phi: f64,
+        #[serde(default)]
+        theta: f64,
+        #[serde(default)]
+        a: f64,
+        #[serde(default)]
+        b: f64,
+    }
+    let s: ShotJson = serde_json::from_str(text).map_err(|e| {
+        format!(
+            "shot {text:?} is not a shot object {{\"V0\", \"phi\", \"theta\", \"a\", \"b\"}}: {e}"
+        )
+    })?;
+    let shot = Shot {
+        v0: s.v0,
+        phi: s.phi,
+        theta: s.theta,
+        a: s.a,
+        b: s.b,
+    };
+    shot.validate().map_err(|e| e.to_string())?;
+    Ok(shot)
+}
+
+impl Stage for SimulateStage {
+    /// The resolved seed and the table file's hash: a changed table or pipeline seed reruns.
+    fn fingerprint_extra(&self) -> Result<Value, StageError> {
+        let table = self
+            .table_text
+            .as_ref()
+            .map(|t| hex(&Sha256::digest(t.as_bytes())));
+        let work = match &self.work {
+            Work::Dataset { seed, .. } => json!({"seed": seed}),
+            Work::Replay { scene, .. } => json!({"scene": scene.to_json()}),
+        };
+        Ok(json!({"table": table, "work": work}))
+    }
+
+    fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
+        let shards: Vec<(u64, u64)> = match &self.work {
+            Work::Dataset { scenes, .. } => (0..scenes.div_ceil(self.per_shard))
+                .map(|s| (s * self.per_shard, ((s + 1) * self.per_shard).min(*scenes)))
+                .collect(),
+            Work::Replay { .. } => vec![(0, 1)],
+        };
+        let total: u64 = shards.iter().map(|(a, b)| b - a).sum();
+        ctx.progress().set_total(ctx.stage_id(), total);
+        let records: Vec<Value> = shards
+            .par_iter()
+            .enumerate()
+            .map(|(i, &(lo, hi))| self.run_shard(ctx, i, lo, hi))
+            .collect::<Result<_, _>>()?;
+        let mut rows: BTreeMap<String, u64> = BTreeMap::new();
+        let (mut traces, mut successes, mut capped, mut events) = (0u64, 0u64, 0u64, 0u64);
+        for r in &records {
+            traces += r["traces"].as_u64().unwrap_or(0);
+            successes += r["successes"].as_u64().unwrap_or(0);
+            capped += r["capped"].as_u64().unwrap_or(0);
+            events += r["physics_events"].as_u64().unwrap_or(0);
+            for (t, n) in r["rows"].as_object().into_iter().flatten() {
+                *rows.entry(t.clone()).or_default() += n.as_u64().unwrap_or(0);
+            }
+        }
+        let frames = rows.get("frames").copied().unwrap_or(0);
+        let line = format!(
+            "{traces} pool trace(s), {successes} successful, {capped} capped; {events} physics events, {frames} frame rows"
+        );
+        Ok(StageOutput {
+            rows,
+            files: Vec::new(),
+            summary: json!({
+                "env": Env::Pooltool.as_str(),
+                "traces": traces,
+                "successes": successes,
+                "capped": capped,
+                "physics_events": events,
+                "table": self.config.name,
+                "dt": self.trace.dt,
+            }),
+            line,
+        })
+    }
+}
+
+/// The open Parquet files of one shard, one per table.
+struct ShardSinks<'a, 'c> {
+    ctx: &'a StageContext<'c>,
+    name: String,
+    sinks: BTreeMap<&'static str, ParquetSink>,
+}
+
+impl ShardSinks<'_, '_> {
+    fn write(&mut self, table: &'static str, batch: &RecordBatch) -> Result<(), StageError> {
+        if batch.num_rows() == 0 {
+            return Ok(());
+        }
+        if !self.sinks.contains_key(table) {
+            let schema = schema::table_schema(table)
+                .ok_or_else(|| StageError::Internal(format!("no schema for table {table}")))?;
+            let sink = self
+                .ctx
+                .staging()
+                .sink(table, Some(Env::Pooltool), &self.name, schema)?;
+            self.sinks.insert(table, sink);
+        }
+        if let Some(sink) = self.sinks.get_mut(table) {
+            sink.write(batch)?;
+        }
+        Ok(())
+    }
+
+    fn commit(self) -> Result<BTreeMap<String, u64>, StageError> {
+        let mut rows = BTreeMap::new();
+        for (table, sink) in self.sinks {
+            let (_, n) = sink.commit()?;
+            rows.insert(table.to_string(), n as u64);
+        }
+        Ok(rows)
+    }
+}
+
+impl SimulateStage {
+    /// The (scene, shots) pairs of scenes `lo..hi`.
+    fn scene_work(&self, index: u64) -> (Scene, Vec<(String, Shot)>) {
+        match &self.work {
+            Work::Dataset { shots, seed, .. } => {
+                let mut scene = Scene::nine_ball(&self.config, rack::scene_seed(*seed, index));
+                scene.scene_id = format!("pool-{seed}-{index:06}");
+                let list = (0..*shots)
+                    .map(|k| {
+                        let mut rng = rack::shot_rng(*seed, index, k);
+                        (
+                            format!("{}-{k:03}", scene.scene_id),
+                            rack::dataset_shot(&scene, &mut rng),
+                        )
+                    })
+                    .collect();
+                (scene, list)
+            }
+            Work::Replay { scene, shot } => {
+                let text = format!(
+                    "{:?} {:?} {:?} {:?} {:?}",
+                    shot.v0, shot.phi, shot.theta, shot.a, shot.b
+                );
+                let h = hex(&Sha256::digest(text.as_bytes()));
+                (
+                    (**scene).clone(),
+                    vec![(format!("{}-{}", scene.scene_id, &h[..8]), *shot)],
+                )
+            }
+        }
+    }
+
+    fn run_shard(
+        &self,
+        ctx: &StageContext<'_>,
+        shard: usize,
+        lo: u64,
+        hi: u64,
+    ) -> Result<Value, StageError> {
+        let name = format!("{shard:05}");
+        if let Some(record) = ctx.finished_shard(&name)? {
+            ctx.progress().advance(ctx.stage_id(), hi - lo);
+            return Ok(record);
+        }
+        let ordinal = ctx.shard_started();
+        let mut sinks = ShardSinks {
+            ctx,
+            name: name.clone(),
+            sinks: BTreeMap::new(),
+        };
+        let (mut traces, mut successes, mut capped, mut events) = (0u64, 0u64, 0u64, 0u64);
+        let source = format!("simulate:{}", ctx.stage_id());
+        let mut builder = TraceBatchBuilder::new();
+        for index in lo..hi {
+            let (scene, shots) = self.scene_work(index);
+            let system = scene
+                .system(&self.config)
+                .map_err(|e| StageError::Input(format!("scene {}: {e}", scene.scene_id)))?;
+            let mut spec = scene.to_json();
+            spec["table"] = json!(self.config.name);
+            spec["index"] = json!(index);
+            let batch = scene_batch(
+                &scene.scene_id,
+                &scene.scene_id,
+                &source,
+                scene.balls.len(),
+                &spec,
+            )?;
+            sinks.write("scenes", &batch)?;
+            for (trace_id, shot) in &shots {
+                let sim = simulate(&system, shot, &self.sim)
+                    .map_err(|e| StageError::Input(format!("trace {trace_id}: {e}")))?;
+                let trace = trace_of(&sim, &scene, shot, trace_id, &self.trace);
+                traces += 1;
+                successes += u64::from(trace.outcome.success);
+                capped += u64::from(matches!(
+                    trace.outcome.terminal_status.as_str(),
+                    "max_events" | "max_time"
+                ));
+                events += sim.events.len() as u64;
+                for ts in &trace.timesteps {
+                    builder.push_timestep(ts);
+                }
+                let b = builder.finish(&crate::trace::TraceMeta {
+                    trace_id: &trace.trace_id,
+                    scene_id: &scene.scene_id,
+                    task_id: &trace.task_id,
+                    events: &trace.events,
+                    outcome: &trace.outcome,
+                    extra: &trace.extra,
+                    source: &source,
+                })?;
+                sinks.write("traces", &b.traces)?;
+                sinks.write("timesteps", &b.timesteps)?;
+                sinks.write("frames", &b.frames)?;
+                if index == lo {
+                    // The mid-shard fault fires with some of the shard's files half written.
+                    ctx.checkpoint_mid_shard(ordinal)?;
+                }
+                sinks.write("events", &b.events)?;
+            }
+            ctx.progress().advance(ctx.stage_id(), 1);
+        }
+        let rows = sinks.commit()?;
+        let record = json!({
+            "traces": traces,
+            "successes": successes,
+            "capped": capped,
+            "physics_events": events,
+            "rows": rows,
+        });
+        ctx.finish_shard(&name, &record)?;
+        Ok(record)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shots_parse_with_defaults_and_bad_ones_name_the_problem() {
+        let s = parse_shot(r#"{"V0": 2, "phi": 90}"#).unwrap();
+        assert_eq!((s.v0, s.phi, s.theta, s.a, s.b), (2.0, 90.0, 0.0, 0.0, 0.0));
+        assert!(
+            parse_shot(r#"{"V0": -1, "phi": 0}"#)
+                .unwrap_err()
+                .contains("V0")
+        );
+        assert!(
+            parse_shot(r#"{"V0": 1, "phi": 0, "a": 0.8, "b": 0.8}"#)
+                .unwrap_err()
+                .contains("a²")
+        );
+        assert!(
+            parse_shot(r#"{"V0": 1, "phi": 0, "spin": 1}"#)
+                .unwrap_err()
+                .contains("spin")
+        );
+        assert!(parse_shot("fast").is_err());
+    }
+}
