@@ -5,4 +5,6 @@ mod common;
 mod export;
 mod import;
 mod query;
+mod render;
 mod run;
+mod simulate;
