@@ -30,7 +30,10 @@ fn import(dir: &Path, input: &Path) {
         input.display()
     );
     let spec = PipelineSpec::from_toml(&dir.join("bench.toml"), &text).unwrap();
-    let opts = RunOptions { run_dir: Some(dir.join("run")), ..RunOptions::default() };
+    let opts = RunOptions {
+        run_dir: Some(dir.join("run")),
+        ..RunOptions::default()
+    };
     run(&spec, &opts, &()).unwrap();
 }
 
@@ -42,7 +45,11 @@ fn bench_import(c: &mut Criterion) {
     g.sample_size(10);
     g.throughput(Throughput::Elements(rows));
     g.bench_function("pooltool_jsonl_160k_frame_rows", |b| {
-        b.iter_batched(|| tempfile::tempdir().unwrap(), |dir| import(dir.path(), &input), BatchSize::PerIteration)
+        b.iter_batched(
+            || tempfile::tempdir().unwrap(),
+            |dir| import(dir.path(), &input),
+            BatchSize::PerIteration,
+        )
     });
     let bytes = std::fs::read(&input).unwrap();
     g.bench_function("serde_json_value_parse_only", |b| {

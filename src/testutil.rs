@@ -3,7 +3,10 @@
 
 use serde_json::json;
 
-use crate::trace::{Body, Env, Event, IphyreObject, JsonMap, Object, Outcome, PhyreObject, PoolBall, Timestep, Trace};
+use crate::trace::{
+    Body, Env, Event, IphyreObject, JsonMap, Object, Outcome, PhyreObject, PoolBall, Timestep,
+    Trace,
+};
 
 /// A trace of `env` with `steps` timesteps of `objects` objects each. Object `k` at step `s` sits at
 /// `x = k + s·0.01`, `y = 2k` and moves with `vx = 1`, `vy = 0` (no velocity for I-PHYRE), so `avg(x)` over a trace is
@@ -19,7 +22,12 @@ pub fn synthetic_trace(env: Env, index: usize, steps: usize, objects: usize) -> 
         })
         .collect();
     let events = vec![
-        Event { kind: "start".into(), t: Some(0.0), payload: Some(json!({"agents": ["0"]})), extra: JsonMap::new() },
+        Event {
+            kind: "start".into(),
+            t: Some(0.0),
+            payload: Some(json!({"agents": ["0"]})),
+            extra: JsonMap::new(),
+        },
         Event {
             kind: "contact_begin".into(),
             t: Some((steps / 2) as f64 * dt),
@@ -37,7 +45,11 @@ pub fn synthetic_trace(env: Env, index: usize, steps: usize, objects: usize) -> 
         events,
         outcome: Outcome {
             success: index % 2 == 0,
-            terminal_status: if index % 2 == 0 { "success".into() } else { "timeout".into() },
+            terminal_status: if index % 2 == 0 {
+                "success".into()
+            } else {
+                "timeout".into()
+            },
             metrics,
             extra: JsonMap::new(),
         },
@@ -61,7 +73,11 @@ fn object(env: Env, k: usize, s: usize) -> Object {
         }),
         Env::Phyre => Body::Phyre(PhyreObject {
             object_index: k as i64,
-            shape: if k % 2 == 0 { "ball".into() } else { "bar".into() },
+            shape: if k % 2 == 0 {
+                "ball".into()
+            } else {
+                "bar".into()
+            },
             color: ["red", "green", "blue", "gray"][k % 4].into(),
             diameter: 10.0,
             x,
@@ -89,5 +105,8 @@ fn object(env: Env, k: usize, s: usize) -> Object {
             angular_velocity: None,
         }),
     };
-    Object { body, extra: JsonMap::new() }
+    Object {
+        body,
+        extra: JsonMap::new(),
+    }
 }

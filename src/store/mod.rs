@@ -29,7 +29,7 @@ use std::io;
 use std::path::{Path, PathBuf};
 
 pub use self::atomic::{AtomicFile, is_temp_name, sync_dir, write_atomic};
-pub use self::parquet::{ParquetSink, ROW_GROUP_ROWS, read_file};
+pub use self::parquet::{ParquetSink, ROW_GROUP_ROWS, read_batches, read_file};
 pub use self::traces::{ReadTraceError, read_trace, trace_ids};
 use crate::trace::Env;
 
@@ -299,6 +299,11 @@ impl Staging {
         }
     }
 
+    /// A folder for a stage's scratch files (removed with the staging area, never published).
+    pub fn scratch_dir(&self) -> PathBuf {
+        self.dir.join("_spill")
+    }
+
     /// Marks a shard finished, with a record of what it wrote. Call after its files are committed.
     pub fn mark_done(&self, shard: &str, record: &serde_json::Value) -> Result<(), StoreError> {
         let path = self.done_dir().join(format!("{shard}.json"));
@@ -328,7 +333,8 @@ impl Staging {
                 let entry = entry.map_err(|e| StoreError::io(&dir, e))?;
                 let path = entry.path();
                 if path.is_dir() {
-                    if path != self.done_dir() {
+                    // `_done` holds shard records and `_spill` spilled rows: neither is a table.
+                    if !entry.file_name().to_string_lossy().starts_with('_') {
                         stack.push(path);
                     }
                 } else if is_parquet(&entry.file_name().to_string_lossy()) {
@@ -362,6 +368,8 @@ impl Staging {
                 removed += 1;
             }
         }
+        // Spilled rows of a trace that was being read.
+        let _ = fs::remove_dir_all(self.scratch_dir());
         // Temporary files of a killed writer.
         let mut stack = vec![self.dir.clone()];
         while let Some(dir) = stack.pop() {

@@ -73,6 +73,20 @@ impl ParquetSink {
     }
 }
 
+/// Reads a Parquet file batch by batch, without holding the whole file.
+pub fn read_batches(
+    path: &Path,
+) -> Result<impl Iterator<Item = Result<RecordBatch, StoreError>>, StoreError> {
+    let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
+    let reader = ParquetRecordBatchReaderBuilder::try_new(file)
+        .and_then(|b| b.with_batch_size(ROW_GROUP_ROWS).build())
+        .map_err(|e| StoreError::parquet(path, e))?;
+    let path = path.to_path_buf();
+    Ok(reader.map(move |b| {
+        b.map_err(|e| StoreError::parquet(&path, parquet::errors::ParquetError::from(e)))
+    }))
+}
+
 /// Reads every batch of a Parquet file.
 pub fn read_file(path: &Path) -> Result<Vec<RecordBatch>, StoreError> {
     let file = File::open(path).map_err(|e| StoreError::io(path, e))?;

@@ -264,6 +264,8 @@ pub struct TraceBatchBuilder {
     steps: usize,
     distinct_objects: std::collections::BTreeSet<String>,
     t_range: Option<(f64, f64)>,
+    /// Frame rows of the current trace already handed out by [`TraceBatchBuilder::take_frames`].
+    taken_frames: usize,
 }
 
 impl TraceBatchBuilder {
@@ -296,6 +298,19 @@ impl TraceBatchBuilder {
         });
     }
 
+    /// Frame rows of the current trace held in memory.
+    pub fn buffered_frames(&self) -> usize {
+        self.frames.rows
+    }
+
+    /// Hands out the frame rows buffered so far (with `trace_id` as a placeholder id, see
+    /// [`with_trace_id`]) so that a very long trace need not be held in memory; the trace's summary
+    /// counts still include them.
+    pub fn take_frames(&mut self, trace_id: &str) -> Result<RecordBatch, ArrowError> {
+        self.taken_frames += self.frames.rows;
+        self.frames.finish(trace_id)
+    }
+
     /// Drops the timesteps pushed so far (the trace was rejected).
     pub fn discard(&mut self) {
         let _ = self.finish_columns("");
@@ -303,6 +318,7 @@ impl TraceBatchBuilder {
 
     fn finish_columns(&mut self, trace_id: &str) -> Result<(RecordBatch, RecordBatch), ArrowError> {
         let steps = std::mem::take(&mut self.steps);
+        self.taken_frames = 0;
         self.distinct_objects.clear();
         self.t_range = None;
         let timesteps = RecordBatch::try_new(
@@ -323,6 +339,7 @@ impl TraceBatchBuilder {
     pub fn finish(&mut self, meta: &TraceMeta<'_>) -> Result<TraceBatches, ArrowError> {
         let n_objects = self.distinct_objects.len() as i64;
         let t_range = self.t_range;
+        let taken = self.taken_frames;
         let (timesteps, frames) = self.finish_columns(meta.trace_id)?;
         let o = meta.outcome;
         let traces = RecordBatch::try_new(
@@ -333,7 +350,7 @@ impl TraceBatchBuilder {
                 Arc::new(StringArray::from(vec![meta.task_id])),
                 Arc::new(Int64Array::from(vec![timesteps.num_rows() as i64])),
                 Arc::new(Int64Array::from(vec![n_objects])),
-                Arc::new(Int64Array::from(vec![frames.num_rows() as i64])),
+                Arc::new(Int64Array::from(vec![(taken + frames.num_rows()) as i64])),
                 Arc::new(Int64Array::from(vec![meta.events.len() as i64])),
                 Arc::new(Float64Array::from(vec![t_range.map(|r| r.0)])),
                 Arc::new(Float64Array::from(vec![t_range.map(|r| r.1)])),
@@ -376,6 +393,13 @@ impl TraceBatchBuilder {
             source,
         })
     }
+}
+
+/// The same rows with every `trace_id` set to `trace_id` (the column must be the table's first).
+pub fn with_trace_id(batch: &RecordBatch, trace_id: &str) -> Result<RecordBatch, ArrowError> {
+    let mut cols = batch.columns().to_vec();
+    cols[0] = constant_dict(trace_id, batch.num_rows());
+    RecordBatch::try_new(batch.schema(), cols)
 }
 
 /// The agents an event names: `payload.agents` when it is an array of strings or numbers.

@@ -7,13 +7,24 @@ use crate::common::{TestRun, example, repo};
 #[test]
 fn export_to_stdout_and_unknown_trace() {
     let t = TestRun::new();
-    t.run(&["import", "--env", "iphyre", example(Env::Iphyre).to_str().unwrap(), "--run", "r"]).ok();
+    t.run(&[
+        "import",
+        "--env",
+        "iphyre",
+        example(Env::Iphyre).to_str().unwrap(),
+        "--run",
+        "r",
+    ])
+    .ok();
     let r = t.run(&["export", "--run", "r", "--trace", "iphyre_support"]);
     r.ok();
     let v: serde_json::Value = serde_json::from_str(&r.stdout).unwrap();
     assert_eq!(v["environment"], "iphyre");
     assert_eq!(v["timesteps"].as_array().unwrap().len(), 16);
-    t.run(&["export", "--run", "r", "--trace", "nope"]).code(2).stderr_has("no trace \"nope\"").stderr_has("1 trace(s)");
+    t.run(&["export", "--run", "r", "--trace", "nope"])
+        .code(2)
+        .stderr_has("no trace \"nope\"")
+        .stderr_has("1 trace(s)");
 }
 
 /// The quickstart's export stages write CSV, Markdown and booktabs LaTeX with the same numbers.
@@ -21,16 +32,35 @@ fn export_to_stdout_and_unknown_trace() {
 fn export_stages_write_csv_markdown_and_latex() {
     let t = TestRun::new();
     let pipeline = repo().join("pipelines/quickstart.toml");
-    t.run(&["run", pipeline.to_str().unwrap(), "--run-dir", "q", "--quiet"]).ok();
+    t.run(&[
+        "run",
+        pipeline.to_str().unwrap(),
+        "--run-dir",
+        "q",
+        "--quiet",
+    ])
+    .ok();
     let csv = std::fs::read_to_string(t.path("q/exports/trace_summary.csv")).unwrap();
     let md = std::fs::read_to_string(t.path("q/exports/trace_summary.md")).unwrap();
     let tex = std::fs::read_to_string(t.path("q/exports/trace_summary.tex")).unwrap();
-    assert!(csv.starts_with("env,traces,steps,frame_rows,events,mean_duration_s,success_rate\n"), "{csv}");
+    assert!(
+        csv.starts_with("env,traces,steps,frame_rows,events,mean_duration_s,success_rate\n"),
+        "{csv}"
+    );
     assert!(csv.contains("\nphyre,1,12,36,2,"), "{csv}");
     assert!(md.contains("| env | traces | steps |"), "{md}");
     assert!(md.contains("| phyre | 1 | 12 | 36 | 2 |"), "{md}");
-    assert!(tex.contains("\\toprule") && tex.contains("\\midrule") && tex.contains("\\bottomrule"), "{tex}");
+    assert!(
+        tex.contains("\\toprule") && tex.contains("\\midrule") && tex.contains("\\bottomrule"),
+        "{tex}"
+    );
     assert!(tex.contains("frame\\_rows"), "{tex}");
-    assert!(tex.contains("phyre & 1 & 12 & 36 & 2 & 0.917 & 0.000 \\\\"), "{tex}");
-    assert!(tex.starts_with("% requires \\usepackage{booktabs}\n% Traces per environment"), "{tex}");
+    assert!(
+        tex.contains("phyre & 1 & 12 & 36 & 2 & 0.917 & 0.000 \\\\"),
+        "{tex}"
+    );
+    assert!(
+        tex.starts_with("% requires \\usepackage{booktabs}\n% Traces per environment"),
+        "{tex}"
+    );
 }

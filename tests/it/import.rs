@@ -17,13 +17,32 @@ fn round_trip_is_lossless_for_every_environment() {
         let t = TestRun::new();
         let src = example(env);
         let original = read_json(&src);
-        t.run(&["import", "--env", env.as_str(), src.to_str().unwrap(), "--run", "a"]).ok();
+        t.run(&[
+            "import",
+            "--env",
+            env.as_str(),
+            src.to_str().unwrap(),
+            "--run",
+            "a",
+        ])
+        .ok();
         let id = src.file_stem().unwrap().to_str().unwrap();
-        t.run(&["export", "--run", "a", "--trace", id, "--out", "first.json"]).ok();
+        t.run(&["export", "--run", "a", "--trace", id, "--out", "first.json"])
+            .ok();
         let mut first = read_json(&t.path("first.json"));
         assert_eq!(first["trace_id"], id);
-        t.run(&["import", "--env", env.as_str(), "first.json", "--run", "b"]).ok();
-        t.run(&["export", "--run", "b", "--trace", id, "--out", "second.json"]).ok();
+        t.run(&["import", "--env", env.as_str(), "first.json", "--run", "b"])
+            .ok();
+        t.run(&[
+            "export",
+            "--run",
+            "b",
+            "--trace",
+            id,
+            "--out",
+            "second.json",
+        ])
+        .ok();
         let second = read_json(&t.path("second.json"));
         assert_eq!(first, second, "{env}: second round trip differs");
         first.as_object_mut().unwrap().remove("trace_id");
@@ -42,13 +61,17 @@ fn unknown_fields_survive_at_every_level() {
     v["events"][0]["step"] = json!(0);
     v["outcome"]["stock_result"] = json!({"solved": false});
     t.write("x.json", &v.to_string());
-    t.run(&["import", "--env", "phyre", "x.json", "--run", "r"]).ok();
-    t.run(&["export", "--run", "r", "--trace", "x", "--out", "back.json"]).ok();
+    t.run(&["import", "--env", "phyre", "x.json", "--run", "r"])
+        .ok();
+    t.run(&["export", "--run", "r", "--trace", "x", "--out", "back.json"])
+        .ok();
     let mut back = read_json(&t.path("back.json"));
     back.as_object_mut().unwrap().remove("trace_id");
     assert_eq!(back, v);
     let keys: Vec<&String> = back.as_object().unwrap().keys().collect();
-    assert!(keys.iter().position(|k| *k == "simulator") < keys.iter().position(|k| *k == "timesteps"));
+    assert!(
+        keys.iter().position(|k| *k == "simulator") < keys.iter().position(|k| *k == "timesteps")
+    );
 }
 
 /// Writes a variant of the pooltool example with one fault, imports it, and checks the message.
@@ -58,31 +81,80 @@ fn rejects(edit: impl FnOnce(&mut Value), env: &str, path: &str, kind: &str) {
     edit(&mut v);
     t.write("bad.json", &v.to_string());
     let r = import(&t, env, "bad.json", "run");
-    r.code(2).stderr_has("bad.json").stderr_has("trace #0").stderr_has(&format!("at {path}:")).stderr_has(&format!("[{kind}]"));
-    assert!(!t.path("run").exists(), "a failed import into a new run leaves nothing behind");
+    r.code(2)
+        .stderr_has("bad.json")
+        .stderr_has("trace #0")
+        .stderr_has(&format!("at {path}:"))
+        .stderr_has(&format!("[{kind}]"));
+    assert!(
+        !t.path("run").exists(),
+        "a failed import into a new run leaves nothing behind"
+    );
 }
 
 #[test]
 fn a_wrong_type_names_its_json_path() {
-    rejects(|v| v["timesteps"][3]["objects"][1]["position"][0] = json!("abc"), "pooltool", "$.timesteps[3].objects[1].position[0]", "type");
+    rejects(
+        |v| v["timesteps"][3]["objects"][1]["position"][0] = json!("abc"),
+        "pooltool",
+        "$.timesteps[3].objects[1].position[0]",
+        "type",
+    );
 }
 
 #[test]
 fn a_missing_field_names_its_json_path() {
-    rejects(|v| drop(v.as_object_mut().unwrap().remove("task_id")), "pooltool", "$.task_id", "missing");
-    rejects(|v| drop(v["timesteps"][2]["objects"][0].as_object_mut().unwrap().remove("ball_id")), "pooltool", "$.timesteps[2].objects[0].ball_id", "missing");
-    rejects(|v| drop(v["outcome"].as_object_mut().unwrap().remove("success")), "pooltool", "$.outcome.success", "missing");
+    rejects(
+        |v| drop(v.as_object_mut().unwrap().remove("task_id")),
+        "pooltool",
+        "$.task_id",
+        "missing",
+    );
+    rejects(
+        |v| {
+            drop(
+                v["timesteps"][2]["objects"][0]
+                    .as_object_mut()
+                    .unwrap()
+                    .remove("ball_id"),
+            )
+        },
+        "pooltool",
+        "$.timesteps[2].objects[0].ball_id",
+        "missing",
+    );
+    rejects(
+        |v| drop(v["outcome"].as_object_mut().unwrap().remove("success")),
+        "pooltool",
+        "$.outcome.success",
+        "missing",
+    );
 }
 
 #[test]
 fn duplicate_object_ids_in_a_timestep_are_rejected() {
-    rejects(|v| v["timesteps"][4]["objects"][1]["ball_id"] = json!("cue"), "pooltool", "$.timesteps[4].objects[1]", "duplicate_object");
+    rejects(
+        |v| v["timesteps"][4]["objects"][1]["ball_id"] = json!("cue"),
+        "pooltool",
+        "$.timesteps[4].objects[1]",
+        "duplicate_object",
+    );
 }
 
 #[test]
 fn time_and_index_must_increase() {
-    rejects(|v| v["timesteps"][5]["t"] = json!(0.1), "pooltool", "$.timesteps[5].t", "order");
-    rejects(|v| v["timesteps"][5]["index"] = json!(4), "pooltool", "$.timesteps[5].index", "order");
+    rejects(
+        |v| v["timesteps"][5]["t"] = json!(0.1),
+        "pooltool",
+        "$.timesteps[5].t",
+        "order",
+    );
+    rejects(
+        |v| v["timesteps"][5]["index"] = json!(4),
+        "pooltool",
+        "$.timesteps[5].index",
+        "order",
+    );
 }
 
 #[test]
@@ -95,13 +167,22 @@ fn nan_and_infinity_are_rejected_with_their_position() {
     let t = TestRun::new();
     let text = std::fs::read_to_string(example(Env::Pooltool)).unwrap();
     // Python's json.dumps writes NaN literals; the first velocity of the cue ball becomes one.
-    let bad = text.replacen("\"velocity\": [\n      0.0", "\"velocity\": [\n      NaN", 1);
+    let bad = text.replacen(
+        "\"velocity\": [\n      0.0",
+        "\"velocity\": [\n      NaN",
+        1,
+    );
     assert_ne!(bad, text);
     t.write("nan.json", &bad);
     let r = import(&t, "pooltool", "nan.json", "run");
-    r.code(2).stderr_has("nan.json:").stderr_has("[non_finite]").stderr_has("NaN is not a finite number");
+    r.code(2)
+        .stderr_has("nan.json:")
+        .stderr_has("[non_finite]")
+        .stderr_has("NaN is not a finite number");
     t.write("big.json", &text.replacen("0.028575", "1e999", 1));
-    import(&t, "pooltool", "big.json", "run").code(2).stderr_has("[non_finite]");
+    import(&t, "pooltool", "big.json", "run")
+        .code(2)
+        .stderr_has("[non_finite]");
     assert!(!t.path("run").exists());
 }
 
@@ -111,9 +192,18 @@ fn malformed_json_gives_line_and_column() {
     let text = std::fs::read_to_string(example(Env::Phyre)).unwrap();
     let cut = &text[..text.len() / 2];
     t.write("cut.json", cut);
-    import(&t, "phyre", "cut.json", "run").code(2).stderr_has("cut.json:").stderr_has("[syntax]");
-    t.write("garbage.json", "{\"environment\": \"phyre\", \"task_id\": oops}");
-    import(&t, "phyre", "garbage.json", "run").code(2).stderr_has("garbage.json:1:").stderr_has("invalid JSON");
+    import(&t, "phyre", "cut.json", "run")
+        .code(2)
+        .stderr_has("cut.json:")
+        .stderr_has("[syntax]");
+    t.write(
+        "garbage.json",
+        "{\"environment\": \"phyre\", \"task_id\": oops}",
+    );
+    import(&t, "phyre", "garbage.json", "run")
+        .code(2)
+        .stderr_has("garbage.json:1:")
+        .stderr_has("invalid JSON");
     assert!(!t.path("run").exists());
 }
 
@@ -128,9 +218,19 @@ fn a_failed_import_into_an_existing_run_changes_no_table() {
     let mut lines = annotrace::trace::json::to_value(&good).to_string();
     lines.push_str("\n{\"environment\": \"phyre\"}\n");
     t.write("mixed.jsonl", &lines);
-    import(&t, "phyre", "mixed.jsonl", "run").code(2).stderr_has("mixed.jsonl:2").stderr_has("$.task_id");
-    let after: Vec<String> = t.files("run").into_iter().filter(|f| f.ends_with(".parquet")).collect();
-    let before: Vec<String> = before.into_iter().filter(|f| f.ends_with(".parquet")).collect();
+    import(&t, "phyre", "mixed.jsonl", "run")
+        .code(2)
+        .stderr_has("mixed.jsonl:2")
+        .stderr_has("$.task_id");
+    let after: Vec<String> = t
+        .files("run")
+        .into_iter()
+        .filter(|f| f.ends_with(".parquet"))
+        .collect();
+    let before: Vec<String> = before
+        .into_iter()
+        .filter(|f| f.ends_with(".parquet"))
+        .collect();
     assert_eq!(before, after);
     assert_eq!(t.csv("run", "SELECT count(*) AS n FROM traces"), "n\n1\n");
 }
@@ -139,33 +239,51 @@ fn a_failed_import_into_an_existing_run_changes_no_table() {
 #[test]
 fn skip_invalid_imports_the_rest_and_prints_the_rejections() {
     let t = TestRun::new();
-    let traces: Vec<_> = (0..3).map(|i| synthetic_trace(Env::Iphyre, i, 6, 3)).collect();
-    let mut lines: Vec<String> = traces.iter().map(|tr| {
-        let mut v = annotrace::trace::json::to_value(tr);
-        v.as_object_mut().unwrap().remove("trace_id");
-        v.to_string()
-    }).collect();
+    let traces: Vec<_> = (0..3)
+        .map(|i| synthetic_trace(Env::Iphyre, i, 6, 3))
+        .collect();
+    let mut lines: Vec<String> = traces
+        .iter()
+        .map(|tr| {
+            let mut v = annotrace::trace::json::to_value(tr);
+            v.as_object_mut().unwrap().remove("trace_id");
+            v.to_string()
+        })
+        .collect();
     let mut bad: Value = serde_json::from_str(&lines[1]).unwrap();
     bad["timesteps"][2]["objects"][0]["joint"] = json!(1.5);
     lines[1] = bad.to_string();
     lines.insert(2, String::new()); // blank lines are skipped
     lines.push("not json at all".into());
     t.write("mixed.jsonl", &(lines.join("\n") + "\n"));
-    let r = t.run(&["import", "--env", "iphyre", "mixed.jsonl", "--run", "run", "--skip-invalid"]);
+    let r = t.run(&[
+        "import",
+        "--env",
+        "iphyre",
+        "mixed.jsonl",
+        "--run",
+        "run",
+        "--skip-invalid",
+    ]);
     r.code(1)
         .stdout_has("imported 2 iphyre trace(s)")
         .stdout_has("2 invalid trace(s) skipped")
         .stdout_has("mixed.jsonl:2")
         .stdout_has("$.timesteps[2].objects[0].joint")
         .stdout_has("mixed.jsonl:5");
-    assert_eq!(t.csv("run", "SELECT trace_id FROM traces ORDER BY trace_id"), "trace_id\nmixed-L1\nmixed-L4\n");
+    assert_eq!(
+        t.csv("run", "SELECT trace_id FROM traces ORDER BY trace_id"),
+        "trace_id\nmixed-L1\nmixed-L4\n"
+    );
 }
 
 /// Folders are imported recursively in sorted order; a trace id already in the run is refused.
 #[test]
 fn folders_arrays_and_duplicate_ids() {
     let t = TestRun::new();
-    let a: Vec<Value> = (0..2).map(|i| annotrace::trace::json::to_value(&synthetic_trace(Env::Pooltool, i, 4, 2))).collect();
+    let a: Vec<Value> = (0..2)
+        .map(|i| annotrace::trace::json::to_value(&synthetic_trace(Env::Pooltool, i, 4, 2)))
+        .collect();
     let mut no_ids = a.clone();
     for v in &mut no_ids {
         v.as_object_mut().unwrap().remove("trace_id");
@@ -173,14 +291,21 @@ fn folders_arrays_and_duplicate_ids() {
     t.write("in/sub/arr.json", &Value::Array(no_ids).to_string());
     t.write("in/one.json", &a[0].to_string());
     t.write("in/ignored.txt", "not a trace");
-    t.run(&["import", "--env", "pooltool", "in", "--run", "run"]).ok().stdout_has("imported 3 pooltool trace(s)");
+    t.run(&["import", "--env", "pooltool", "in", "--run", "run"])
+        .ok()
+        .stdout_has("imported 3 pooltool trace(s)");
     assert_eq!(
         t.csv("run", "SELECT trace_id FROM traces ORDER BY trace_id"),
         "trace_id\narr-0\narr-1\npooltool-000000\n"
     );
     // Same content, other file: the id is taken.
     t.write("again.json", &a[0].to_string());
-    import(&t, "pooltool", "again.json", "run").code(2).stderr_has("[duplicate_trace]").stderr_has("pooltool-000000");
+    import(&t, "pooltool", "again.json", "run")
+        .code(2)
+        .stderr_has("[duplicate_trace]")
+        .stderr_has("pooltool-000000");
     // The same import again is recognised and skipped.
-    t.run(&["import", "--env", "pooltool", "in", "--run", "run"]).ok().stdout_has("already imported");
+    t.run(&["import", "--env", "pooltool", "in", "--run", "run"])
+        .ok()
+        .stdout_has("already imported");
 }

@@ -11,10 +11,22 @@ fn setup(n: usize) -> (TestRun, Vec<annotrace::trace::Trace>) {
     let t = TestRun::new();
     let mut all = Vec::new();
     for env in Env::ALL {
-        let traces: Vec<_> = (0..n).map(|i| synthetic_trace(env, i, 10 + i, 3 + i % 3)).collect();
+        let traces: Vec<_> = (0..n)
+            .map(|i| synthetic_trace(env, i, 10 + i, 3 + i % 3))
+            .collect();
         let file = format!("{env}.jsonl");
         t.write_jsonl(&file, &traces);
-        t.run(&["import", "--env", env.as_str(), &file, "--run", "r", "--traces-per-shard", "4"]).ok();
+        t.run(&[
+            "import",
+            "--env",
+            env.as_str(),
+            &file,
+            "--run",
+            "r",
+            "--traces-per-shard",
+            "4",
+        ])
+        .ok();
         all.extend(traces);
     }
     (t, all)
@@ -28,30 +40,49 @@ fn counts_and_aggregates_match_the_traces() {
         let mine: Vec<_> = traces.iter().filter(|tr| tr.env == env).collect();
         let frames: usize = mine.iter().map(|tr| tr.frame_rows()).sum();
         let steps: usize = mine.iter().map(|tr| tr.timesteps.len()).sum();
-        let got = t.csv("r", &format!(
-            "SELECT (SELECT count(*) FROM traces WHERE env = '{env}') AS traces, \
+        let got = t.csv(
+            "r",
+            &format!(
+                "SELECT (SELECT count(*) FROM traces WHERE env = '{env}') AS traces, \
                     (SELECT count(*) FROM frames WHERE env = '{env}') AS frames, \
                     (SELECT count(*) FROM timesteps WHERE env = '{env}') AS steps, \
                     (SELECT count(*) FROM events WHERE env = '{env}') AS events"
-        ));
-        assert_eq!(got, format!("traces,frames,steps,events\n{},{frames},{steps},{}\n", mine.len(), mine.len() * 2));
+            ),
+        );
+        assert_eq!(
+            got,
+            format!(
+                "traces,frames,steps,events\n{},{frames},{steps},{}\n",
+                mine.len(),
+                mine.len() * 2
+            )
+        );
     }
     // An aggregate: mean x per trace, against the value computed from the model.
     let got = t.csv("r", "SELECT trace_id, avg(x) AS mean_x FROM frames WHERE env = 'pooltool' GROUP BY trace_id ORDER BY trace_id");
     let mut expected = String::from("trace_id,mean_x\n");
     for tr in traces.iter().filter(|tr| tr.env == Env::Pooltool) {
-        let xs: Vec<f64> = tr.timesteps.iter().flat_map(|s| s.objects.iter().map(|o| match &o.body {
-            Body::Pool(b) => b.position[0],
-            _ => unreachable!(),
-        })).collect();
+        let xs: Vec<f64> = tr
+            .timesteps
+            .iter()
+            .flat_map(|s| {
+                s.objects.iter().map(|o| match &o.body {
+                    Body::Pool(b) => b.position[0],
+                    _ => unreachable!(),
+                })
+            })
+            .collect();
         let mean = xs.iter().sum::<f64>() / xs.len() as f64;
         expected.push_str(&format!("{},{mean}\n", tr.trace_id));
     }
     let parse = |s: &str| -> Vec<(String, f64)> {
-        s.lines().skip(1).map(|l| {
-            let (a, b) = l.split_once(',').unwrap();
-            (a.to_string(), b.parse().unwrap())
-        }).collect()
+        s.lines()
+            .skip(1)
+            .map(|l| {
+                let (a, b) = l.split_once(',').unwrap();
+                (a.to_string(), b.parse().unwrap())
+            })
+            .collect()
     };
     for ((ga, gb), (ea, eb)) in parse(&got).into_iter().zip(parse(&expected)) {
         assert_eq!(ga, ea);
@@ -80,20 +111,48 @@ fn output_formats_and_sql_errors() {
     +----------+----+---------+
     3 rows
     ");
-    let latex = t.run(&["query", sql, "--run", "r", "--format", "latex", "--precision", "2"]);
-    latex.ok().stdout_has("\\begin{tabular}{lrr}").stdout_has("phyre & 74 & 1.00 \\\\");
+    let latex = t.run(&[
+        "query",
+        sql,
+        "--run",
+        "r",
+        "--format",
+        "latex",
+        "--precision",
+        "2",
+    ]);
+    latex
+        .ok()
+        .stdout_has("\\begin{tabular}{lrr}")
+        .stdout_has("phyre & 74 & 1.00 \\\\");
     let md = t.run(&["query", sql, "--run", "r", "--format", "markdown"]);
     md.ok().stdout_has("| :--- | ---: | ---: |");
     let json = t.run(&["query", sql, "--run", "r", "--format", "json"]);
     let v: serde_json::Value = serde_json::from_str(&json.stdout).unwrap();
     assert_eq!(v[1]["n"], 74);
     assert!(v[0]["mean_vx"].is_null());
-    t.run(&["query", sql, "--run", "r", "--format", "parquet", "--out", "out.parquet"]).ok();
+    t.run(&[
+        "query",
+        sql,
+        "--run",
+        "r",
+        "--format",
+        "parquet",
+        "--out",
+        "out.parquet",
+    ])
+    .ok();
     assert!(t.path("out.parquet").exists());
     // DataFusion's own message, exit 2.
-    t.run(&["query", "SELECT nope FROM traces", "--run", "r"]).code(2).stderr_has("No field named nope");
-    t.run(&["query", "SELECT 1", "--run", "missing"]).code(2).stderr_has("no such run folder");
-    t.run(&["query", "SELECT 1", "--run", "r", "--format", "xlsx"]).code(2).stderr_has("unknown format");
+    t.run(&["query", "SELECT nope FROM traces", "--run", "r"])
+        .code(2)
+        .stderr_has("No field named nope");
+    t.run(&["query", "SELECT 1", "--run", "missing"])
+        .code(2)
+        .stderr_has("no such run folder");
+    t.run(&["query", "SELECT 1", "--run", "r", "--format", "xlsx"])
+        .code(2)
+        .stderr_has("unknown format");
 }
 
 #[test]

@@ -19,7 +19,8 @@ use crate::pipeline::params::{ParamSpec, ParamType};
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
-use crate::store::{ParquetSink, read_file};
+use crate::store::{ParquetSink, read_batches, read_file};
+use crate::trace::batch::with_trace_id;
 use crate::trace::json::{
     self, Fault, FaultKind, TraceConsumer, TraceError, TraceHeader, TraceLocation,
     default_trace_id, expand_paths,
@@ -59,6 +60,12 @@ pub static KIND: StageKind = StageKind {
             "1000",
             "traces per output file; a resumed import redoes at most one shard per input file",
         ),
+        ParamSpec::optional(
+            "spill_rows",
+            ParamType::Count,
+            "65536",
+            "frame rows of one trace kept in memory before the rest is spilled to a scratch file",
+        ),
     ],
     build,
 };
@@ -92,9 +99,11 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         .as_u64()
         .unwrap_or(1000)
         .max(1) as usize;
+    let spill_rows = def.params["spill_rows"].as_u64().unwrap_or(65536).max(1) as usize;
     Ok(Box::new(ImportStage {
         env,
         paths,
+        spill_rows,
         skip_invalid: def.params["skip_invalid"].as_bool().unwrap_or(false),
         per_shard,
         project_dir: spec.project_dir.clone(),
@@ -108,6 +117,9 @@ pub struct ImportStage {
     paths: Vec<PathBuf>,
     skip_invalid: bool,
     per_shard: usize,
+    /// Frame rows of one trace held in memory before they are spilled, so that a trace of any length
+    /// is imported with bounded memory.
+    spill_rows: usize,
     project_dir: PathBuf,
 }
 
@@ -155,6 +167,8 @@ impl Stage for ImportStage {
                 file,
                 stem,
                 builder: TraceBatchBuilder::new(),
+                spill: None,
+                spills: 0,
                 first_step: None,
                 next_ordinal: 0,
                 shard: None,
@@ -283,6 +297,9 @@ struct Importer<'a, 'c> {
     file: &'a Path,
     stem: String,
     builder: TraceBatchBuilder,
+    /// Frame rows of the current trace spilled to disk (written with a placeholder trace id).
+    spill: Option<ParquetSink>,
+    spills: usize,
     first_step: Option<Timestep>,
     next_ordinal: usize,
     shard: Option<OpenShard>,
@@ -345,6 +362,45 @@ impl Importer<'_, '_> {
         self.ctx.finish_shard(&shard.name, &record)
     }
 
+    /// Moves the buffered frame rows of the current trace to its spill file.
+    fn spill_frames(&mut self) -> Result<(), StageError> {
+        let batch = self.builder.take_frames("")?;
+        if self.spill.is_none() {
+            self.spills += 1;
+            let path = self
+                .ctx
+                .staging()
+                .scratch_dir()
+                .join(format!("{:05}-{}.parquet", self.file_index, self.spills));
+            self.spill = Some(ParquetSink::create(path, schema::FRAMES.clone())?);
+        }
+        self.spill.as_mut().expect("created above").write(&batch)?;
+        Ok(())
+    }
+
+    /// Drops the spill file of a rejected trace.
+    fn drop_spill(&mut self) {
+        // Dropping an uncommitted sink removes its temporary file.
+        self.spill = None;
+    }
+
+    /// Copies the spilled rows of an accepted trace into the shard, with its real id.
+    fn write_spill(&mut self, trace_id: &str) -> Result<(), StageError> {
+        let Some(sink) = self.spill.take() else {
+            return Ok(());
+        };
+        let (path, _) = sink.commit()?;
+        for batch in read_batches(&path)? {
+            let batch = with_trace_id(&batch?, trace_id)?;
+            self.write("frames", &batch)?;
+        }
+        std::fs::remove_file(&path).map_err(|e| crate::store::StoreError::Io {
+            path: path.clone(),
+            source: e,
+        })?;
+        Ok(())
+    }
+
     fn write(&mut self, table: &'static str, batch: &RecordBatch) -> Result<(), StageError> {
         if batch.num_rows() == 0 {
             return Ok(());
@@ -376,6 +432,7 @@ impl Importer<'_, '_> {
             .unwrap_or_else(|| default_trace_id(&self.stem, loc));
         if self.trace_ids.contains(&trace_id) {
             self.builder.discard();
+            self.drop_spill();
             let fault = Fault::new(
                 "$.trace_id",
                 FaultKind::DuplicateTrace,
@@ -422,6 +479,7 @@ impl Importer<'_, '_> {
         }
         self.write("traces", &batches.traces)?;
         self.write("timesteps", &batches.timesteps)?;
+        self.write_spill(&trace_id)?;
         self.write("frames", &batches.frames)?;
         let ordinal = self.shard.as_ref().map_or(0, |s| s.ordinal);
         // The mid-shard fault fires with some of the shard's files half written.
@@ -462,6 +520,11 @@ impl TraceConsumer for Importer<'_, '_> {
         if self.first_step.is_none() {
             self.first_step = Some(ts);
         }
+        if self.builder.buffered_frames() >= self.stage.spill_rows {
+            if let Err(e) = self.spill_frames() {
+                self.failure = Some(e);
+            }
+        }
     }
 
     fn finish(
@@ -485,6 +548,7 @@ impl TraceConsumer for Importer<'_, '_> {
                 Ok(h) => self.accept(loc, h),
                 Err(e) => {
                     self.builder.discard();
+                    self.drop_spill();
                     self.reject(e)
                 }
             };

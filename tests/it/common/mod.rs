@@ -22,22 +22,42 @@ pub struct Ran {
 
 impl Ran {
     pub fn ok(&self) -> &Self {
-        assert_eq!(self.code, Some(0), "expected success\nstdout:\n{}\nstderr:\n{}", self.stdout, self.stderr);
+        assert_eq!(
+            self.code,
+            Some(0),
+            "expected success\nstdout:\n{}\nstderr:\n{}",
+            self.stdout,
+            self.stderr
+        );
         self
     }
 
     pub fn code(&self, code: i32) -> &Self {
-        assert_eq!(self.code, Some(code), "expected exit {code}\nstdout:\n{}\nstderr:\n{}", self.stdout, self.stderr);
+        assert_eq!(
+            self.code,
+            Some(code),
+            "expected exit {code}\nstdout:\n{}\nstderr:\n{}",
+            self.stdout,
+            self.stderr
+        );
         self
     }
 
     pub fn stderr_has(&self, needle: &str) -> &Self {
-        assert!(self.stderr.contains(needle), "stderr lacks {needle:?}:\n{}", self.stderr);
+        assert!(
+            self.stderr.contains(needle),
+            "stderr lacks {needle:?}:\n{}",
+            self.stderr
+        );
         self
     }
 
     pub fn stdout_has(&self, needle: &str) -> &Self {
-        assert!(self.stdout.contains(needle), "stdout lacks {needle:?}:\n{}", self.stdout);
+        assert!(
+            self.stdout.contains(needle),
+            "stdout lacks {needle:?}:\n{}",
+            self.stdout
+        );
         self
     }
 }
@@ -59,7 +79,9 @@ pub fn repo() -> PathBuf {
 
 impl TestRun {
     pub fn new() -> Self {
-        TestRun { dir: tempfile::tempdir().expect("temp dir") }
+        TestRun {
+            dir: tempfile::tempdir().expect("temp dir"),
+        }
     }
 
     pub fn path(&self, rel: &str) -> PathBuf {
@@ -69,13 +91,19 @@ impl TestRun {
     /// The `annotrace` command, run in the temporary folder.
     pub fn cmd(&self) -> Command {
         let mut c = Command::new(env!("CARGO_BIN_EXE_annotrace"));
-        c.current_dir(self.dir.path()).env_remove("ANNOTRACE_FAULT").env_remove("ANNOTRACE_LOG");
+        c.current_dir(self.dir.path())
+            .env_remove("ANNOTRACE_FAULT")
+            .env_remove("ANNOTRACE_LOG");
         c
     }
 
     /// Runs `annotrace ARGS…`.
     pub fn run(&self, args: &[&str]) -> Ran {
-        self.cmd().args(args).output().expect("annotrace runs").into()
+        self.cmd()
+            .args(args)
+            .output()
+            .expect("annotrace runs")
+            .into()
     }
 
     /// Runs `annotrace ARGS…` with extra environment variables.
@@ -118,13 +146,20 @@ impl TestRun {
         let mut out = Vec::new();
         let mut stack = vec![root.clone()];
         while let Some(d) = stack.pop() {
-            let Ok(entries) = std::fs::read_dir(&d) else { continue };
+            let Ok(entries) = std::fs::read_dir(&d) else {
+                continue;
+            };
             for e in entries.flatten() {
                 let p = e.path();
                 if p.is_dir() {
                     stack.push(p);
                 } else {
-                    out.push(p.strip_prefix(&root).unwrap().to_string_lossy().into_owned());
+                    out.push(
+                        p.strip_prefix(&root)
+                            .unwrap()
+                            .to_string_lossy()
+                            .into_owned(),
+                    );
                 }
             }
         }
