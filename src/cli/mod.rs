@@ -129,6 +129,17 @@ fn init_logging(quiet: bool) {
         .try_init();
 }
 
+/// Opens a run folder for SQL; a folder that does not exist is the user's mistake (exit 2).
+pub(crate) fn open_query(dir: &std::path::Path) -> Result<annotrace::query::RunQuery, CliError> {
+    if !dir.is_dir() {
+        return Err(CliError::input(anyhow::anyhow!(
+            "{}: no such run folder",
+            dir.display()
+        )));
+    }
+    annotrace::query::RunQuery::open(&annotrace::store::RunDir::new(dir)).map_err(CliError::failed)
+}
+
 /// The fault plan from `ANNOTRACE_FAULT`, for tests of resumption.
 pub(crate) fn fault_from_env() -> Result<Option<annotrace::pipeline::FaultPlan>, CliError> {
     match std::env::var("ANNOTRACE_FAULT") {

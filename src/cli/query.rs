@@ -3,11 +3,11 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use annotrace::query::{Format, RenderOptions, RunQuery, render};
-use annotrace::store::{AtomicFile, ParquetSink, RunDir};
+use annotrace::query::{Format, RenderOptions, render};
+use annotrace::store::{AtomicFile, ParquetSink};
 use anyhow::Context;
 
-use super::{CliError, CliResult};
+use super::{CliError, CliResult, open_query};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -29,14 +29,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> CliResult {
-    let run = RunDir::new(&args.run);
-    if !run.root().is_dir() {
-        return Err(CliError::input(anyhow::anyhow!(
-            "{}: no such run folder",
-            run.root().display()
-        )));
-    }
-    let q = RunQuery::open(&run).map_err(CliError::failed)?;
+    let q = open_query(&args.run)?;
     // SQL mistakes are the user's: DataFusion's message is shown as is, exit code 2.
     let result = q.sql(&args.sql).map_err(CliError::input)?;
     let opts = RenderOptions {

@@ -2,10 +2,7 @@
 
 use std::path::PathBuf;
 
-use annotrace::query::RunQuery;
-use annotrace::store::RunDir;
-
-use super::{CliError, CliResult};
+use super::{CliError, CliResult, open_query};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -18,14 +15,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> CliResult {
-    let run = RunDir::new(&args.run);
-    if !run.root().is_dir() {
-        return Err(CliError::input(anyhow::anyhow!(
-            "{}: no such run folder",
-            run.root().display()
-        )));
-    }
-    let q = RunQuery::open(&run).map_err(CliError::failed)?;
+    let q = open_query(&args.run)?;
     for t in q.tables().map_err(CliError::failed)? {
         println!("{}: {} rows in {} file(s)", t.name, t.rows, t.files);
         if !args.brief {

@@ -301,19 +301,24 @@ fn plan_with(
         .collect()
 }
 
+/// Checks the options, builds every stage with its fingerprint, and finds the run folder.
+fn prepare(spec: &PipelineSpec, opts: &RunOptions) -> Result<(Built, RunDir), RunError> {
+    check_stage_option(spec, "--force", &opts.force)?;
+    check_stage_option(spec, "--until", &opts.until)?;
+    let built = build(spec)?;
+    let dir = opts
+        .run_dir
+        .clone()
+        .unwrap_or_else(|| spec.default_run_dir());
+    Ok((built, RunDir::new(dir)))
+}
+
 /// What `run` would do, without doing it.
 pub fn explain(
     spec: &PipelineSpec,
     opts: &RunOptions,
 ) -> Result<(PathBuf, Vec<PlannedStage>), RunError> {
-    check_stage_option(spec, "--force", &opts.force)?;
-    check_stage_option(spec, "--until", &opts.until)?;
-    let built = build(spec)?;
-    let run = RunDir::new(
-        opts.run_dir
-            .clone()
-            .unwrap_or_else(|| spec.default_run_dir()),
-    );
+    let (built, run) = prepare(spec, opts)?;
     let manifest = Manifest::load(&run)?.unwrap_or_default();
     let plan = plan_with(spec, opts, &built, &run, &manifest);
     Ok((run.root().to_path_buf(), plan))
@@ -332,14 +337,7 @@ pub fn run(
     opts: &RunOptions,
     progress: &dyn Progress,
 ) -> Result<RunReport, RunError> {
-    check_stage_option(spec, "--force", &opts.force)?;
-    check_stage_option(spec, "--until", &opts.until)?;
-    let built = build(spec)?;
-    let run = RunDir::new(
-        opts.run_dir
-            .clone()
-            .unwrap_or_else(|| spec.default_run_dir()),
-    );
+    let (built, run) = prepare(spec, opts)?;
     let existed = run.root().exists();
     fs::create_dir_all(run.root()).map_err(|e| StoreError::Io {
         path: run.root().to_path_buf(),

@@ -103,114 +103,133 @@ struct FrameColumns {
     rows: usize,
 }
 
+/// One `frames` row: the shared core plus the environment columns, `None` where the environment has
+/// no such field.
+#[derive(Default)]
+struct FrameRow<'a> {
+    object_id: String,
+    x: f64,
+    y: f64,
+    z: Option<f64>,
+    vx: Option<f64>,
+    vy: Option<f64>,
+    vz: Option<f64>,
+    angle: Option<f64>,
+    wx: Option<f64>,
+    wy: Option<f64>,
+    wz: Option<f64>,
+    kind: Option<&'a str>,
+    motion_state_code: Option<i32>,
+    motion_state: Option<&'a str>,
+    radius: Option<f64>,
+    diameter: Option<f64>,
+    shape: Option<&'a str>,
+    color: Option<&'a str>,
+    is_user_input: Option<bool>,
+    x1: Option<f64>,
+    y1: Option<f64>,
+    x2: Option<f64>,
+    y2: Option<f64>,
+    eliminable: Option<f64>,
+    dynamic: Option<f64>,
+    joint: Option<i64>,
+    spring: Option<i64>,
+}
+
+impl<'a> FrameRow<'a> {
+    fn of(body: &'a Body) -> Self {
+        match body {
+            Body::Pool(b) => FrameRow {
+                object_id: b.ball_id.clone(),
+                x: b.position[0],
+                y: b.position[1],
+                z: Some(b.position[2]),
+                vx: Some(b.velocity[0]),
+                vy: Some(b.velocity[1]),
+                vz: Some(b.velocity[2]),
+                wx: Some(b.angular_velocity[0]),
+                wy: Some(b.angular_velocity[1]),
+                wz: Some(b.angular_velocity[2]),
+                kind: Some(&b.kind),
+                // Motion-state codes are 0..=4; the import rejects nothing here, so a foreign
+                // producer's out-of-range code saturates rather than wrapping.
+                motion_state_code: Some(i32::try_from(b.motion_state_code).unwrap_or(i32::MAX)),
+                motion_state: Some(&b.motion_state),
+                radius: Some(b.radius),
+                ..FrameRow::default()
+            },
+            Body::Phyre(o) => FrameRow {
+                object_id: o.object_index.to_string(),
+                x: o.x,
+                y: o.y,
+                vx: Some(o.vx),
+                vy: Some(o.vy),
+                angle: Some(o.angle),
+                wz: Some(o.angular_velocity),
+                diameter: Some(o.diameter),
+                shape: Some(&o.shape),
+                color: Some(&o.color),
+                is_user_input: Some(o.is_user_input),
+                ..FrameRow::default()
+            },
+            Body::Iphyre(o) => FrameRow {
+                object_id: o.index.to_string(),
+                x: (o.x1 + o.x2) / 2.0,
+                y: (o.y1 + o.y2) / 2.0,
+                vx: o.vx,
+                vy: o.vy,
+                angle: o.angle,
+                wz: o.angular_velocity,
+                radius: Some(o.radius),
+                x1: Some(o.x1),
+                y1: Some(o.y1),
+                x2: Some(o.x2),
+                y2: Some(o.y2),
+                eliminable: Some(o.eliminable),
+                dynamic: Some(o.dynamic),
+                joint: Some(o.joint),
+                spring: Some(o.spring),
+                ..FrameRow::default()
+            },
+        }
+    }
+}
+
 impl FrameColumns {
     fn push(&mut self, step: i64, t: f64, slot: i32, obj: &Object) {
+        let r = FrameRow::of(&obj.body);
         self.rows += 1;
         self.step.append_value(step);
         self.t.append_value(t);
         self.slot.append_value(slot);
+        self.object_id.append_value(&r.object_id);
+        self.x.append_value(r.x);
+        self.y.append_value(r.y);
+        self.z.append_option(r.z);
+        self.vx.append_option(r.vx);
+        self.vy.append_option(r.vy);
+        self.vz.append_option(r.vz);
+        self.angle.append_option(r.angle);
+        self.wx.append_option(r.wx);
+        self.wy.append_option(r.wy);
+        self.wz.append_option(r.wz);
+        self.kind.append_option(r.kind);
+        self.motion_state_code.append_option(r.motion_state_code);
+        self.motion_state.append_option(r.motion_state);
+        self.radius.append_option(r.radius);
+        self.diameter.append_option(r.diameter);
+        self.shape.append_option(r.shape);
+        self.color.append_option(r.color);
+        self.is_user_input.append_option(r.is_user_input);
+        self.x1.append_option(r.x1);
+        self.y1.append_option(r.y1);
+        self.x2.append_option(r.x2);
+        self.y2.append_option(r.y2);
+        self.eliminable.append_option(r.eliminable);
+        self.dynamic.append_option(r.dynamic);
+        self.joint.append_option(r.joint);
+        self.spring.append_option(r.spring);
         self.extra.append_option(json_or_null(&obj.extra));
-        match &obj.body {
-            Body::Pool(b) => self.push_pool(b),
-            Body::Phyre(o) => self.push_phyre(o),
-            Body::Iphyre(o) => self.push_iphyre(o),
-        }
-    }
-
-    fn push_pool(&mut self, b: &PoolBall) {
-        self.object_id.append_value(&b.ball_id);
-        let [x, y, z] = b.position;
-        let [vx, vy, vz] = b.velocity;
-        let [wx, wy, wz] = b.angular_velocity;
-        self.x.append_value(x);
-        self.y.append_value(y);
-        self.z.append_value(z);
-        self.vx.append_value(vx);
-        self.vy.append_value(vy);
-        self.vz.append_value(vz);
-        self.angle.append_null();
-        self.wx.append_value(wx);
-        self.wy.append_value(wy);
-        self.wz.append_value(wz);
-        self.kind.append_value(&b.kind);
-        // Motion-state codes are 0..=4; an out-of-range code from a foreign producer is kept as null
-        // would lose it, so it is clamped into i32 only when it fits and rejected at import otherwise.
-        self.motion_state_code
-            .append_value(i32::try_from(b.motion_state_code).unwrap_or(i32::MAX));
-        self.motion_state.append_value(&b.motion_state);
-        self.radius.append_value(b.radius);
-        self.diameter.append_null();
-        self.shape.append_null();
-        self.color.append_null();
-        self.is_user_input.append_null();
-        self.x1.append_null();
-        self.y1.append_null();
-        self.x2.append_null();
-        self.y2.append_null();
-        self.eliminable.append_null();
-        self.dynamic.append_null();
-        self.joint.append_null();
-        self.spring.append_null();
-    }
-
-    fn push_phyre(&mut self, o: &PhyreObject) {
-        self.object_id.append_value(o.object_index.to_string());
-        self.x.append_value(o.x);
-        self.y.append_value(o.y);
-        self.z.append_null();
-        self.vx.append_value(o.vx);
-        self.vy.append_value(o.vy);
-        self.vz.append_null();
-        self.angle.append_value(o.angle);
-        self.wx.append_null();
-        self.wy.append_null();
-        self.wz.append_value(o.angular_velocity);
-        self.kind.append_null();
-        self.motion_state_code.append_null();
-        self.motion_state.append_null();
-        self.radius.append_null();
-        self.diameter.append_value(o.diameter);
-        self.shape.append_value(&o.shape);
-        self.color.append_value(&o.color);
-        self.is_user_input.append_value(o.is_user_input);
-        self.x1.append_null();
-        self.y1.append_null();
-        self.x2.append_null();
-        self.y2.append_null();
-        self.eliminable.append_null();
-        self.dynamic.append_null();
-        self.joint.append_null();
-        self.spring.append_null();
-    }
-
-    fn push_iphyre(&mut self, o: &IphyreObject) {
-        self.object_id.append_value(o.index.to_string());
-        self.x.append_value((o.x1 + o.x2) / 2.0);
-        self.y.append_value((o.y1 + o.y2) / 2.0);
-        self.z.append_null();
-        self.vx.append_option(o.vx);
-        self.vy.append_option(o.vy);
-        self.vz.append_null();
-        self.angle.append_option(o.angle);
-        self.wx.append_null();
-        self.wy.append_null();
-        self.wz.append_option(o.angular_velocity);
-        self.kind.append_null();
-        self.motion_state_code.append_null();
-        self.motion_state.append_null();
-        self.radius.append_value(o.radius);
-        self.diameter.append_null();
-        self.shape.append_null();
-        self.color.append_null();
-        self.is_user_input.append_null();
-        self.x1.append_value(o.x1);
-        self.y1.append_value(o.y1);
-        self.x2.append_value(o.x2);
-        self.y2.append_value(o.y2);
-        self.eliminable.append_value(o.eliminable);
-        self.dynamic.append_value(o.dynamic);
-        self.joint.append_value(o.joint);
-        self.spring.append_value(o.spring);
     }
 
     fn finish(&mut self, trace_id: &str) -> Result<RecordBatch, ArrowError> {
