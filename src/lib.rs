@@ -8,10 +8,12 @@
 //! - [`trace`]: the trace model, its Arrow schemas and the paper's JSON format;
 //! - [`store`]: the run directory on disk — atomic files, Parquet datasets, staging and commit;
 //! - [`envs`]: simulators behind one `Environment` trait (billiards: pooltool 0.6.0 physics), producing traces;
+//! - [`detect`]: sandboxed Python workers that run detector programs over traces, annotations and libraries;
 //! - [`query`]: DataFusion over a run's tables, and result formats (table, CSV, Markdown, LaTeX, JSON);
 //! - [`pipeline`]: pipeline files, the stage registry, fingerprints, the runner and its manifest.
 #![warn(missing_docs)]
 
+pub mod detect;
 pub mod envs;
 pub mod pipeline;
 pub mod query;

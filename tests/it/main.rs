@@ -7,4 +7,5 @@ mod import;
 mod query;
 mod render;
 mod run;
+mod sandbox;
 mod simulate;

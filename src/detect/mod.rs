@@ -1,0 +1,28 @@
+//! The detector runtime: sandboxed Python workers that run detector programs over traces.
+//!
+//! A **detector** ([`Detector`]) is Python source defining `find_pattern(trace)`, which returns a list of
+//! patterns `{label, start_timestep, end_timestep, parameters: {object_details: {...}}, provenance?,
+//! metadata?}` (the paper's contract). Detectors are written by people and, mostly, by LLMs, so they run
+//! in a [`WorkerPool`] of long-lived, sandboxed CPython processes (layers in [`SandboxLimits`]' module
+//! docs), and every output is checked in Rust ([`validate`]). A failing detector is data
+//! ([`CandidateStatus`], [`DetectorError`] with line, column or JSON path), never an `Err` of the batch.
+//!
+//! **Owns:** the worker processes and their protocol, the sandbox limits, output validation.
+//! **Does not:** read or write Parquet (`store/`, the `annotate` stage), choose detectors (`search/`) or
+//! score them (`fitness/`).
+//!
+//! Entry point: [`WorkerPool::new`] then [`WorkerPool::run`]`(&detectors, &traces)`.
+
+mod detector;
+mod error;
+mod pool;
+mod protocol;
+mod sandbox;
+mod validate;
+mod worker;
+
+pub use self::detector::{Detector, DetectorId, normalise_label};
+pub use self::error::{CandidateStatus, DetectError, DetectorError};
+pub use self::pool::{BatchResult, CallResult, RunStats, WorkerPool};
+pub use self::sandbox::{SandboxLayers, SandboxLimits};
+pub use self::validate::{Pattern, validate};

@@ -1,0 +1,525 @@
+//! [`WorkerPool`]: long-lived sandboxed workers that run detectors over traces in parallel.
+//!
+//! [`WorkerPool::run`] hands traces to workers one at a time (one Rust thread drives each worker): the
+//! worker loads the trace once (kept in its cache of `trace_cache` traces), compiles each detector once
+//! (kept for the worker's life), and runs every detector on it. Every call is timed by the worker
+//! (wall and CPU time of `find_pattern` itself) and by the pool (the round trip). A call past its time
+//! limit kills the worker, a fresh one takes its place, and the detector is marked `timeout` for that
+//! trace and `skipped` for the rest of the batch; the other detectors go on.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+use serde_json::Value;
+
+use super::detector::Detector;
+use super::error::{CandidateStatus, DetectError, DetectorError};
+use super::protocol::{self, COMPILE, EVICT, LOAD_TRACE, RUN};
+use super::sandbox::{SandboxLayers, SandboxLimits, resolve_python};
+use super::validate::{Pattern, validate};
+use super::worker::{Death, Reply, Worker, parse};
+use crate::trace::Trace;
+
+/// The result of one detector on one trace.
+#[derive(Clone, Debug)]
+pub struct CallResult {
+    /// Index of the detector in the batch.
+    pub detector: usize,
+    /// Index of the trace in the batch.
+    pub trace: usize,
+    /// Whether it ran and produced valid output.
+    pub status: CandidateStatus,
+    /// The validated patterns (empty unless `status` is ok).
+    pub patterns: Vec<Pattern>,
+    /// Wall time of `find_pattern` in the worker (s); 0 when it did not run to the end.
+    pub wall_s: f64,
+    /// CPU time of `find_pattern` in the worker (s).
+    pub cpu_s: f64,
+    /// Wall time of the whole request as seen from Rust (s): the call plus protocol and validation.
+    pub round_trip_s: f64,
+    /// The first 1000 characters the detector printed.
+    pub printed: String,
+}
+
+/// Totals of one [`WorkerPool::run`], for overhead accounting.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RunStats {
+    /// Traces converted to the paper's dict and loaded into a worker (cache misses).
+    pub traces_loaded: usize,
+    /// Time spent converting traces to JSON in Rust (s, summed over threads).
+    pub convert_s: f64,
+    /// Time spent loading traces in workers, round trip (s, summed over threads).
+    pub load_s: f64,
+    /// Time spent compiling detectors, round trip (s).
+    pub compile_s: f64,
+    /// Detector calls made.
+    pub calls: usize,
+    /// Sum of the workers' wall time inside `find_pattern` (s).
+    pub detector_wall_s: f64,
+    /// Sum of the round trips of run requests (s).
+    pub round_trip_s: f64,
+    /// Workers replaced after a timeout, memory error or crash.
+    pub restarts: usize,
+}
+
+impl RunStats {
+    fn add(&mut self, o: &RunStats) {
+        self.traces_loaded += o.traces_loaded;
+        self.convert_s += o.convert_s;
+        self.load_s += o.load_s;
+        self.compile_s += o.compile_s;
+        self.calls += o.calls;
+        self.detector_wall_s += o.detector_wall_s;
+        self.round_trip_s += o.round_trip_s;
+        self.restarts += o.restarts;
+    }
+
+    /// Protocol, conversion, loading and compilation time as a fraction of detector time.
+    pub fn overhead(&self) -> f64 {
+        let over = self.convert_s + self.load_s + self.compile_s + self.round_trip_s
+            - self.detector_wall_s;
+        if self.detector_wall_s > 0.0 {
+            over / self.detector_wall_s
+        } else {
+            0.0
+        }
+    }
+}
+
+/// The results of a batch: one [`CallResult`] per (trace, detector), trace-major.
+#[derive(Clone, Debug, Default)]
+pub struct BatchResult {
+    /// `results[t * n_detectors + d]`.
+    pub results: Vec<CallResult>,
+    /// Totals.
+    pub stats: RunStats,
+}
+
+/// A pool of sandboxed Python workers.
+///
+/// ```no_run
+/// use annotrace::detect::{Detector, SandboxLimits, WorkerPool};
+/// use annotrace::trace::Env;
+/// let pool = WorkerPool::new(SandboxLimits::default()).unwrap();
+/// println!("sandbox: {}", pool.layers().describe());
+/// let d = Detector::new(Env::Pooltool, "cue strike", "def find_pattern(trace):\n    return []\n", "inline");
+/// let traces: Vec<annotrace::trace::Trace> = Vec::new();
+/// let batch = pool.run(&[d], &traces);
+/// assert!(batch.results.is_empty());
+/// ```
+pub struct WorkerPool {
+    limits: SandboxLimits,
+    python: PathBuf,
+    slots: Vec<Mutex<Option<Worker>>>,
+    layers: SandboxLayers,
+}
+
+/// The key of a trace in a worker's cache.
+fn trace_key(trace: &Trace) -> String {
+    format!(
+        "{}\u{1}{}\u{1}{}",
+        trace.trace_id,
+        trace.timesteps.len(),
+        trace.timesteps.last().map(|t| t.t).unwrap_or(0.0)
+    )
+}
+
+impl WorkerPool {
+    /// Starts `limits.workers` workers (at least one) and checks the sandbox layers.
+    pub fn new(limits: SandboxLimits) -> Result<Self, DetectError> {
+        let python = resolve_python(&limits)?;
+        let n = limits.workers.max(1);
+        let mut slots = Vec::with_capacity(n);
+        let mut layers = SandboxLayers::default();
+        for _ in 0..n {
+            let w = Worker::spawn(&python, &limits)?;
+            layers = w.layers.clone();
+            slots.push(Mutex::new(Some(w)));
+        }
+        if limits.require_seccomp && layers.seccomp != "filter" {
+            return Err(DetectError::LayerUnavailable { layer: "seccomp" });
+        }
+        Ok(WorkerPool {
+            limits,
+            python,
+            slots,
+            layers,
+        })
+    }
+
+    /// The sandbox layers the workers reported.
+    pub fn layers(&self) -> &SandboxLayers {
+        &self.layers
+    }
+
+    /// The limits the pool runs with.
+    pub fn limits(&self) -> &SandboxLimits {
+        &self.limits
+    }
+
+    /// Number of workers.
+    pub fn workers(&self) -> usize {
+        self.slots.len()
+    }
+
+    /// Runs every detector on every trace. Never fails as a whole: a detector that fails is a
+    /// [`CandidateStatus::Failed`] result, and a worker that cannot be restarted fails its calls as
+    /// `crashed`.
+    pub fn run(&self, detectors: &[Detector], traces: &[Trace]) -> BatchResult {
+        let nd = detectors.len();
+        let next = AtomicUsize::new(0);
+        let shared = Shared {
+            dead: Mutex::new(HashMap::new()),
+        };
+        let results: Mutex<Vec<Option<CallResult>>> = Mutex::new(vec![None; nd * traces.len()]);
+        let stats = Mutex::new(RunStats::default());
+        std::thread::scope(|s| {
+            for slot in &self.slots {
+                let (next, shared, results, stats) = (&next, &shared, &results, &stats);
+                s.spawn(move || {
+                    let mut guard = slot.lock().unwrap_or_else(|p| p.into_inner());
+                    let mut local = RunStats::default();
+                    loop {
+                        let t = next.fetch_add(1, Ordering::SeqCst);
+                        if t >= traces.len() {
+                            break;
+                        }
+                        let out = self
+                            .run_trace(&mut guard, detectors, t, &traces[t], shared, &mut local);
+                        let mut r = results.lock().unwrap_or_else(|p| p.into_inner());
+                        for (d, res) in out.into_iter().enumerate() {
+                            r[t * nd + d] = Some(res);
+                        }
+                    }
+                    stats.lock().unwrap_or_else(|p| p.into_inner()).add(&local);
+                });
+            }
+        });
+        let results = results
+            .into_inner()
+            .unwrap_or_else(|p| p.into_inner())
+            .into_iter()
+            .flatten()
+            .collect();
+        BatchResult {
+            results,
+            stats: stats.into_inner().unwrap_or_else(|p| p.into_inner()),
+        }
+    }
+
+    /// A live worker in the slot (starting one if needed).
+    fn ensure_worker<'w>(
+        &self,
+        slot: &'w mut Option<Worker>,
+        stats: &mut RunStats,
+    ) -> Result<&'w mut Worker, DetectorError> {
+        if slot.is_none() {
+            stats.restarts += 1;
+            let w =
+                Worker::spawn(&self.python, &self.limits).map_err(|e| DetectorError::Crashed {
+                    message: format!("could not start a replacement worker: {e}"),
+                })?;
+            *slot = Some(w);
+        }
+        Ok(slot.as_mut().expect("just filled"))
+    }
+
+    /// What a dead worker means for the call that was running.
+    fn death_error(&self, death: &Death) -> DetectorError {
+        match death.signal {
+            // SIGXCPU: the RLIMIT_CPU backstop ended the call.
+            Some(24) => DetectorError::Timeout {
+                seconds: self.limits.call_timeout.as_secs_f64(),
+            },
+            _ => DetectorError::Crashed {
+                message: death.message.clone(),
+            },
+        }
+    }
+
+    fn run_trace(
+        &self,
+        slot: &mut Option<Worker>,
+        detectors: &[Detector],
+        t: usize,
+        trace: &Trace,
+        shared: &Shared,
+        stats: &mut RunStats,
+    ) -> Vec<CallResult> {
+        let key = trace_key(trace);
+        let steps = trace
+            .timesteps
+            .first()
+            .zip(trace.timesteps.last())
+            .map(|(a, b)| (a.index, b.index));
+        let timeout = self.limits.call_timeout;
+        let mut out = Vec::with_capacity(detectors.len());
+        for (d, det) in detectors.iter().enumerate() {
+            let mut res = CallResult {
+                detector: d,
+                trace: t,
+                status: CandidateStatus::Ok,
+                patterns: Vec::new(),
+                wall_s: 0.0,
+                cpu_s: 0.0,
+                round_trip_s: 0.0,
+                printed: String::new(),
+            };
+            let fail = |mut res: CallResult, e: DetectorError| {
+                res.status = CandidateStatus::Failed(e);
+                res
+            };
+            if let Some(e) = shared.dead_error(det.id.as_str()) {
+                out.push(fail(res, e));
+                continue;
+            }
+            let worker = match self.ensure_worker(slot, stats) {
+                Ok(w) => w,
+                Err(e) => {
+                    out.push(fail(res, e));
+                    continue;
+                }
+            };
+            // Load the trace (once per worker while it stays cached).
+            if !worker.traces.contains(&key) {
+                let c0 = Instant::now();
+                let body = protocol::load_body(&key, trace);
+                stats.convert_s += c0.elapsed().as_secs_f64();
+                let l0 = Instant::now();
+                match worker.request(
+                    LOAD_TRACE,
+                    &body,
+                    timeout.max(std::time::Duration::from_secs(30)),
+                ) {
+                    Reply::Frame(f) if parse(&f).is_ok_and(|v| v["ok"] == Value::Bool(true)) => {}
+                    Reply::Frame(_) => {
+                        *slot = None;
+                        out.push(fail(
+                            res,
+                            DetectorError::Memory {
+                                limit_bytes: self.limits.memory_bytes,
+                            },
+                        ));
+                        continue;
+                    }
+                    Reply::Timeout => {
+                        *slot = None;
+                        out.push(fail(
+                            res,
+                            DetectorError::Crashed {
+                                message: "loading the trace timed out".into(),
+                            },
+                        ));
+                        continue;
+                    }
+                    Reply::Died(death) => {
+                        *slot = None;
+                        out.push(fail(
+                            res,
+                            DetectorError::Crashed {
+                                message: format!("while loading the trace: {}", death.message),
+                            },
+                        ));
+                        continue;
+                    }
+                }
+                stats.load_s += l0.elapsed().as_secs_f64();
+                stats.traces_loaded += 1;
+                let worker = slot.as_mut().expect("alive");
+                worker.traces.push_back(key.clone());
+                if worker.traces.len() > self.limits.trace_cache.max(1) {
+                    let old: Vec<String> = worker.traces.pop_front().into_iter().collect();
+                    if !matches!(
+                        worker.request(EVICT, &protocol::evict_body(&old), timeout),
+                        Reply::Frame(_)
+                    ) {
+                        *slot = None;
+                        out.push(fail(
+                            res,
+                            DetectorError::Crashed {
+                                message: "evicting a trace failed".into(),
+                            },
+                        ));
+                        continue;
+                    }
+                }
+            } else {
+                // Most recently used goes to the back.
+                let worker = slot.as_mut().expect("alive");
+                worker.traces.retain(|k| k != &key);
+                worker.traces.push_back(key.clone());
+            }
+            let worker = slot.as_mut().expect("alive");
+            // Compile (once per worker).
+            if !worker.detectors.contains(det.id.as_str()) {
+                let c0 = Instant::now();
+                let reply = worker.request(
+                    COMPILE,
+                    &protocol::compile_body(det.id.as_str(), &det.code),
+                    timeout,
+                );
+                stats.compile_s += c0.elapsed().as_secs_f64();
+                match self.interpret(reply, slot) {
+                    Ok(v) if v["ok"] == Value::Bool(true) => {
+                        if let Some(w) = slot.as_mut() {
+                            w.detectors.insert(det.id.0.clone());
+                        }
+                    }
+                    Ok(v) => {
+                        let e = error_of(&v["error"], &self.limits);
+                        if error_is_fatal_for_worker(&v["error"]) {
+                            *slot = None;
+                        }
+                        shared.kill(det.id.as_str(), &e);
+                        out.push(fail(res, e));
+                        continue;
+                    }
+                    Err(e) => {
+                        shared.kill(det.id.as_str(), &e);
+                        out.push(fail(res, e));
+                        continue;
+                    }
+                }
+            }
+            let Some(worker) = slot.as_mut() else {
+                out.push(fail(
+                    res,
+                    DetectorError::Crashed {
+                        message: "worker lost".into(),
+                    },
+                ));
+                continue;
+            };
+            let r0 = Instant::now();
+            let reply = worker.request(RUN, &protocol::run_body(det.id.as_str(), &key), timeout);
+            let parsed = self.interpret(reply, slot);
+            res.round_trip_s = r0.elapsed().as_secs_f64();
+            stats.calls += 1;
+            stats.round_trip_s += res.round_trip_s;
+            match parsed {
+                Ok(mut v) => {
+                    res.wall_s = v["wall"].as_f64().unwrap_or(0.0);
+                    res.cpu_s = v["cpu"].as_f64().unwrap_or(0.0);
+                    stats.detector_wall_s += res.wall_s;
+                    if v["ok"] == Value::Bool(true) {
+                        res.printed = v["printed"].as_str().unwrap_or_default().to_string();
+                        match validate(v["patterns"].take(), det, steps) {
+                            Ok(p) => res.patterns = p,
+                            Err(e) => res.status = CandidateStatus::Failed(e),
+                        }
+                    } else {
+                        let e = error_of(&v["error"], &self.limits);
+                        if error_is_fatal_for_worker(&v["error"]) {
+                            *slot = None;
+                            shared.kill(det.id.as_str(), &e);
+                        }
+                        res.status = CandidateStatus::Failed(e);
+                    }
+                }
+                Err(e) => {
+                    shared.kill(det.id.as_str(), &e);
+                    res.status = CandidateStatus::Failed(e);
+                }
+            }
+            out.push(res);
+        }
+        out
+    }
+
+    /// Turns a reply into JSON, or into the error of a killed or dead worker (which is then dropped).
+    fn interpret(&self, reply: Reply, slot: &mut Option<Worker>) -> Result<Value, DetectorError> {
+        match reply {
+            Reply::Frame(f) => parse(&f).map_err(|e| {
+                *slot = None;
+                DetectorError::Crashed {
+                    message: e.to_string(),
+                }
+            }),
+            Reply::Timeout => {
+                *slot = None;
+                Err(DetectorError::Timeout {
+                    seconds: self.limits.call_timeout.as_secs_f64(),
+                })
+            }
+            Reply::Died(death) => {
+                *slot = None;
+                Err(self.death_error(&death))
+            }
+        }
+    }
+}
+
+/// State shared by the threads of one batch.
+struct Shared {
+    /// Detectors that failed fatally, with the error later calls report as `skipped`.
+    dead: Mutex<HashMap<String, DetectorError>>,
+}
+
+impl Shared {
+    fn kill(&self, id: &str, e: &DetectorError) {
+        if e.is_fatal() {
+            self.dead
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .entry(id.to_string())
+                .or_insert_with(|| e.clone());
+        }
+    }
+
+    /// The error a detector's later calls report: compile errors as they were, run-time failures as
+    /// `skipped`.
+    fn dead_error(&self, id: &str) -> Option<DetectorError> {
+        let dead = self.dead.lock().unwrap_or_else(|p| p.into_inner());
+        dead.get(id).map(|e| match e {
+            DetectorError::Syntax { .. }
+            | DetectorError::Forbidden { .. }
+            | DetectorError::NoFindPattern { .. } => e.clone(),
+            other => DetectorError::Skipped {
+                message: other.to_string(),
+            },
+        })
+    }
+}
+
+fn error_is_fatal_for_worker(e: &Value) -> bool {
+    e["fatal"] == Value::Bool(true) || e["category"] == "memory"
+}
+
+/// The typed error of a worker's error reply.
+fn error_of(e: &Value, limits: &SandboxLimits) -> DetectorError {
+    let s = |k: &str| e[k].as_str().unwrap_or_default().to_string();
+    let n = |k: &str| e[k].as_u64().map(|v| v as u32);
+    match e["category"].as_str().unwrap_or_default() {
+        "syntax" => DetectorError::Syntax {
+            message: s("message"),
+            line: n("line"),
+            column: n("column"),
+        },
+        "forbidden" => DetectorError::Forbidden {
+            message: s("message"),
+            line: n("line"),
+            column: n("column"),
+        },
+        "no_find_pattern" => DetectorError::NoFindPattern {
+            message: s("message"),
+        },
+        "runtime" => DetectorError::Runtime {
+            exception: e["exception"].as_str().map(str::to_string),
+            message: s("message"),
+            line: n("line"),
+        },
+        "memory" => DetectorError::Memory {
+            limit_bytes: limits.memory_bytes,
+        },
+        "invalid_output" => DetectorError::InvalidOutput {
+            path: e["path"].as_str().unwrap_or("$").to_string(),
+            message: s("message"),
+        },
+        other => DetectorError::Crashed {
+            message: format!("worker error {other}: {}", s("message")),
+        },
+    }
+}

@@ -1,0 +1,489 @@
+# annotrace detector worker: runs untrusted `find_pattern(trace)` functions for the Rust side.
+#
+# Started by src/detect/worker.rs as `python3 -I -S -B -c <this file>` with a scrubbed environment and
+# resource limits already applied (RLIMIT_AS, RLIMIT_FSIZE=0, RLIMIT_NPROC, RLIMIT_NOFILE, RLIMIT_CORE=0,
+# RLIMIT_CPU). Standard library only. Order of work, which matters:
+#   1. import every module the worker will ever need (nothing may be imported after step 3);
+#   2. keep the protocol pipes as private binary files and point sys.stdout/sys.stderr at bounded sinks;
+#   3. lock the process down: no_new_privs, a Landlock ruleset with no rules (no file access at all, no TCP,
+#      no signals or abstract sockets outside the process), then a seccomp filter (no sockets, no
+#      exec/fork, no file opens, no file-system changes), each where the kernel offers it;
+#   4. say "ready" (with the layers that are active) and serve requests.
+#
+# Protocol (see protocol.rs): frames of a 4-byte little-endian length and a payload whose first byte is the
+# message type and the rest JSON. One reply per request, in order.
+#   b"T" {"id", "trace"}            load a trace (the paper's dict), cached read-only   -> {"ok": true}
+#   b"E" {"ids": [...]}             evict traces                                        -> {"ok": true}
+#   b"C" {"id", "code"}             check and compile a detector                        -> {"ok": true} | error
+#   b"R" {"detector", "trace"}      run it                                              -> patterns | error
+# Before every request the soft RLIMIT_CPU is re-armed to (CPU used + cpu_seconds), a backstop behind the
+# Rust side's wall-clock timer.
+# An error reply is {"ok": false, "error": {"category", "message", "line", "column", ...}}.
+import ast
+import builtins as _builtins
+import gc
+import json
+import os
+import resource
+import struct
+import sys
+import time
+
+try:
+    import ctypes
+except Exception:  # no ctypes: the OS layers are reported as unavailable
+    ctypes = None
+
+CONFIG = json.loads(sys.argv[1]) if len(sys.argv) > 1 else {}
+MAX_PATTERNS = int(CONFIG.get("max_patterns", 10000))
+MAX_OUTPUT_BYTES = int(CONFIG.get("max_output_bytes", 4 << 20))
+MAX_PRINT_BYTES = 4096
+PYTHON_GUARD = bool(CONFIG.get("python_guard", True))
+CPU_SECONDS = float(CONFIG.get("cpu_seconds", 0))
+
+_IN = open(0, "rb", buffering=0, closefd=False)
+_OUT = open(1, "wb", buffering=0, closefd=False)
+_PACK = struct.Struct("<I")
+
+
+class _Sink:
+    """Bounded text sink standing in for stdout/stderr: a detector that prints 1 GB costs time, not memory."""
+
+    def __init__(self):
+        self.parts = []
+        self.size = 0
+
+    def write(self, s):
+        s = str(s)
+        if self.size < MAX_PRINT_BYTES:
+            self.parts.append(s[: MAX_PRINT_BYTES - self.size])
+        self.size += len(s)
+        return len(s)
+
+    def flush(self):
+        pass
+
+    def take(self):
+        out = "".join(self.parts)
+        self.parts = []
+        self.size = 0
+        return out
+
+
+_SINK = _Sink()
+sys.stdout = _SINK
+sys.stdin = None
+
+
+def _read_exact(n):
+    buf = bytearray()
+    while len(buf) < n:
+        chunk = _IN.read(n - len(buf))
+        if not chunk:
+            sys.exit(0)
+        buf += chunk
+    return bytes(buf)
+
+
+def _send(obj_bytes):
+    _OUT.write(_PACK.pack(len(obj_bytes)) + obj_bytes)
+
+
+def _reply(obj):
+    _send(json.dumps(obj, separators=(",", ":")).encode())
+
+
+# ---------------------------------------------------------------------------------------------------
+# Step 3: OS layers.
+
+_SYS = {  # x86_64 syscall numbers
+    "read": 0, "write": 1, "open": 2, "socket": 41, "connect": 42, "accept": 43, "sendto": 44,
+    "recvfrom": 45, "sendmsg": 46, "recvmsg": 47, "shutdown": 48, "bind": 49, "listen": 50,
+    "socketpair": 53, "clone": 56, "fork": 57, "vfork": 58, "execve": 59, "kill": 62, "truncate": 76,
+    "getdents": 78, "chdir": 80, "rename": 82, "mkdir": 83, "rmdir": 84, "creat": 85, "link": 86,
+    "unlink": 87, "symlink": 88, "chmod": 90, "fchmod": 91, "chown": 92, "fchown": 93, "lchown": 94,
+    "ptrace": 101, "mknod": 133, "personality": 135, "pivot_root": 155, "chroot": 161, "mount": 165,
+    "umount2": 166, "getdents64": 217, "openat": 257, "mkdirat": 258, "mknodat": 259,
+    "fchownat": 260, "unlinkat": 263, "renameat": 264, "linkat": 265, "symlinkat": 266,
+    "fchmodat": 268, "unshare": 272, "accept4": 288, "perf_event_open": 298, "setns": 308,
+    "process_vm_readv": 310, "process_vm_writev": 311, "renameat2": 316, "memfd_create": 319,
+    "bpf": 321, "execveat": 322, "userfaultfd": 323, "io_uring_setup": 425, "io_uring_enter": 426,
+    "io_uring_register": 427, "open_tree": 428, "move_mount": 429, "fsopen": 430, "clone3": 435,
+    "openat2": 437, "pidfd_getfd": 438,
+}
+_DENY = [
+    "open", "openat", "openat2", "creat", "socket", "connect", "accept", "accept4", "sendto",
+    "recvfrom", "sendmsg", "recvmsg", "shutdown", "bind", "listen", "socketpair", "fork", "vfork",
+    "execve", "execveat", "kill", "truncate", "getdents", "getdents64", "chdir", "rename", "renameat",
+    "renameat2", "mkdir", "mkdirat", "rmdir", "link", "linkat", "unlink", "unlinkat", "symlink",
+    "symlinkat", "chmod", "fchmod", "fchmodat", "chown", "fchown", "lchown", "fchownat", "mknod",
+    "mknodat", "ptrace", "personality", "pivot_root", "chroot", "mount", "umount2", "unshare",
+    "setns", "perf_event_open", "process_vm_readv", "process_vm_writev", "memfd_create", "bpf",
+    "userfaultfd", "io_uring_setup", "io_uring_enter", "io_uring_register", "open_tree",
+    "move_mount", "fsopen", "pidfd_getfd",
+]
+
+
+def _no_new_privs(libc):
+    return libc.prctl(38, 1, 0, 0, 0) == 0  # PR_SET_NO_NEW_PRIVS
+
+
+def _landlock(libc):
+    """A ruleset that handles every access right the kernel knows and grants none."""
+    libc.syscall.restype = ctypes.c_long
+    abi = libc.syscall(444, None, ctypes.c_size_t(0), ctypes.c_uint(1))  # LANDLOCK_CREATE_RULESET_VERSION
+    if abi < 1:
+        return "unavailable"
+    fs = (1 << 13) - 1  # ABI 1: execute … make_sym
+    if abi >= 2:
+        fs |= 1 << 13  # refer
+    if abi >= 3:
+        fs |= 1 << 14  # truncate
+    if abi >= 5:
+        fs |= 1 << 15  # ioctl_dev
+    net = 3 if abi >= 4 else 0  # bind_tcp | connect_tcp
+    scoped = 3 if abi >= 6 else 0  # abstract unix sockets | signals
+
+    class Attr(ctypes.Structure):
+        _fields_ = [("fs", ctypes.c_uint64), ("net", ctypes.c_uint64), ("scoped", ctypes.c_uint64)]
+
+    attr = Attr(fs, net, scoped)
+    size = 8 if abi < 4 else (16 if abi < 6 else 24)
+    fd = libc.syscall(444, ctypes.byref(attr), ctypes.c_size_t(size), ctypes.c_uint(0))
+    if fd < 0:
+        return "unavailable"
+    ok = libc.syscall(446, ctypes.c_int(fd), ctypes.c_uint(0)) == 0  # landlock_restrict_self
+    libc.close(fd)
+    return "abi%d" % abi if ok else "unavailable"
+
+
+def _seccomp(libc):
+    """A BPF filter: x86_64 only; denied syscalls fail with EPERM (clone3 with ENOSYS, so that glibc falls
+    back to clone); clone is allowed only for threads (CLONE_THREAD)."""
+    if struct.calcsize("P") != 8 or _machine() != "x86_64":
+        return "unavailable"
+
+    class Insn(ctypes.Structure):
+        _fields_ = [("code", ctypes.c_ushort), ("jt", ctypes.c_ubyte), ("jf", ctypes.c_ubyte),
+                    ("k", ctypes.c_uint32)]
+
+    class Prog(ctypes.Structure):
+        _fields_ = [("len", ctypes.c_ushort), ("filter", ctypes.POINTER(Insn))]
+
+    LD, JEQ, JSET, RET = 0x20, 0x15, 0x45, 0x06
+    ALLOW, KILL = 0x7FFF0000, 0x80000000
+    EPERM, ENOSYS = 0x00050000 | 1, 0x00050000 | 38
+    denied = sorted(set(_SYS[n] for n in _DENY))
+    prog = [
+        (LD, 0, 0, 4),  # arch
+        (JEQ, 1, 0, 0xC000003E),  # AUDIT_ARCH_X86_64
+        (RET, 0, 0, KILL),
+        (LD, 0, 0, 0),  # syscall number
+        (0x35, 0, 1, 0x40000000),  # jge: x32 ABI -> deny
+        (RET, 0, 0, EPERM),
+        (JEQ, 0, 1, _SYS["clone3"]),
+        (RET, 0, 0, ENOSYS),
+        (JEQ, 0, 4, _SYS["clone"]),  # not clone: on to the deny list
+        (LD, 0, 0, 16),  # clone flags (low 32 bits of args[0])
+        (JSET, 1, 0, 0x00010000),  # CLONE_THREAD
+        (RET, 0, 0, EPERM),
+        (RET, 0, 0, ALLOW),
+        (LD, 0, 0, 0),
+    ]
+    for nr in denied:
+        prog.append((JEQ, 0, 1, nr))
+        prog.append((RET, 0, 0, EPERM))
+    prog.append((RET, 0, 0, ALLOW))
+    arr = (Insn * len(prog))(*[Insn(*i) for i in prog])
+    fprog = Prog(len(prog), arr)
+    ok = libc.prctl(22, 2, ctypes.byref(fprog), 0, 0) == 0  # PR_SET_SECCOMP, SECCOMP_MODE_FILTER
+    return "filter" if ok else "unavailable"
+
+
+def _machine():
+    try:
+        return os.uname().machine
+    except Exception:
+        return ""
+
+
+def _lock_down():
+    layers = {"no_new_privs": False, "landlock": "unavailable", "seccomp": "unavailable"}
+    if not CONFIG.get("os_layers", True) or ctypes is None:
+        return layers
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        layers["no_new_privs"] = _no_new_privs(libc)
+        if layers["no_new_privs"]:
+            if CONFIG.get("landlock", True):
+                layers["landlock"] = _landlock(libc)
+            if CONFIG.get("seccomp", True):
+                layers["seccomp"] = _seccomp(libc)
+    except Exception as e:  # report, never crash: the Rust side decides whether that is acceptable
+        layers["error"] = repr(e)
+    return layers
+
+
+# ---------------------------------------------------------------------------------------------------
+# The Python layer: checked source, reduced builtins, read-only traces.
+
+FORBIDDEN_NAMES = {
+    "eval", "exec", "compile", "open", "input", "breakpoint", "globals", "locals", "vars", "dir",
+    "getattr", "setattr", "delattr", "hasattr", "type", "super", "object", "memoryview", "help",
+    "exit", "quit", "classmethod", "staticmethod", "property", "bytearray", "id", "__import__",
+}
+FORBIDDEN_ATTRS = {
+    "gi_frame", "gi_code", "gi_yieldfrom", "cr_frame", "cr_code", "cr_await", "ag_frame", "ag_code",
+    "ag_await", "f_back", "f_globals", "f_locals", "f_builtins", "f_code", "tb_frame", "tb_next",
+    "co_code", "co_consts", "mro", "format_map",
+}
+
+
+class ForbiddenError(Exception):
+    def __init__(self, what, node):
+        Exception.__init__(self, what)
+        self.what = what
+        self.line = getattr(node, "lineno", None)
+        self.column = getattr(node, "col_offset", -1) + 1 or None
+
+
+def check_source(tree):
+    has_find_pattern = False
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            raise ForbiddenError("import statements are not allowed (detectors may use only the trace)", node)
+        if isinstance(node, ast.ClassDef):
+            raise ForbiddenError("class definitions are not allowed", node)
+        if isinstance(node, ast.Attribute):
+            a = node.attr
+            if a.startswith("_") or a in FORBIDDEN_ATTRS:
+                raise ForbiddenError("attribute access `.%s` is not allowed" % a, node)
+        if isinstance(node, ast.Name):
+            if node.id.startswith("__") or node.id in FORBIDDEN_NAMES:
+                raise ForbiddenError("the name `%s` is not allowed" % node.id, node)
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.name == "find_pattern":
+            has_find_pattern = True
+        if isinstance(node, ast.Global):
+            for n in node.names:
+                if n.startswith("__"):
+                    raise ForbiddenError("the name `%s` is not allowed" % n, node)
+    return has_find_pattern
+
+
+def _print(*args, sep=" ", end="\n", **_kw):
+    _SINK.write(sep.join(str(a) for a in args) + end)
+
+
+_SAFE = [
+    "abs", "all", "any", "ascii", "bin", "bool", "callable", "chr", "complex", "dict", "divmod",
+    "enumerate", "filter", "float", "format", "frozenset", "hash", "hex", "int", "isinstance",
+    "issubclass", "iter", "len", "list", "map", "max", "min", "next", "oct", "ord", "pow", "range",
+    "repr", "reversed", "round", "set", "slice", "sorted", "str", "sum", "tuple", "zip", "bytes",
+    "ArithmeticError", "AssertionError", "AttributeError", "Exception", "IndexError", "KeyError",
+    "LookupError", "NameError", "NotImplementedError", "OverflowError", "RuntimeError",
+    "StopIteration", "TypeError", "ValueError", "ZeroDivisionError", "True", "False", "None",
+]
+SAFE_BUILTINS = {n: getattr(_builtins, n) for n in _SAFE if hasattr(_builtins, n)}
+SAFE_BUILTINS["print"] = _print
+if not PYTHON_GUARD:
+    # Tests of the OS layers only: the detector sees the real builtins, so only the OS stops it.
+    SAFE_BUILTINS = _builtins.__dict__
+
+
+class FrozenDict(dict):
+    """A trace dict detectors can read but not change (so one detector cannot corrupt the cached trace
+    for the next); `.copy()` and `dict(x)` give ordinary dicts."""
+
+    __slots__ = ()
+
+    def _read_only(self, *a, **k):
+        raise TypeError("the trace is read-only; copy it first (dict(x), list(x))")
+
+    __setitem__ = __delitem__ = pop = popitem = clear = update = setdefault = __ior__ = _read_only
+
+
+def _freeze(d):
+    for k, v in d.items():
+        if type(v) is list:
+            dict.__setitem__(d, k, tuple(v))
+    return FrozenDict(d)
+
+
+TRACES = {}
+DETECTORS = {}
+
+
+def _error(category, message, line=None, column=None, **extra):
+    e = {"category": category, "message": message}
+    if line is not None:
+        e["line"] = line
+    if column is not None:
+        e["column"] = column
+    e.update(extra)
+    return {"ok": False, "error": e}
+
+
+def _tb_line(tb):
+    """The innermost line of the traceback that lies in detector code."""
+    line = None
+    while tb is not None:
+        if tb.tb_frame.f_code.co_filename == "<detector>":
+            line = tb.tb_lineno
+        tb = tb.tb_next
+    return line
+
+
+def _set_cpu_limit(seconds):
+    """Soft RLIMIT_CPU at (CPU used so far + seconds): the kernel ends a call that overruns (SIGXCPU)."""
+    if not seconds:
+        return
+    used = time.process_time()
+    soft, hard = resource.getrlimit(resource.RLIMIT_CPU)
+    want = int(used + seconds) + 1
+    if hard != resource.RLIM_INFINITY:
+        want = min(want, hard)
+    try:
+        resource.setrlimit(resource.RLIMIT_CPU, (want, hard))
+    except (ValueError, OSError):
+        pass
+
+
+def compile_detector(msg):
+    code = msg.get("code", "")
+    try:
+        tree = ast.parse(code, "<detector>")
+    except SyntaxError as e:
+        return _error("syntax", e.msg, e.lineno, e.offset)
+    except (ValueError, RecursionError, MemoryError) as e:
+        return _error("syntax", str(e) or type(e).__name__)
+    if PYTHON_GUARD:
+        try:
+            found = check_source(tree)
+        except ForbiddenError as e:
+            return _error("forbidden", e.what, e.line, e.column)
+        if not found:
+            return _error("no_find_pattern", "the code defines no function `find_pattern(trace)`")
+    try:
+        compiled = compile(tree, "<detector>", "exec")
+    except (SyntaxError, ValueError, RecursionError) as e:
+        return _error("syntax", str(e), getattr(e, "lineno", None), getattr(e, "offset", None))
+    ns = {"__builtins__": SAFE_BUILTINS, "__name__": "detector"}
+    try:
+        exec(compiled, ns)
+    except MemoryError:
+        return _error("memory", "MemoryError while defining the detector", fatal=True)
+    except RecursionError as e:
+        return _error("runtime", "RecursionError: %s" % e, _tb_line(e.__traceback__), exception="RecursionError")
+    except BaseException as e:  # noqa: B036  (SystemExit and KeyboardInterrupt from detector code too)
+        return _error("runtime", "%s: %s" % (type(e).__name__, e), _tb_line(e.__traceback__),
+                      exception=type(e).__name__)
+    fn = ns.get("find_pattern")
+    if not callable(fn):
+        return _error("no_find_pattern", "the code defines no function `find_pattern(trace)`")
+    DETECTORS[msg["id"]] = fn
+    return {"ok": True}
+
+
+class _TooBig(Exception):
+    pass
+
+
+def _not_json(o):
+    raise TypeError("a value of type %s is not JSON (use dict, list, str, int, float, bool, None)" % type(o).__name__)
+
+
+def run_detector(msg):
+    fn = DETECTORS.get(msg["detector"])
+    trace = TRACES.get(msg["trace"])
+    if fn is None or trace is None:
+        return None, _error("internal", "detector or trace not loaded")
+    _SINK.take()
+    w0 = time.perf_counter()
+    c0 = time.process_time()
+    try:
+        out = fn(trace)
+    except MemoryError:
+        return None, _error("memory", "MemoryError", fatal=True)
+    except RecursionError as e:
+        return None, _error("runtime", "RecursionError: maximum recursion depth exceeded",
+                            _tb_line(e.__traceback__), exception="RecursionError")
+    except BaseException as e:  # noqa: B036
+        return None, _error("runtime", "%s: %s" % (type(e).__name__, str(e)[:500]),
+                            _tb_line(e.__traceback__), exception=type(e).__name__)
+    wall = time.perf_counter() - w0
+    cpu = time.process_time() - c0
+    timing = {"wall": wall, "cpu": cpu}
+    if not isinstance(out, list):
+        return None, _error("invalid_output", "find_pattern must return a list, found %s" % type(out).__name__,
+                            path="$", **timing)
+    if len(out) > MAX_PATTERNS:
+        return None, _error("invalid_output", "find_pattern returned %d patterns (limit %d)" % (len(out), MAX_PATTERNS),
+                            path="$", **timing)
+    try:
+        text = json.dumps(out, separators=(",", ":"), allow_nan=False, default=_not_json)
+    except MemoryError:
+        return None, _error("memory", "MemoryError while encoding the output", fatal=True)
+    except RecursionError:
+        return None, _error("invalid_output", "the output is nested too deeply", path="$", **timing)
+    except (TypeError, ValueError) as e:
+        return None, _error("invalid_output", str(e), path="$", **timing)
+    if len(text) > MAX_OUTPUT_BYTES:
+        return None, _error("invalid_output", "the output is %d bytes (limit %d)" % (len(text), MAX_OUTPUT_BYTES),
+                            path="$", **timing)
+    printed = _SINK.take()
+    head = '{"ok":true,"wall":%r,"cpu":%r,"printed":%s,"patterns":' % (wall, cpu, json.dumps(printed[:1000]))
+    return (head + text + "}").encode(), None
+
+
+def serve():
+    while True:
+        (n,) = _PACK.unpack(_read_exact(4))
+        frame = _read_exact(n)
+        kind = frame[:1]
+        _set_cpu_limit(CPU_SECONDS)
+        try:
+            if kind == b"T":
+                gc.disable()
+                try:
+                    msg = json.loads(frame[1:], object_hook=_freeze)
+                    TRACES[msg["id"]] = msg["trace"]
+                finally:
+                    gc.enable()
+                # The cached trace never holds cycles: keep it out of every later collection.
+                gc.freeze()
+                del msg
+                _reply({"ok": True})
+            elif kind == b"E":
+                msg = json.loads(frame[1:])
+                for i in msg.get("ids", []):
+                    TRACES.pop(i, None)
+                gc.unfreeze()
+                gc.collect()
+                gc.freeze()
+                _reply({"ok": True})
+            elif kind == b"C":
+                _reply(compile_detector(json.loads(frame[1:])))
+            elif kind == b"R":
+                raw, err = run_detector(json.loads(frame[1:]))
+                if raw is not None:
+                    _send(raw)
+                else:
+                    _reply(err)
+                    if err["error"].get("fatal"):
+                        sys.exit(3)
+            else:
+                _reply(_error("internal", "unknown message type %r" % kind))
+        except MemoryError:
+            _reply(_error("memory", "MemoryError", fatal=True))
+            sys.exit(3)
+
+
+def main():
+    sys.setrecursionlimit(int(CONFIG.get("recursion_limit", 2000)))
+    layers = _lock_down()
+    layers["python_guard"] = PYTHON_GUARD
+    _reply({"ok": True, "ready": True, "layers": layers, "python": sys.version.split()[0]})
+    serve()
+
+
+main()

@@ -1,0 +1,245 @@
+//! One sandboxed worker process: start it, send requests, wait for replies with a deadline, kill it.
+//!
+//! A reader thread turns the worker's standard output into frames on a channel, so that waiting for a
+//! reply has a timeout; another drains standard error into a bounded buffer (the last 8 KiB), quoted
+//! when the worker dies. The worker remembers which traces and detectors it holds, so that the pool
+//! sends each only once.
+
+use std::collections::{HashSet, VecDeque};
+use std::io::Read;
+use std::path::Path;
+use std::process::{Child, ChildStdin, Stdio};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, channel};
+use std::sync::{Arc, Mutex};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+use super::error::DetectError;
+use super::protocol::{self, read_frame, write_frame};
+use super::sandbox::{SandboxLayers, SandboxLimits, worker_command};
+
+/// The worker's Python source, embedded at build time.
+pub(crate) const WORKER_PY: &str = include_str!("worker.py");
+
+/// How long a worker may take to start and lock itself down.
+const START_TIMEOUT: Duration = Duration::from_secs(30);
+/// Bytes of standard error kept.
+const STDERR_KEEP: usize = 8 << 10;
+
+/// What came back for a request.
+#[derive(Debug)]
+pub(crate) enum Reply {
+    /// A reply frame (raw JSON bytes).
+    Frame(Vec<u8>),
+    /// No reply within the deadline; the worker has been killed.
+    Timeout,
+    /// The worker died; how.
+    Died(Death),
+}
+
+/// How a worker died.
+#[derive(Debug)]
+pub(crate) struct Death {
+    /// The signal that ended it, if one did.
+    pub signal: Option<i32>,
+    /// Exit status, or signal, and the end of standard error.
+    pub message: String,
+}
+
+/// A running worker.
+pub(crate) struct Worker {
+    child: Child,
+    stdin: Option<ChildStdin>,
+    replies: Receiver<std::io::Result<Vec<u8>>>,
+    stderr: Arc<Mutex<VecDeque<u8>>>,
+    /// Trace keys loaded, least recently used first.
+    pub traces: VecDeque<String>,
+    /// Detector ids compiled.
+    pub detectors: HashSet<String>,
+    /// The layers it reported.
+    pub layers: SandboxLayers,
+}
+
+impl Worker {
+    /// Starts a worker and waits for its ready message.
+    pub fn spawn(python: &Path, limits: &SandboxLimits) -> Result<Worker, DetectError> {
+        let mut cmd = worker_command(&python.to_path_buf(), limits, WORKER_PY);
+        cmd.stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped());
+        let mut child = cmd.spawn().map_err(|e| DetectError::Spawn {
+            message: format!("{}: {e}", python.display()),
+        })?;
+        let stdin = child.stdin.take();
+        let mut stdout = child.stdout.take().expect("piped");
+        let mut err = child.stderr.take().expect("piped");
+        let max = limits.max_output_bytes + (64 << 10);
+        let (tx, rx) = channel();
+        thread::Builder::new()
+            .name("detect-reader".into())
+            .spawn(move || {
+                loop {
+                    let frame = read_frame(&mut stdout, max);
+                    let stop = frame.is_err();
+                    if tx.send(frame).is_err() || stop {
+                        break;
+                    }
+                }
+            })
+            .map_err(|e| DetectError::Spawn {
+                message: format!("reader thread: {e}"),
+            })?;
+        let stderr = Arc::new(Mutex::new(VecDeque::new()));
+        let sink = stderr.clone();
+        thread::Builder::new()
+            .name("detect-stderr".into())
+            .spawn(move || {
+                let mut buf = [0u8; 4096];
+                while let Ok(n) = err.read(&mut buf) {
+                    if n == 0 {
+                        break;
+                    }
+                    let mut q = sink.lock().unwrap_or_else(|p| p.into_inner());
+                    q.extend(&buf[..n]);
+                    let excess = q.len().saturating_sub(STDERR_KEEP);
+                    q.drain(..excess);
+                }
+            })
+            .map_err(|e| DetectError::Spawn {
+                message: format!("stderr thread: {e}"),
+            })?;
+        let mut w = Worker {
+            child,
+            stdin,
+            replies: rx,
+            stderr,
+            traces: VecDeque::new(),
+            detectors: HashSet::new(),
+            layers: SandboxLayers::default(),
+        };
+        let ready = match w.wait_reply(START_TIMEOUT) {
+            Reply::Frame(f) => {
+                protocol::parse_reply(&f).map_err(|m| DetectError::Spawn { message: m })?
+            }
+            Reply::Timeout => {
+                return Err(DetectError::Spawn {
+                    message: "no ready message within 30 s".into(),
+                });
+            }
+            Reply::Died(d) => return Err(DetectError::Spawn { message: d.message }),
+        };
+        let layers = &ready["layers"];
+        w.layers = SandboxLayers {
+            python: ready["python"].as_str().unwrap_or_default().to_string(),
+            rlimits: cfg!(unix),
+            no_new_privs: layers["no_new_privs"].as_bool().unwrap_or(false),
+            landlock: layers["landlock"]
+                .as_str()
+                .unwrap_or("unavailable")
+                .to_string(),
+            seccomp: layers["seccomp"]
+                .as_str()
+                .unwrap_or("unavailable")
+                .to_string(),
+            python_guard: layers["python_guard"].as_bool().unwrap_or(false),
+        };
+        Ok(w)
+    }
+
+    /// Sends a request and waits up to `timeout` for its reply. On timeout the worker is killed.
+    pub fn request(&mut self, kind: u8, body: &[u8], timeout: Duration) -> Reply {
+        let sent = match self.stdin.as_mut() {
+            Some(stdin) => write_frame(stdin, kind, body),
+            None => Err(std::io::Error::other("worker stdin closed")),
+        };
+        if sent.is_err() {
+            return Reply::Died(self.reap());
+        }
+        self.wait_reply(timeout)
+    }
+
+    fn wait_reply(&mut self, timeout: Duration) -> Reply {
+        let deadline = Instant::now() + timeout;
+        match self
+            .replies
+            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+        {
+            Ok(Ok(frame)) => Reply::Frame(frame),
+            Ok(Err(_)) | Err(RecvTimeoutError::Disconnected) => Reply::Died(self.reap()),
+            Err(RecvTimeoutError::Timeout) => {
+                self.kill();
+                Reply::Timeout
+            }
+        }
+    }
+
+    /// Kills the worker (SIGKILL) and waits for it.
+    pub fn kill(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        self.stdin = None;
+    }
+
+    /// Waits for a worker that stopped on its own and says how it ended.
+    fn reap(&mut self) -> Death {
+        self.stdin = None;
+        // The process may still be exiting; give it a moment, then make sure.
+        let deadline = Instant::now() + Duration::from_secs(2);
+        let status = loop {
+            match self.child.try_wait() {
+                Ok(Some(s)) => break Some(s),
+                Ok(None) if Instant::now() < deadline => thread::sleep(Duration::from_millis(5)),
+                _ => {
+                    let _ = self.child.kill();
+                    break self.child.wait().ok();
+                }
+            }
+        };
+        // Let the stderr thread catch up with the last words.
+        thread::sleep(Duration::from_millis(10));
+        let tail = {
+            let q = self.stderr.lock().unwrap_or_else(|p| p.into_inner());
+            String::from_utf8_lossy(&q.iter().copied().collect::<Vec<u8>>()).into_owned()
+        };
+        #[cfg(unix)]
+        let signal = {
+            use std::os::unix::process::ExitStatusExt;
+            status.and_then(|s| s.signal())
+        };
+        #[cfg(not(unix))]
+        let signal = None;
+        let how = match (status.and_then(|s| s.code()), signal) {
+            (Some(c), _) => format!("exit status {c}"),
+            (None, Some(s)) => format!("signal {s}"),
+            _ => "unknown status".into(),
+        };
+        let tail = tail.trim();
+        Death {
+            signal,
+            message: if tail.is_empty() {
+                how
+            } else {
+                let start = tail
+                    .char_indices()
+                    .rev()
+                    .nth(1999)
+                    .map(|(i, _)| i)
+                    .unwrap_or(0);
+                format!("{how}; stderr: {}", &tail[start..])
+            },
+        }
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+/// Parses a reply frame.
+pub(crate) fn parse(frame: &[u8]) -> Result<Value, DetectError> {
+    protocol::parse_reply(frame).map_err(DetectError::Internal)
+}

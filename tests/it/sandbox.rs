@@ -1,0 +1,388 @@
+//! Hostile detectors, one per test: each is contained and reported while the batch goes on.
+//!
+//! Every test runs the hostile detector between two well-behaved ones over two traces, and checks the
+//! hostile one's status and that the well-behaved ones still produced their patterns on both traces
+//! (so a killed worker was replaced). Tests marked "OS layer" turn the Python layer off
+//! (`python_guard: false`) to show that the process layers stop the same attack on their own.
+
+use std::time::{Duration, Instant};
+
+use annotrace::detect::{CandidateStatus, Detector, DetectorError, SandboxLimits, WorkerPool};
+use annotrace::testutil::synthetic_trace;
+use annotrace::trace::{Env, Trace};
+
+const GOOD: &str = r#"
+def find_pattern(trace):
+    steps = trace["timesteps"]
+    return [{"label": "probe", "start_timestep": steps[0]["index"], "end_timestep": steps[-1]["index"],
+             "parameters": {"object_details": {"0": {"role": "any"}}}}]
+"#;
+
+fn limits(guard: bool) -> SandboxLimits {
+    SandboxLimits {
+        workers: 1,
+        call_timeout: Duration::from_millis(1500),
+        memory_bytes: 768 << 20,
+        python_guard: guard,
+        ..SandboxLimits::default()
+    }
+}
+
+fn traces() -> Vec<Trace> {
+    vec![
+        synthetic_trace(Env::Phyre, 0, 5, 2),
+        synthetic_trace(Env::Phyre, 1, 5, 2),
+    ]
+}
+
+fn det(code: &str) -> Detector {
+    Detector::new(Env::Phyre, "probe", code, "test")
+}
+
+/// Runs [good, hostile, good] over two traces and returns the hostile detector's statuses.
+fn contain(code: &str, guard: bool) -> Vec<CandidateStatus> {
+    let pool = WorkerPool::new(limits(guard)).expect("workers start");
+    if guard {
+        assert!(pool.layers().python_guard);
+    }
+    let good_a = det(GOOD);
+    let good_b = det(&format!("{GOOD}\n# second copy\n"));
+    let hostile = det(code);
+    let batch = pool.run(&[good_a, hostile, good_b], &traces());
+    assert_eq!(batch.results.len(), 6);
+    let mut hostile_status = Vec::new();
+    for r in &batch.results {
+        if r.detector == 1 {
+            hostile_status.push(r.status.clone());
+        } else {
+            assert_eq!(
+                r.status,
+                CandidateStatus::Ok,
+                "well-behaved detector failed: {r:?}"
+            );
+            assert_eq!(r.patterns.len(), 1);
+        }
+    }
+    hostile_status
+}
+
+fn wrap(body: &str) -> String {
+    let body: String = body.lines().map(|l| format!("    {l}\n")).collect();
+    format!("def find_pattern(trace):\n{body}    return []\n")
+}
+
+fn is_forbidden(s: &CandidateStatus) -> bool {
+    matches!(
+        s,
+        CandidateStatus::Failed(DetectorError::Forbidden { line: Some(_), .. })
+    )
+}
+
+fn is_permission_error(s: &CandidateStatus) -> bool {
+    match s {
+        CandidateStatus::Failed(DetectorError::Runtime { message, .. }) => {
+            message.contains("PermissionError") || message.contains("Operation not permitted")
+        }
+        _ => false,
+    }
+}
+
+#[test]
+fn sandbox_layers_are_reported() {
+    let pool = WorkerPool::new(limits(true)).unwrap();
+    let l = pool.layers();
+    assert!(l.rlimits && l.python_guard);
+    assert!(!l.python.is_empty());
+    // This project's machine (Linux 6.x) has both; elsewhere the pool reports what it found.
+    if cfg!(target_os = "linux") && cfg!(target_arch = "x86_64") {
+        assert!(l.no_new_privs, "{}", l.describe());
+        assert_eq!(l.seccomp, "filter", "{}", l.describe());
+    }
+}
+
+#[test]
+fn reading_a_file_is_refused() {
+    let s = contain(&wrap("return open('/etc/passwd').read()"), true);
+    assert!(s.iter().all(is_forbidden), "{s:?}");
+}
+
+#[test]
+fn reading_a_file_is_refused_by_the_os_layers() {
+    let s = contain(&wrap("return [open('/etc/passwd').read()]"), false);
+    assert!(s.iter().all(is_permission_error), "{s:?}");
+}
+
+#[test]
+fn writing_a_file_is_refused_by_the_os_layers() {
+    let dir = tempfile::tempdir().unwrap();
+    let target = dir.path().join("owned.txt");
+    let code = wrap(&format!(
+        "open({:?}, 'w').write('x')",
+        target.display().to_string()
+    ));
+    let s = contain(&code, false);
+    assert!(s.iter().all(is_permission_error), "{s:?}");
+    assert!(!target.exists());
+    assert!(
+        contain(&wrap("open('/tmp/x', 'w')"), true)
+            .iter()
+            .all(is_forbidden)
+    );
+}
+
+#[test]
+fn listing_a_directory_is_refused() {
+    assert!(
+        contain(&wrap("import os\nreturn os.listdir('/')"), true)
+            .iter()
+            .all(is_forbidden)
+    );
+    // The worker's already-imported `os` module, reached without the Python layer.
+    let s = contain(&wrap("import os\nreturn os.listdir('/')"), false);
+    assert!(s.iter().all(is_permission_error), "{s:?}");
+}
+
+#[test]
+fn opening_a_socket_is_refused() {
+    assert!(
+        contain(&wrap("import socket\nsocket.socket()"), true)
+            .iter()
+            .all(is_forbidden)
+    );
+    // Without the Python layer: the socket module cannot even be loaded (Landlock), and the raw
+    // syscall through the already-loaded ctypes fails with EPERM (seccomp).
+    let s = contain(&wrap("import socket\nsocket.socket()"), false);
+    assert!(s.iter().all(is_permission_error), "{s:?}");
+    let raw = wrap(
+        "import ctypes\nfd = ctypes.CDLL(None).socket(2, 1, 0)\nif fd < 0:\n    raise PermissionError('socket: Operation not permitted')\nreturn [fd]",
+    );
+    let s = contain(&raw, false);
+    assert!(s.iter().all(is_permission_error), "{s:?}");
+}
+
+#[test]
+fn spawning_a_process_or_forking_is_refused() {
+    assert!(
+        contain(&wrap("import subprocess\nsubprocess.run(['ls'])"), true)
+            .iter()
+            .all(is_forbidden)
+    );
+    let s = contain(&wrap("import os\nos.fork()"), false);
+    assert!(s.iter().all(is_permission_error), "{s:?}");
+    let s = contain(&wrap("import os\nos.execv('/bin/ls', ['ls'])"), false);
+    assert!(s.iter().all(is_permission_error), "{s:?}");
+    let s = contain(
+        &wrap("import os\nos.posix_spawn('/bin/ls', ['ls'], {})"),
+        false,
+    );
+    assert!(s.iter().all(is_permission_error), "{s:?}");
+}
+
+#[test]
+fn an_endless_loop_times_out_and_the_batch_goes_on() {
+    let t0 = Instant::now();
+    let s = contain(&wrap("while True:\n    pass"), true);
+    assert!(
+        matches!(s[0], CandidateStatus::Failed(DetectorError::Timeout { .. })),
+        "{s:?}"
+    );
+    // Not run again on the second trace: it already timed out once.
+    assert!(
+        matches!(s[1], CandidateStatus::Failed(DetectorError::Skipped { .. })),
+        "{s:?}"
+    );
+    assert!(t0.elapsed() < Duration::from_secs(10));
+}
+
+#[test]
+fn allocating_ten_gigabytes_is_a_memory_error() {
+    let s = contain(
+        &wrap("x = [0] * (10 * 1024 ** 3 // 8)\nreturn [len(x)]"),
+        true,
+    );
+    assert!(
+        matches!(s[0], CandidateStatus::Failed(DetectorError::Memory { .. })),
+        "{s:?}"
+    );
+    assert!(
+        matches!(s[1], CandidateStatus::Failed(DetectorError::Skipped { .. })),
+        "{s:?}"
+    );
+    let s = contain(&wrap("x = bytes(10 * 1024 ** 3)\nreturn [len(x)]"), true);
+    assert!(
+        matches!(s[0], CandidateStatus::Failed(DetectorError::Memory { .. })),
+        "{s:?}"
+    );
+}
+
+#[test]
+fn deep_recursion_is_a_runtime_error_with_its_line() {
+    let code =
+        "def f(n):\n    return f(n + 1) + 1\n\ndef find_pattern(trace):\n    return [f(0)]\n";
+    let s = contain(code, true);
+    for st in &s {
+        match st {
+            CandidateStatus::Failed(DetectorError::Runtime { message, line, .. }) => {
+                assert!(message.contains("RecursionError"), "{message}");
+                assert_eq!(*line, Some(2));
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+}
+
+#[test]
+fn printing_a_gigabyte_costs_no_memory() {
+    // 1 GiB printed in 1 MiB lines: the sink keeps 4 KiB, so this is bounded by time only.
+    let code = wrap("line = 'x' * (1 << 20)\nfor i in range(1024):\n    print(line)");
+    let s = contain(&code, true);
+    assert!(
+        s.iter().all(|s| *s == CandidateStatus::Ok
+            || matches!(
+                s,
+                CandidateStatus::Failed(
+                    DetectorError::Timeout { .. } | DetectorError::Skipped { .. }
+                )
+            )),
+        "{s:?}"
+    );
+}
+
+#[test]
+fn returning_a_hundred_megabyte_list_is_invalid_output() {
+    let s = contain(&wrap("return ['x' * 100] * (1024 * 1024)"), true);
+    for st in &s {
+        match st {
+            CandidateStatus::Failed(DetectorError::InvalidOutput { path, message }) => {
+                assert_eq!(path, "$");
+                assert!(message.contains("limit"), "{message}");
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+    // Under the pattern-count limit but over the byte limit.
+    let s = contain(&wrap("return ['x' * (1 << 20)] * 100"), true);
+    assert!(
+        s.iter().all(|s| matches!(
+            s,
+            CandidateStatus::Failed(DetectorError::InvalidOutput { .. })
+        )),
+        "{s:?}"
+    );
+}
+
+#[test]
+fn introspection_escapes_are_refused() {
+    for code in [
+        "return ().__class__.__mro__[1].__subclasses__()",
+        "return [c for c in ().__class__.__bases__[0].__subclasses__()]",
+        "g = (x for x in [1])\nreturn [g.gi_frame.f_back.f_globals]",
+        "return [find_pattern.__globals__['__builtins__']]",
+        "return [getattr((), '__class__')]",
+        "return [type(())]",
+        "return [__builtins__]",
+        "return [__import__('os')]",
+        "return [eval('1')]",
+        "return [globals()]",
+    ] {
+        let s = contain(&wrap(code), true);
+        assert!(s.iter().all(is_forbidden), "{code}: {s:?}");
+    }
+    // Even if the code reaches an object, the trace it was given is read-only.
+    let s = contain(&wrap("trace['timesteps'] = []"), true);
+    assert!(
+        s.iter().all(|s| matches!(s, CandidateStatus::Failed(DetectorError::Runtime { message, .. }) if message.contains("read-only"))),
+        "{s:?}"
+    );
+}
+
+#[test]
+fn environment_variables_hold_no_secrets() {
+    assert!(
+        contain(&wrap("import os\nreturn list(os.environ)"), true)
+            .iter()
+            .all(is_forbidden)
+    );
+    // Without the Python layer the environment is readable, but it was scrubbed.
+    // SAFETY: tests in this binary do not read this variable concurrently.
+    unsafe { std::env::set_var("ANNOTRACE_TEST_SECRET", "hunter2") };
+    let pool = WorkerPool::new(limits(false)).unwrap();
+    let code = "import os\ndef find_pattern(trace):\n    return [{'label': 'probe', 'start_timestep': 0, 'end_timestep': 0, 'parameters': {'object_details': {}, 'env': dict(os.environ)}}]\n";
+    let batch = pool.run(&[det(code)], &traces()[..1]);
+    let r = &batch.results[0];
+    assert_eq!(r.status, CandidateStatus::Ok, "{r:?}");
+    let env = r.patterns[0].parameters["env"].as_object().unwrap();
+    let mut keys: Vec<&str> = env.keys().map(String::as_str).collect();
+    keys.sort();
+    assert!(
+        keys.iter()
+            .all(|k| ["LC_ALL", "LC_CTYPE", "PYTHONHASHSEED"].contains(k)),
+        "{keys:?}"
+    );
+}
+
+#[test]
+fn sleeping_past_the_timeout_is_killed() {
+    assert!(
+        contain(&wrap("import time\ntime.sleep(5)"), true)
+            .iter()
+            .all(is_forbidden)
+    );
+    // The OS layers do not stop sleeping; the wall-clock timer does.
+    let t0 = Instant::now();
+    let s = contain(&wrap("import time\ntime.sleep(30)"), false);
+    assert!(
+        matches!(s[0], CandidateStatus::Failed(DetectorError::Timeout { .. })),
+        "{s:?}"
+    );
+    assert!(t0.elapsed() < Duration::from_secs(10));
+}
+
+#[test]
+fn syntax_errors_and_missing_functions_are_typed() {
+    let s = contain("def find_pattern(trace)\n    return []\n", true);
+    assert!(
+        s.iter().all(|s| matches!(
+            s,
+            CandidateStatus::Failed(DetectorError::Syntax {
+                line: Some(1),
+                column: Some(_),
+                ..
+            })
+        )),
+        "{s:?}"
+    );
+    let s = contain("def other(trace):\n    return []\n", true);
+    assert!(
+        s.iter().all(|s| matches!(
+            s,
+            CandidateStatus::Failed(DetectorError::NoFindPattern { .. })
+        )),
+        "{s:?}"
+    );
+    let s = contain(&wrap("return [1 / 0]"), true);
+    assert!(
+        s.iter().all(|s| matches!(s, CandidateStatus::Failed(DetectorError::Runtime { line: Some(2), exception: Some(e), .. }) if e == "ZeroDivisionError")),
+        "{s:?}"
+    );
+}
+
+#[test]
+fn invalid_output_is_reported_with_its_json_path() {
+    let code = "def find_pattern(trace):\n    return [{'label': 'probe', 'start_timestep': 3, 'end_timestep': 1, 'parameters': {'object_details': {}}}]\n";
+    let s = contain(code, true);
+    assert!(
+        s.iter().all(|s| matches!(s, CandidateStatus::Failed(DetectorError::InvalidOutput { path, .. }) if path == "$[0].end_timestep")),
+        "{s:?}"
+    );
+    let s = contain(&wrap("return [{1, 2}]"), true);
+    assert!(
+        s.iter().all(|s| matches!(s, CandidateStatus::Failed(DetectorError::InvalidOutput { message, .. }) if message.contains("set"))),
+        "{s:?}"
+    );
+    let s = contain("def find_pattern(trace):\n    return None\n", true);
+    assert!(
+        s.iter().all(|s| matches!(s, CandidateStatus::Failed(DetectorError::InvalidOutput { path, .. }) if path == "$")),
+        "{s:?}"
+    );
+}
