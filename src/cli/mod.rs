@@ -7,6 +7,8 @@
 //! The environment is read here only: `ANNOTRACE_LOG` (log filter, e.g. `debug`) and `ANNOTRACE_FAULT`
 //! (a test switch that stops a run on purpose, see `docs/pipelines.md`).
 
+mod accuracy;
+mod annotate;
 mod export;
 mod import;
 mod progress;
@@ -77,6 +79,10 @@ enum Command {
     Render(render::Args),
     /// Import traces in the paper's JSON format into a run.
     Import(import::Args),
+    /// Run a detector library over a run's traces in sandboxed Python workers.
+    Annotate(annotate::Args),
+    /// Score a library's event-grounded labels against simulator events (precision/recall/F1).
+    Accuracy(accuracy::Args),
     /// Write one trace of a run back in the paper's JSON format.
     Export(export::Args),
     /// Run SQL over a run's tables.
@@ -95,6 +101,8 @@ pub fn main() -> ExitCode {
         Command::Simulate(a) => simulate::run(a, cli.quiet),
         Command::Render(a) => render::run(a),
         Command::Import(a) => import::run(a, cli.quiet),
+        Command::Annotate(a) => annotate::run(a, cli.quiet),
+        Command::Accuracy(a) => accuracy::run(a, cli.quiet),
         Command::Export(a) => export::run(a),
         Command::Query(a) => query::run(a),
         Command::Tables(a) => tables::run(a),

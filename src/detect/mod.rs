@@ -7,22 +7,39 @@
 //! docs), and every output is checked in Rust ([`validate`]). A failing detector is data
 //! ([`CandidateStatus`], [`DetectorError`] with line, column or JSON path), never an `Err` of the batch.
 //!
-//! **Owns:** the worker processes and their protocol, the sandbox limits, output validation.
+//! **Owns:** the worker processes and their protocol, the sandbox limits, output validation, library
+//! folders ([`Library`]), annotations and the N×J annotation matrix ([`AnnotationMatrix`]), and the Arrow
+//! schemas of the `detectors`, `detector_calls` and `annotations` tables ([`tables`]).
 //! **Does not:** read or write Parquet (`store/`, the `annotate` stage), choose detectors (`search/`) or
 //! score them (`fitness/`).
 //!
 //! Entry point: [`WorkerPool::new`] then [`WorkerPool::run`]`(&detectors, &traces)`.
 
+pub mod accuracy;
+mod annotation;
 mod detector;
 mod error;
+mod library;
 mod pool;
 mod protocol;
 mod sandbox;
+pub mod tables;
 mod validate;
 mod worker;
 
+pub use self::annotation::{Annotation, AnnotationMatrix};
 pub use self::detector::{Detector, DetectorId, normalise_label};
 pub use self::error::{CandidateStatus, DetectError, DetectorError};
+pub use self::library::{Library, LibraryError};
 pub use self::pool::{BatchResult, CallResult, RunStats, WorkerPool};
 pub use self::sandbox::{SandboxLayers, SandboxLimits};
 pub use self::validate::{Pattern, validate};
+
+/// A hash of the worker's source, so that stages rerun when the sandbox changes.
+pub fn worker_fingerprint() -> String {
+    use sha2::{Digest, Sha256};
+    Sha256::digest(worker::WORKER_PY.as_bytes())[..8]
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}

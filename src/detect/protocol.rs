@@ -48,8 +48,8 @@ pub(crate) fn load_body(key: &str, trace: &Trace) -> Vec<u8> {
     buf.extend_from_slice(b"{\"id\":");
     serde_json::to_writer(&mut buf, key).expect("a string serialises");
     buf.extend_from_slice(b",\"trace\":");
-    serde_json::to_writer(&mut buf, &crate::trace::json::to_value(trace))
-        .expect("a JSON value serialises");
+    // Streamed in the paper's layout, without building a JSON tree first.
+    crate::trace::json::write_trace(&mut buf, trace, false).expect("a trace always serialises");
     buf.push(b'}');
     buf
 }

@@ -48,6 +48,8 @@ pub struct StageKind {
 pub static STAGE_KINDS: &[&StageKind] = &[
     &stages::import::KIND,
     &stages::simulate::KIND,
+    &stages::annotate::KIND,
+    &stages::accuracy::KIND,
     &stages::sql::KIND,
     &stages::export::KIND,
 ];

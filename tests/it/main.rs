@@ -2,6 +2,7 @@
 
 mod common;
 
+mod annotate;
 mod export;
 mod import;
 mod query;

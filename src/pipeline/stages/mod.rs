@@ -1,11 +1,15 @@
 //! The stage kinds, one file each: `import` (paper-format JSON into the trace tables), `simulate` (an
 //! environment's simulator into the trace tables), `sql` (a query over the run stored as a table) and
-//! `export` (a table or query written to `exports/`).
+//! `export` (a table or query written to `exports/`), `annotate` (a detector library run over the traces)
+//! and `accuracy` (its event-grounded labels scored against simulator events).
 
+pub mod accuracy;
+pub mod annotate;
 pub mod export;
 pub mod import;
 pub mod simulate;
 pub mod sql;
+mod trace_files;
 
 use std::path::{Path, PathBuf};
 

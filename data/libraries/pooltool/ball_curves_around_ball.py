@@ -1,0 +1,148 @@
+"""ball curves around ball: a moving ball's path bends (swerve from side spin while it slides) as it
+passes close to another ball without touching it.
+
+Between two consecutive events of a ball (so no collision or cushion inside), its heading — from the
+recorded velocity — must turn by more than 8 degrees, and another ball must come within 4 ball radii of
+its path at the same timesteps while the two never collide."""
+
+def _clock(trace):
+    """Timestep indices and times, in order."""
+    idx, ts = [], []
+    for s in trace.get("timesteps", []):
+        idx.append(s.get("index", len(idx)))
+        ts.append(float(s.get("t", 0.0)))
+    return idx, ts
+
+
+def _at(ts, t):
+    """Position (in the timestep list) of the last timestep at or before time t."""
+    lo, hi = 0, len(ts) - 1
+    if t <= ts[0]:
+        return 0
+    if t >= ts[hi]:
+        return hi
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if ts[mid] <= t:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+def _span(idx, ts, t0, t1=None):
+    """The narrowest inclusive step span covering times t0..t1: from the last step at or before t0 to the
+    first step at or after t1 (one step when an instant falls exactly on a step)."""
+    if t1 is None:
+        t1 = t0
+    a = _at(ts, t0)
+    b = _at(ts, t1)
+    if ts[b] < t1 and b + 1 < len(ts):
+        b += 1
+    return idx[a], idx[b], a, b
+
+
+def _events(trace, kinds):
+    """(t, payload) of events of the given kinds, in time order."""
+    out = []
+    for e in trace.get("events", []):
+        if e.get("kind") in kinds and e.get("t") is not None:
+            out.append((float(e["t"]), e.get("payload") or {}))
+    out.sort(key=lambda x: x[0])
+    return out
+
+
+def _state(trace, k, bid):
+    """The object dict of ball `bid` at timestep position k, or None."""
+    for o in trace["timesteps"][k].get("objects", []):
+        if str(o.get("ball_id")) == bid:
+            return o
+    return None
+
+
+def _xy(o):
+    p = (o or {}).get("position") or (0.0, 0.0)
+    return [round(float(p[0]), 4), round(float(p[1]), 4)]
+
+
+def _speed(o):
+    v = (o or {}).get("velocity") or (0.0, 0.0)
+    return (float(v[0]) ** 2 + float(v[1]) ** 2) ** 0.5
+
+
+def _detail(trace, a, b, bid, role, **extra):
+    """object_details entry: role, identity, and where the ball is when the pattern starts and ends."""
+    d = {"role": role, "ball_id": bid, "kind": "ball",
+         "start_position": _xy(_state(trace, a, bid)), "end_position": _xy(_state(trace, b, bid))}
+    d.update(extra)
+    return d
+
+TURN_COS = 0.990  # cos 8°
+NEAR_RADII = 4.0
+
+
+def _ball_events(trace, bid):
+    out = []
+    for e in trace.get("events", []):
+        p = e.get("payload") or {}
+        k = e.get("kind", "")
+        if not k.startswith("physics_") or e.get("t") is None:
+            continue
+        balls = [str(x) for x in (p.get("agents") or [])[:2]] if k == "physics_ball_ball" else [str(p.get("ball"))]
+        if bid in balls:
+            out.append(float(e["t"]))
+    return sorted(out)
+
+
+def _unit(o):
+    v = o.get("velocity") or (0.0, 0.0)
+    n = (float(v[0]) ** 2 + float(v[1]) ** 2) ** 0.5
+    return (float(v[0]) / n, float(v[1]) / n) if n > 1e-3 else None
+
+
+def find_pattern(trace):
+    steps = trace.get("timesteps") or ()
+    if len(steps) < 3:
+        return []
+    idx, ts = _clock(trace)
+    ids = [str(o.get("ball_id")) for o in steps[0].get("objects", [])]
+    touched = set()
+    for t, p in _events(trace, ("physics_ball_ball",)):
+        ag = [str(x) for x in (p.get("agents") or [])[:2]]
+        if len(ag) == 2:
+            touched.add((ag[0], ag[1]))
+            touched.add((ag[1], ag[0]))
+    out = []
+    for bid in ids:
+        times = _ball_events(trace, bid) + [ts[-1]]
+        for t0, t1 in zip(times, times[1:]):
+            a, b = _at(ts, t0) + 1, _at(ts, t1)
+            if b - a < 2:
+                continue
+            oa, ob = _state(trace, a, bid), _state(trace, b, bid)
+            if oa is None or ob is None or oa.get("motion_state") != "sliding":
+                continue
+            ua, ub = _unit(oa), _unit(ob)
+            if ua is None or ub is None or ua[0] * ub[0] + ua[1] * ub[1] > TURN_COS:
+                continue
+            r = float(oa.get("radius") or 0.028575)
+            best = None
+            for other in ids:
+                if other == bid or (bid, other) in touched:
+                    continue
+                for k in range(a, b + 1):
+                    p, q = _state(trace, k, bid), _state(trace, k, other)
+                    if p is None or q is None or q.get("motion_state") == "pocketed":
+                        continue
+                    d = ((p["position"][0] - q["position"][0]) ** 2 + (p["position"][1] - q["position"][1]) ** 2) ** 0.5
+                    if d < NEAR_RADII * r and (best is None or d < best[0]):
+                        best = (d, other, k)
+            if best is None:
+                continue
+            d, other, k = best
+            out.append({"label": "ball curves around ball", "start_timestep": idx[a], "end_timestep": idx[b],
+                        "parameters": {"object_details": {
+                            bid: _detail(trace, a, b, bid, "curving ball"),
+                            other: _detail(trace, a, b, other, "obstacle ball")},
+                            "closest_distance": round(d, 4), "closest_timestep": idx[k]}})
+    return out

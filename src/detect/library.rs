@@ -1,0 +1,221 @@
+//! A detector library on disk: a folder with a `library.toml` manifest and one `.py` file per detector,
+//! which people can read and edit.
+//!
+//! ```toml
+//! [library]
+//! name = "pooltool-human"
+//! env = "pooltool"
+//! description = "Hand-written detectors for the paper's 12 PoolTool human labels"
+//!
+//! [[detector]]
+//! label = "cue strike"          # the label its patterns carry
+//! file = "cue_strike.py"        # defines find_pattern(trace)
+//! aliases = ["stick strike"]    # optional: other spellings the validator accepts
+//! weight = 1.0                  # optional: its value in the annotation matrix
+//! ```
+//!
+//! Several detectors may share a label (an ensemble). Unknown keys are errors, so a typo does not pass
+//! silently.
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use sha2::{Digest, Sha256};
+
+use super::detector::{Detector, DetectorId};
+use crate::trace::Env;
+
+/// A library could not be loaded; every variant names the file.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum LibraryError {
+    /// A file could not be read.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The manifest is not valid.
+    #[error("{}: {message}", path.display())]
+    Manifest {
+        /// The manifest.
+        path: PathBuf,
+        /// What is wrong (from the TOML parser, with line and column).
+        message: String,
+    },
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Manifest {
+    library: Header,
+    #[serde(default, rename = "detector")]
+    detectors: Vec<Entry>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Header {
+    name: String,
+    env: String,
+    #[serde(default)]
+    description: String,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Entry {
+    label: String,
+    file: String,
+    #[serde(default)]
+    aliases: Vec<String>,
+    #[serde(default = "one")]
+    weight: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+/// A loaded library.
+#[derive(Clone, Debug)]
+pub struct Library {
+    /// Its name.
+    pub name: String,
+    /// The environment its detectors read.
+    pub env: Env,
+    /// One paragraph on what it is.
+    pub description: String,
+    /// The folder it was read from.
+    pub dir: PathBuf,
+    /// Its detectors, in manifest order.
+    pub detectors: Vec<Detector>,
+}
+
+impl Library {
+    /// Reads `dir/library.toml` and the detector files it lists.
+    pub fn load(dir: &Path) -> Result<Library, LibraryError> {
+        let path = dir.join("library.toml");
+        let text = std::fs::read_to_string(&path).map_err(|source| LibraryError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        let bad = |message: String| LibraryError::Manifest {
+            path: path.clone(),
+            message,
+        };
+        let m: Manifest = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
+        let env: Env = m
+            .library
+            .env
+            .parse()
+            .map_err(|e: crate::trace::UnknownEnv| bad(e.to_string()))?;
+        if m.detectors.is_empty() {
+            return Err(bad("the library lists no [[detector]]".into()));
+        }
+        let mut detectors = Vec::with_capacity(m.detectors.len());
+        for e in m.detectors {
+            if e.label.trim().is_empty() {
+                return Err(bad(format!(
+                    "detector file {:?} has an empty label",
+                    e.file
+                )));
+            }
+            if !(e.weight.is_finite()) {
+                return Err(bad(format!(
+                    "detector {:?}: weight must be a finite number",
+                    e.label
+                )));
+            }
+            let file = dir.join(&e.file);
+            let code = std::fs::read_to_string(&file).map_err(|source| LibraryError::Io {
+                path: file.clone(),
+                source,
+            })?;
+            detectors.push(Detector {
+                id: DetectorId::of(env, &e.label, &code),
+                label: e.label,
+                aliases: e.aliases,
+                env,
+                source: format!("{}/{}", m.library.name, e.file),
+                code,
+                weight: e.weight,
+            });
+        }
+        Ok(Library {
+            name: m.library.name,
+            env,
+            description: m.library.description,
+            dir: dir.to_path_buf(),
+            detectors,
+        })
+    }
+
+    /// A hash of everything that decides the library's output (ids, labels, aliases, weights), for
+    /// stage fingerprints.
+    pub fn fingerprint(&self) -> String {
+        let mut h = Sha256::new();
+        for d in &self.detectors {
+            h.update(d.id.as_str().as_bytes());
+            h.update(d.aliases.join("\u{1}").as_bytes());
+            h.update(d.weight.to_le_bytes());
+            h.update(d.source.as_bytes());
+        }
+        h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+    }
+
+    /// The distinct labels, in manifest order.
+    pub fn labels(&self) -> Vec<&str> {
+        let mut out: Vec<&str> = Vec::new();
+        for d in &self.detectors {
+            if !out.contains(&d.label.as_str()) {
+                out.push(&d.label);
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_builtin_pooltool_library_loads() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/libraries/pooltool");
+        let lib = Library::load(&dir).unwrap();
+        assert_eq!(lib.env, Env::Pooltool);
+        assert_eq!(lib.labels().len(), 12);
+        assert!(
+            lib.detectors
+                .iter()
+                .all(|d| d.code.contains("def find_pattern(trace)"))
+        );
+        assert_eq!(
+            lib.fingerprint(),
+            Library::load(&dir).unwrap().fingerprint()
+        );
+    }
+
+    #[test]
+    fn manifest_errors_name_the_file_and_the_fault() {
+        let tmp = tempfile::tempdir().unwrap();
+        std::fs::write(
+            tmp.path().join("library.toml"),
+            "[library]\nname = \"x\"\nenv = \"pooltool\"\n[[detector]]\nlabel = \"a\"\nfile = \"a.py\"\ncolour = 1\n",
+        )
+        .unwrap();
+        let e = Library::load(tmp.path()).unwrap_err().to_string();
+        assert!(e.contains("library.toml") && e.contains("colour"), "{e}");
+        std::fs::write(
+            tmp.path().join("library.toml"),
+            "[library]\nname = \"x\"\nenv = \"pooltool\"\n[[detector]]\nlabel = \"a\"\nfile = \"a.py\"\n",
+        )
+        .unwrap();
+        let e = Library::load(tmp.path()).unwrap_err().to_string();
+        assert!(e.contains("a.py"), "{e}");
+    }
+}

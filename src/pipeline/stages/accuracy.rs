@@ -1,0 +1,308 @@
+//! `accuracy`: runs a detector library over the run's traces and scores its event-grounded labels
+//! against the simulator's events (precision, recall, F1 per label; `detect::accuracy` defines the
+//! matching), writing the `accuracy` table.
+//!
+//! Billiards only for now: PHYRE and I-PHYRE have no simulator in annotrace yet, so their contact
+//! events cannot be produced and the stage refuses those environments.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use arrow::array::{Float64Array, Int64Array, RecordBatch, StringArray};
+use arrow::datatypes::{DataType, Field, Schema};
+use serde_json::{Value, json};
+
+use super::annotate::{DetectorSetup, SANDBOX_PARAMS, annotations_of, status_counts, write};
+use super::trace_files::{read_traces, trace_file_sets};
+use crate::detect::accuracy::{
+    LabelScore, POOLTOOL_GROUNDED, markdown, pooltool_truth, score_trace,
+};
+use crate::detect::{Annotation, WorkerPool};
+use crate::pipeline::params::{ParamSpec, ParamType};
+use crate::pipeline::registry::{BuildError, StageKind};
+use crate::pipeline::spec::{PipelineSpec, StageDef};
+use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
+use crate::trace::Env;
+
+const PARAMS: &[ParamSpec] = &[
+    SANDBOX_PARAMS[0],
+    SANDBOX_PARAMS[1],
+    SANDBOX_PARAMS[2],
+    SANDBOX_PARAMS[3],
+    SANDBOX_PARAMS[4],
+    ParamSpec::optional(
+        "tolerance",
+        ParamType::Float,
+        "0.05",
+        "time tolerance (s) around a detection's span when matching an event",
+    ),
+    ParamSpec::optional(
+        "merge",
+        ParamType::Float,
+        "0.05",
+        "contacts of the same pair (or ball and cushion) closer than this (s) are one event",
+    ),
+    ParamSpec::optional(
+        "use_annotations",
+        ParamType::Bool,
+        "false",
+        "score the run's annotations table (rows of this library's detectors, written by an annotate \
+         stage listed in `inputs`) instead of running the detectors again",
+    ),
+];
+
+/// The `accuracy` stage kind.
+pub static KIND: StageKind = StageKind {
+    name: "accuracy",
+    summary: "score a library's event-grounded labels against simulator events (P/R/F1)",
+    doc: "Runs a detector library over every trace of `env` in the run (like annotate, without writing \
+          annotations) and scores the event-grounded labels against the simulator's event log: cue strike, \
+          ball collision (same-pair contacts closer than `merge` merged), cushion rebound, ball pocketed, \
+          rolling/sliding ball (sliding-to-rolling transitions) and spinning ball. A detection matches an \
+          event of its label that involves only balls it names and falls in its time span ± `tolerance`. \
+          Writes the accuracy table (one row per label). Billiards only until PHYRE/I-PHYRE simulators exist.",
+    writes: "accuracy",
+    params: PARAMS,
+    build,
+};
+
+/// The `accuracy` stage.
+#[derive(Debug)]
+pub struct AccuracyStage {
+    setup: DetectorSetup,
+    use_annotations: bool,
+    tolerance: f64,
+    merge: f64,
+}
+
+fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
+    let setup = DetectorSetup::from_params(def, spec)?;
+    if setup.env != Env::Pooltool {
+        return Err(BuildError::param(
+            "env",
+            format!(
+                "accuracy needs simulator events; only pooltool has a simulator so far, not {}",
+                setup.env
+            ),
+        ));
+    }
+    let num = |k: &'static str| -> Result<f64, BuildError> {
+        let v = def.params[k].as_f64().unwrap_or(0.05);
+        if v >= 0.0 && v.is_finite() {
+            Ok(v)
+        } else {
+            Err(BuildError::param(
+                k,
+                format!("`{k}` must be >= 0, found {v}"),
+            ))
+        }
+    };
+    Ok(Box::new(AccuracyStage {
+        use_annotations: def.params["use_annotations"].as_bool().unwrap_or(false),
+        tolerance: num("tolerance")?,
+        merge: num("merge")?,
+        setup,
+    }))
+}
+
+/// The `accuracy` table's schema.
+fn schema() -> Arc<Schema> {
+    Arc::new(Schema::new(vec![
+        Field::new("label", DataType::Utf8, false),
+        Field::new("events", DataType::Int64, false),
+        Field::new("detections", DataType::Int64, false),
+        Field::new("true_positives", DataType::Int64, false),
+        Field::new("false_positives", DataType::Int64, false),
+        Field::new("false_negatives", DataType::Int64, false),
+        Field::new("precision", DataType::Float64, false),
+        Field::new("recall", DataType::Float64, false),
+        Field::new("f1", DataType::Float64, false),
+    ]))
+}
+
+fn batch(scores: &[LabelScore]) -> Result<RecordBatch, StageError> {
+    let ints = |f: fn(&LabelScore) -> u64| {
+        Arc::new(Int64Array::from_iter_values(
+            scores.iter().map(|s| f(s) as i64),
+        ))
+    };
+    let floats =
+        |f: fn(&LabelScore) -> f64| Arc::new(Float64Array::from_iter_values(scores.iter().map(f)));
+    Ok(RecordBatch::try_new(
+        schema(),
+        vec![
+            Arc::new(StringArray::from_iter_values(
+                scores.iter().map(|s| s.label.as_str()),
+            )),
+            ints(|s| s.events),
+            ints(|s| s.detections),
+            ints(|s| s.true_positives),
+            ints(|s| s.false_positives),
+            ints(|s| s.false_negatives),
+            floats(LabelScore::precision),
+            floats(LabelScore::recall),
+            floats(LabelScore::f1),
+        ],
+    )?)
+}
+
+impl Stage for AccuracyStage {
+    fn fingerprint_extra(&self) -> Result<Value, StageError> {
+        Ok(json!({
+            "library": self.setup.library.fingerprint(),
+            "worker": crate::detect::worker_fingerprint(),
+        }))
+    }
+
+    fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
+        let lib = &self.setup.library;
+        let sets = trace_file_sets(ctx.run(), self.setup.env)?;
+        ctx.progress().set_total(ctx.stage_id(), sets.len() as u64);
+        let mut pool: Option<WorkerPool> = None;
+        let mut stored = if self.use_annotations {
+            Some(stored_annotations(ctx, self.setup.env, lib)?)
+        } else {
+            None
+        };
+        let mut scores: BTreeMap<String, LabelScore> = BTreeMap::new();
+        let mut statuses: BTreeMap<String, u64> = BTreeMap::new();
+        let mut n_traces = 0usize;
+        for set in &sets {
+            let traces = read_traces(ctx.run(), set)?;
+            let anns = match stored.as_mut() {
+                Some(all) => traces
+                    .iter()
+                    .flat_map(|t| all.remove(&t.trace_id).unwrap_or_default())
+                    .collect(),
+                None => {
+                    if pool.is_none() {
+                        pool = Some(self.setup.pool()?);
+                    }
+                    let pool = pool.as_ref().expect("just started");
+                    let batch = pool.run(&lib.detectors, &traces);
+                    for (k, v) in status_counts(&batch) {
+                        *statuses.entry(k).or_default() += v;
+                    }
+                    annotations_of(lib, &traces, &batch)
+                }
+            };
+            for trace in &traces {
+                let mine: Vec<&Annotation> = anns
+                    .iter()
+                    .filter(|a| a.trace_id == trace.trace_id)
+                    .collect();
+                let truth = pooltool_truth(trace, self.merge);
+                score_trace(
+                    POOLTOOL_GROUNDED,
+                    &truth,
+                    &mine,
+                    self.tolerance,
+                    &mut scores,
+                );
+            }
+            n_traces += traces.len();
+            ctx.progress().advance(ctx.stage_id(), 1);
+        }
+        let ordered: Vec<LabelScore> = POOLTOOL_GROUNDED
+            .iter()
+            .filter_map(|l| scores.get(*l).cloned())
+            .collect();
+        let n = write(ctx, "accuracy", self.setup.env, "00000", &batch(&ordered)?)?;
+        let min_f1 = ordered.iter().map(LabelScore::f1).fold(1.0_f64, f64::min);
+        let mut rows = BTreeMap::new();
+        rows.insert("accuracy".to_string(), n);
+        Ok(StageOutput {
+            rows,
+            files: Vec::new(),
+            summary: json!({
+                "env": self.setup.env.as_str(),
+                "library": lib.name,
+                "traces": n_traces,
+                "tolerance": self.tolerance,
+                "merge": self.merge,
+                "statuses": statuses,
+                "scores": ordered.iter().map(|s| json!({
+                    "label": s.label, "events": s.events, "detections": s.detections,
+                    "precision": s.precision(), "recall": s.recall(), "f1": s.f1(),
+                })).collect::<Vec<_>>(),
+                "markdown": markdown(&ordered),
+            }),
+            line: format!(
+                "{n_traces} trace(s), {} event-grounded label(s) of {}: lowest F1 {min_f1:.3}",
+                ordered.len(),
+                lib.name
+            ),
+        })
+    }
+}
+
+/// The run's `annotations` rows of `env` written by `lib`'s detectors, by trace.
+fn stored_annotations(
+    ctx: &StageContext<'_>,
+    env: Env,
+    lib: &crate::detect::Library,
+) -> Result<std::collections::HashMap<String, Vec<Annotation>>, StageError> {
+    use arrow::array::{Array, AsArray};
+    use arrow::datatypes::Float64Type;
+    let mut out: std::collections::HashMap<String, Vec<Annotation>> = Default::default();
+    let files: Vec<_> = ctx
+        .run()
+        .table("annotations")?
+        .files
+        .into_iter()
+        .filter(|f| f.env == Some(env))
+        .collect();
+    if files.is_empty() {
+        return Err(StageError::Input(
+            "use_annotations is set but the run has no annotations table for this environment \
+             (list the annotate stage in `inputs`)"
+                .into(),
+        ));
+    }
+    for f in files {
+        for b in crate::store::read_file(&f.path)? {
+            let col = |n: &str| {
+                b.column_by_name(n).cloned().ok_or_else(|| {
+                    StageError::Input(format!("{}: no column {n}", f.path.display()))
+                })
+            };
+            let (det, trace, label) = (col("detector_id")?, col("trace_id")?, col("label")?);
+            let (t0, t1, objects) = (col("t_start")?, col("t_end")?, col("objects")?);
+            let (det, trace, label) = (
+                det.as_string::<i32>(),
+                trace.as_string::<i32>(),
+                label.as_string::<i32>(),
+            );
+            let (t0, t1) = (
+                t0.as_primitive::<Float64Type>(),
+                t1.as_primitive::<Float64Type>(),
+            );
+            let objects = objects.as_list::<i32>();
+            for i in 0..b.num_rows() {
+                let Some(d) = lib.detectors.iter().find(|d| d.id.as_str() == det.value(i)) else {
+                    continue;
+                };
+                let objs = objects.value(i);
+                let objs = objs.as_string::<i32>();
+                out.entry(trace.value(i).to_string())
+                    .or_default()
+                    .push(Annotation {
+                        detector_id: d.id.clone(),
+                        trace_id: trace.value(i).to_string(),
+                        label: label.value(i).to_string(),
+                        seq: 0,
+                        start_step: 0,
+                        end_step: 0,
+                        t_start: if t0.is_null(i) { f64::NAN } else { t0.value(i) },
+                        t_end: if t1.is_null(i) { f64::NAN } else { t1.value(i) },
+                        objects: (0..objs.len()).map(|k| objs.value(k).to_string()).collect(),
+                        parameters: Default::default(),
+                        provenance: None,
+                        metadata: None,
+                        activation: d.weight,
+                    });
+            }
+        }
+    }
+    Ok(out)
+}

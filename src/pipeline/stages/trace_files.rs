@@ -1,0 +1,143 @@
+//! Reading a run's traces file by file, for stages that process every trace (`annotate`, `accuracy`).
+//!
+//! Stages that write the trace tables (`import`, `simulate`) write one file per shard with the same name
+//! in `traces`, `timesteps`, `frames` and `events` (`<stage>.<shard>.parquet`). Reading such a set once,
+//! sorting each table by trace and slicing, rebuilds all of its traces at the cost of one read, where
+//! `store::read_trace` per trace would scan row groups once per trace.
+
+use arrow::array::{Array, ArrayRef, RecordBatch, StringArray};
+use arrow::compute::{
+    SortColumn, cast, concat_batches, lexsort_to_indices, take, take_record_batch,
+};
+use arrow::datatypes::DataType;
+
+use crate::pipeline::stage::StageError;
+use crate::store::{RunDir, read_file};
+use crate::trace::schema::table_schema;
+use crate::trace::{Env, Trace, TraceRows, decode_trace};
+
+/// One file name shared by the trace tables of one environment.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct TraceFileSet {
+    /// The environment partition.
+    pub env: Env,
+    /// The file name (`simulate_pool.00000.parquet`).
+    pub name: String,
+}
+
+/// The trace file sets of `env` in the run, sorted by name.
+pub(crate) fn trace_file_sets(run: &RunDir, env: Env) -> Result<Vec<TraceFileSet>, StageError> {
+    let mut out: Vec<TraceFileSet> = run
+        .table("traces")?
+        .files
+        .into_iter()
+        .filter(|f| f.env == Some(env))
+        .filter_map(|f| {
+            f.path.file_name().map(|n| TraceFileSet {
+                env,
+                name: n.to_string_lossy().into_owned(),
+            })
+        })
+        .collect();
+    out.sort_by(|a, b| a.name.cmp(&b.name));
+    Ok(out)
+}
+
+/// All rows of `table` in the set's file (an empty batch when the file does not exist), sorted by
+/// `trace_id` then `sort_by`, with the trace ids as plain strings alongside.
+fn sorted_rows(
+    run: &RunDir,
+    set: &TraceFileSet,
+    table: &str,
+    sort_by: &[&str],
+) -> Result<(RecordBatch, StringArray), StageError> {
+    let schema = table_schema(table)
+        .ok_or_else(|| StageError::Internal(format!("no schema for table {table}")))?;
+    let path = run.partition_dir(table, Some(set.env)).join(&set.name);
+    let batches = if path.exists() {
+        read_file(&path)?
+    } else {
+        Vec::new()
+    };
+    let all = concat_batches(&schema, &batches)?;
+    let ids = all
+        .column_by_name("trace_id")
+        .ok_or_else(|| StageError::Internal(format!("{table}: no trace_id column")))?;
+    let ids: ArrayRef = if matches!(ids.data_type(), DataType::Utf8) {
+        ids.clone()
+    } else {
+        cast(ids, &DataType::Utf8)?
+    };
+    if all.num_rows() == 0 {
+        return Ok((all, StringArray::from(Vec::<String>::new())));
+    }
+    let mut columns = vec![SortColumn {
+        values: ids.clone(),
+        options: None,
+    }];
+    for c in sort_by {
+        columns.push(SortColumn {
+            values: all
+                .column_by_name(c)
+                .ok_or_else(|| StageError::Internal(format!("{table}: no {c} column")))?
+                .clone(),
+            options: None,
+        });
+    }
+    let idx = lexsort_to_indices(&columns, None)?;
+    let sorted = take_record_batch(&all, &idx)?;
+    let ids = take(&ids, &idx, None)?;
+    let ids = ids
+        .as_any()
+        .downcast_ref::<StringArray>()
+        .cloned()
+        .ok_or_else(|| StageError::Internal("trace ids are not strings".into()))?;
+    Ok((sorted, ids))
+}
+
+/// The row range of each trace id in rows sorted by trace id.
+fn ranges(ids: &StringArray) -> std::collections::HashMap<String, (usize, usize)> {
+    let mut out = std::collections::HashMap::new();
+    let mut start = 0;
+    for i in 1..=ids.len() {
+        if i == ids.len() || ids.value(i) != ids.value(start) {
+            out.insert(ids.value(start).to_string(), (start, i - start));
+            start = i;
+        }
+    }
+    out
+}
+
+/// Reads every trace of a file set, in the order of the `traces` file.
+pub(crate) fn read_traces(run: &RunDir, set: &TraceFileSet) -> Result<Vec<Trace>, StageError> {
+    let schema = table_schema("traces")
+        .ok_or_else(|| StageError::Internal("no schema for traces".into()))?;
+    let path = run.partition_dir("traces", Some(set.env)).join(&set.name);
+    let traces = concat_batches(&schema, &read_file(&path)?)?;
+    let (steps, step_ids) = sorted_rows(run, set, "timesteps", &["step"])?;
+    let (frames, frame_ids) = sorted_rows(run, set, "frames", &["step", "slot"])?;
+    let (events, event_ids) = sorted_rows(run, set, "events", &["seq"])?;
+    let (rs, rf, re) = (ranges(&step_ids), ranges(&frame_ids), ranges(&event_ids));
+    let ids = traces
+        .column_by_name("trace_id")
+        .and_then(|c| c.as_any().downcast_ref::<StringArray>())
+        .ok_or_else(|| StageError::Internal("traces: trace_id is not a string column".into()))?;
+    let slice = |b: &RecordBatch, r: Option<&(usize, usize)>| match r {
+        Some(&(o, n)) => b.slice(o, n),
+        None => b.slice(0, 0),
+    };
+    let mut out = Vec::with_capacity(ids.len());
+    for i in 0..ids.len() {
+        let id = ids.value(i);
+        let trace = decode_trace(&TraceRows {
+            env: set.env,
+            trace: &traces.slice(i, 1),
+            timesteps: &slice(&steps, rs.get(id)),
+            frames: &slice(&frames, rf.get(id)),
+            events: &slice(&events, re.get(id)),
+        })
+        .map_err(|e| StageError::Input(format!("{}: trace {id}: {e}", path.display())))?;
+        out.push(trace);
+    }
+    Ok(out)
+}

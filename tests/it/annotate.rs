@@ -1,0 +1,221 @@
+//! `annotrace annotate` / `accuracy` and the built-in pooltool library on simulated shots with known
+//! events.
+
+use std::path::Path;
+use std::time::Duration;
+
+use annotrace::detect::{CandidateStatus, Library, SandboxLimits, WorkerPool};
+use annotrace::envs::pool::{
+    PoolConfig, Scene, Shot, SimOptions, TraceOptions, aim, simulate, trace_of,
+};
+use annotrace::trace::Trace;
+
+use crate::common::TestRun;
+
+fn library() -> Library {
+    Library::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("data/libraries/pooltool")).unwrap()
+}
+
+/// The cue ball drives the 9-ball straight into the right-top pocket (the to_trace test's scene).
+fn straight_pot(v0: f64, b: f64, dt: f64) -> Trace {
+    let c = PoolConfig::default_7ft();
+    let scene = Scene::from_json_str(
+        r#"{"balls":[{"id":"cue","x":0.5,"y":1.2},{"id":"9","x":0.75,"y":1.6}]}"#,
+        &c,
+    )
+    .unwrap();
+    let phi = aim::ghost_ball(&scene, &c, "9", "rt").unwrap();
+    let shot = Shot {
+        v0,
+        phi,
+        theta: 0.0,
+        a: 0.0,
+        b,
+    };
+    let sim = simulate(&scene.system(&c).unwrap(), &shot, &SimOptions::default()).unwrap();
+    trace_of(
+        &sim,
+        &scene,
+        &shot,
+        &format!("pot-{v0}-{b}-{dt}"),
+        &TraceOptions { dt },
+    )
+}
+
+fn run_library(traces: &[Trace]) -> (Library, Vec<Vec<(String, Vec<String>, i64, i64)>>) {
+    let lib = library();
+    let pool = WorkerPool::new(SandboxLimits {
+        workers: 2,
+        call_timeout: Duration::from_secs(20),
+        ..SandboxLimits::default()
+    })
+    .unwrap();
+    let batch = pool.run(&lib.detectors, traces);
+    let mut per_trace = vec![Vec::new(); traces.len()];
+    for r in &batch.results {
+        assert_eq!(
+            r.status,
+            CandidateStatus::Ok,
+            "{}: {:?}",
+            lib.detectors[r.detector].label,
+            r.status
+        );
+        for p in &r.patterns {
+            per_trace[r.trace].push((
+                lib.detectors[r.detector].label.clone(),
+                p.objects(),
+                p.start_step,
+                p.end_step,
+            ));
+        }
+    }
+    (lib, per_trace)
+}
+
+fn count(found: &[(String, Vec<String>, i64, i64)], label: &str) -> usize {
+    found.iter().filter(|f| f.0 == label).count()
+}
+
+#[test]
+fn the_pooltool_library_finds_the_known_events_of_a_straight_pot() {
+    let traces = [
+        straight_pot(2.5, 0.0, 0.01),
+        straight_pot(2.5, 0.5, 0.1),
+        straight_pot(0.4, 0.0, 0.01),
+    ];
+    let (_, found) = run_library(&traces);
+    let pot = &found[0];
+    // One strike at step 0, one cue-9 collision, the 9 pocketed, no cushion (a clean pot).
+    let strike: Vec<_> = pot.iter().filter(|f| f.0 == "cue strike").collect();
+    assert_eq!(strike.len(), 1);
+    assert_eq!(
+        (strike[0].2, strike[0].1.clone()),
+        (0, vec!["cue".to_string()])
+    );
+    let hit: Vec<_> = pot.iter().filter(|f| f.0 == "ball collision").collect();
+    assert_eq!(hit.len(), 1, "{pot:?}");
+    let mut balls = hit[0].1.clone();
+    balls.sort();
+    assert_eq!(balls, vec!["9".to_string(), "cue".to_string()]);
+    let t_hit = traces[0]
+        .events
+        .iter()
+        .find(|e| e.kind == "physics_ball_ball")
+        .and_then(|e| e.t)
+        .unwrap();
+    let step_of = |s: i64| traces[0].timesteps.iter().find(|t| t.index == s).unwrap().t;
+    assert!(step_of(hit[0].2) <= t_hit && t_hit <= step_of(hit[0].3));
+    assert!(hit[0].3 - hit[0].2 <= 1, "narrowest span: {hit:?}");
+    let pocketed: Vec<_> = pot.iter().filter(|f| f.0 == "ball pocketed").collect();
+    assert_eq!(pocketed.len(), 1);
+    assert!(pocketed[0].1.contains(&"9".to_string()));
+    assert!(count(pot, "sliding ball") >= 2 && count(pot, "rolling ball") >= 1);
+    assert_eq!(
+        count(pot, "spin shot"),
+        0,
+        "a centre-ball hit is not a spin shot"
+    );
+    assert_eq!(count(pot, "gentle touch"), 0, "2.5 m/s is not gentle");
+    // The same pot with follow at coarse frames: a spin shot, still one collision and one pocketing.
+    let follow = &found[1];
+    assert_eq!(count(follow, "spin shot"), 1);
+    assert_eq!(count(follow, "ball collision"), 1);
+    // A soft shot: the collision is a gentle touch.
+    assert!(count(&found[2], "gentle touch") <= count(&found[2], "ball collision"));
+}
+
+#[test]
+fn annotate_writes_the_tables_and_accuracy_scores_them() {
+    let run = TestRun::new();
+    let dir = run.path("r");
+    run.run(&[
+        "simulate",
+        "--run",
+        dir.to_str().unwrap(),
+        "--scenes",
+        "6",
+        "--seed",
+        "5",
+        "--dt",
+        "0.05",
+    ])
+    .ok();
+    let out = run.run(&["annotate", "--run", dir.to_str().unwrap(), "--workers", "2"]);
+    out.ok()
+        .stdout_has("annotated 6 pooltool trace(s) with 12 detector(s)")
+        .stdout_has("seccomp");
+    let q = run.run(&[
+        "query",
+        "SELECT count(*) AS n, count(DISTINCT detector_id) AS d FROM detector_calls WHERE status = 'ok'",
+        "--run",
+        dir.to_str().unwrap(),
+    ]);
+    q.ok().stdout_has("| 72 | 12 |");
+    let q = run.run(&[
+        "query",
+        "SELECT count(*) AS n FROM detectors",
+        "--run",
+        dir.to_str().unwrap(),
+    ]);
+    q.ok().stdout_has("| 12 |");
+    let q = run.run(&[
+        "query",
+        "SELECT count(*) AS n FROM annotations WHERE label = 'cue strike' AND start_step = 0",
+        "--run",
+        dir.to_str().unwrap(),
+    ]);
+    q.ok().stdout_has("| 6 |");
+    // Running it again replaces the stage's tables instead of adding to them.
+    run.run(&[
+        "annotate",
+        "--run",
+        dir.to_str().unwrap(),
+        "--workers",
+        "2",
+        "-q",
+    ])
+    .ok();
+    run.run(&[
+        "query",
+        "SELECT count(*) AS n FROM detectors",
+        "--run",
+        dir.to_str().unwrap(),
+    ])
+    .ok()
+    .stdout_has("| 12 |");
+    let acc = run.run(&[
+        "accuracy",
+        "--run",
+        dir.to_str().unwrap(),
+        "--workers",
+        "2",
+        "-q",
+    ]);
+    acc.ok()
+        .stdout_has("| cue strike | 6 | 6 | 6 | 0 | 0 | 1.000 | 1.000 | 1.000 |");
+}
+
+#[test]
+fn a_library_that_is_not_there_is_an_input_error() {
+    let run = TestRun::new();
+    let dir = run.path("r");
+    run.run(&[
+        "simulate",
+        "--run",
+        dir.to_str().unwrap(),
+        "--scenes",
+        "1",
+        "--dt",
+        "0.1",
+    ])
+    .ok();
+    run.run(&[
+        "annotate",
+        "--run",
+        dir.to_str().unwrap(),
+        "--library",
+        "nowhere",
+    ])
+    .code(2)
+    .stderr_has("library.toml");
+}
