@@ -15,6 +15,7 @@ mod progress;
 mod query;
 mod render;
 mod run;
+mod show;
 mod simulate;
 mod stages;
 mod tables;
@@ -83,6 +84,8 @@ enum Command {
     Annotate(annotate::Args),
     /// Score a library's event-grounded labels against simulator events (precision/recall/F1).
     Accuracy(accuracy::Args),
+    /// Print a trace with its annotations as compact text for language models, with a token count.
+    Show(show::Args),
     /// Write one trace of a run back in the paper's JSON format.
     Export(export::Args),
     /// Run SQL over a run's tables.
@@ -103,6 +106,7 @@ pub fn main() -> ExitCode {
         Command::Import(a) => import::run(a, cli.quiet),
         Command::Annotate(a) => annotate::run(a, cli.quiet),
         Command::Accuracy(a) => accuracy::run(a, cli.quiet),
+        Command::Show(a) => show::run(a),
         Command::Export(a) => export::run(a),
         Command::Query(a) => query::run(a),
         Command::Tables(a) => tables::run(a),

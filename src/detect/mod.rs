@@ -9,7 +9,8 @@
 //!
 //! **Owns:** the worker processes and their protocol, the sandbox limits, output validation, library
 //! folders ([`Library`]), annotations and the N×J annotation matrix ([`AnnotationMatrix`]), and the Arrow
-//! schemas of the `detectors`, `detector_calls` and `annotations` tables ([`tables`]).
+//! schemas of the `detectors`, `detector_calls` and `annotations` tables ([`tables`]), and annotated
+//! traces as text for language models with a token estimate ([`annotated_text`], [`count_tokens`]).
 //! **Does not:** read or write Parquet (`store/`, the `annotate` stage), choose detectors (`search/`) or
 //! score them (`fitness/`).
 //!
@@ -24,6 +25,7 @@ mod pool;
 mod protocol;
 mod sandbox;
 pub mod tables;
+mod text;
 mod validate;
 mod worker;
 
@@ -33,6 +35,7 @@ pub use self::error::{CandidateStatus, DetectError, DetectorError};
 pub use self::library::{Library, LibraryError};
 pub use self::pool::{BatchResult, CallResult, RunStats, WorkerPool};
 pub use self::sandbox::{SandboxLayers, SandboxLimits};
+pub use self::text::{annotated_text, count_tokens};
 pub use self::validate::{Pattern, validate};
 
 /// A hash of the worker's source, so that stages rerun when the sandbox changes.

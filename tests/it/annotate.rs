@@ -183,6 +183,23 @@ fn annotate_writes_the_tables_and_accuracy_scores_them() {
     ])
     .ok()
     .stdout_has("| 12 |");
+    // The annotated trace as text for language models, with a token estimate.
+    let shown = run.run(&[
+        "show",
+        "--run",
+        dir.to_str().unwrap(),
+        "--trace",
+        "pool-5-000000-000",
+    ]);
+    shown
+        .ok()
+        .stdout_has("trace pool-5-000000-000 (pooltool, task pool-5-000000)")
+        .stdout_has("scene: 10 balls: cue (")
+        .stdout_has("\n0 t0.00 cue strike: cue struck cue ball")
+        .stdout_has("# tokens: ");
+    run.run(&["show", "--run", dir.to_str().unwrap(), "--trace", "nope"])
+        .code(2)
+        .stderr_has("no trace");
     let acc = run.run(&[
         "accuracy",
         "--run",

@@ -12,7 +12,9 @@ use arrow::array::{Float64Array, Int64Array, RecordBatch, StringArray};
 use arrow::datatypes::{DataType, Field, Schema};
 use serde_json::{Value, json};
 
-use super::annotate::{DetectorSetup, SANDBOX_PARAMS, annotations_of, status_counts, write};
+use super::annotate::{
+    DetectorSetup, SANDBOX_PARAMS, annotations_of, read_annotations, status_counts, write,
+};
 use super::trace_files::{read_traces, trace_file_sets};
 use crate::detect::accuracy::{
     LabelScore, POOLTOOL_GROUNDED, markdown, pooltool_truth, score_trace,
@@ -242,66 +244,22 @@ fn stored_annotations(
     env: Env,
     lib: &crate::detect::Library,
 ) -> Result<std::collections::HashMap<String, Vec<Annotation>>, StageError> {
-    use arrow::array::{Array, AsArray};
-    use arrow::datatypes::Float64Type;
-    let mut out: std::collections::HashMap<String, Vec<Annotation>> = Default::default();
-    let files: Vec<_> = ctx
-        .run()
-        .table("annotations")?
-        .files
-        .into_iter()
-        .filter(|f| f.env == Some(env))
-        .collect();
-    if files.is_empty() {
+    let rows = read_annotations(ctx.run(), env, None)?;
+    if rows.is_empty() {
         return Err(StageError::Input(
-            "use_annotations is set but the run has no annotations table for this environment \
+            "use_annotations is set but the run has no annotations for this environment \
              (list the annotate stage in `inputs`)"
                 .into(),
         ));
     }
-    for f in files {
-        for b in crate::store::read_file(&f.path)? {
-            let col = |n: &str| {
-                b.column_by_name(n).cloned().ok_or_else(|| {
-                    StageError::Input(format!("{}: no column {n}", f.path.display()))
-                })
+    let mut out: std::collections::HashMap<String, Vec<Annotation>> = Default::default();
+    for a in rows {
+        if let Some(d) = lib.detectors.iter().find(|d| d.id == a.detector_id) {
+            let a = Annotation {
+                activation: d.weight,
+                ..a
             };
-            let (det, trace, label) = (col("detector_id")?, col("trace_id")?, col("label")?);
-            let (t0, t1, objects) = (col("t_start")?, col("t_end")?, col("objects")?);
-            let (det, trace, label) = (
-                det.as_string::<i32>(),
-                trace.as_string::<i32>(),
-                label.as_string::<i32>(),
-            );
-            let (t0, t1) = (
-                t0.as_primitive::<Float64Type>(),
-                t1.as_primitive::<Float64Type>(),
-            );
-            let objects = objects.as_list::<i32>();
-            for i in 0..b.num_rows() {
-                let Some(d) = lib.detectors.iter().find(|d| d.id.as_str() == det.value(i)) else {
-                    continue;
-                };
-                let objs = objects.value(i);
-                let objs = objs.as_string::<i32>();
-                out.entry(trace.value(i).to_string())
-                    .or_default()
-                    .push(Annotation {
-                        detector_id: d.id.clone(),
-                        trace_id: trace.value(i).to_string(),
-                        label: label.value(i).to_string(),
-                        seq: 0,
-                        start_step: 0,
-                        end_step: 0,
-                        t_start: if t0.is_null(i) { f64::NAN } else { t0.value(i) },
-                        t_end: if t1.is_null(i) { f64::NAN } else { t1.value(i) },
-                        objects: (0..objs.len()).map(|k| objs.value(k).to_string()).collect(),
-                        parameters: Default::default(),
-                        provenance: None,
-                        metadata: None,
-                        activation: d.weight,
-                    });
-            }
+            out.entry(a.trace_id.clone()).or_default().push(a);
         }
     }
     Ok(out)
