@@ -17,7 +17,7 @@ use serde_json::Value;
 
 use super::detector::Detector;
 use super::error::{CandidateStatus, DetectError, DetectorError};
-use super::protocol::{self, COMPILE, EVICT, LOAD_TRACE, RUN};
+use super::protocol::{self, COMPILE, EVICT, RUN};
 use super::sandbox::{SandboxLayers, SandboxLimits, resolve_python};
 use super::validate::{Pattern, validate};
 use super::worker::{Death, Reply, Worker, parse};
@@ -286,14 +286,10 @@ impl WorkerPool {
             // Load the trace (once per worker while it stays cached).
             if !worker.traces.contains(&key) {
                 let c0 = Instant::now();
-                let body = protocol::load_body(&key, trace);
+                let (kind, body) = protocol::load_request(&key, trace);
                 stats.convert_s += c0.elapsed().as_secs_f64();
                 let l0 = Instant::now();
-                match worker.request(
-                    LOAD_TRACE,
-                    &body,
-                    timeout.max(std::time::Duration::from_secs(30)),
-                ) {
+                match worker.request(kind, &body, timeout.max(std::time::Duration::from_secs(30))) {
                     Reply::Frame(f) if parse(&f).is_ok_and(|v| v["ok"] == Value::Bool(true)) => {}
                     Reply::Frame(_) => {
                         *slot = None;

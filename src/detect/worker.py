@@ -13,12 +13,15 @@
 # Protocol (see protocol.rs): frames of a 4-byte little-endian length and a payload whose first byte is the
 # message type and the rest JSON. One reply per request, in order.
 #   b"T" {"id", "trace"}            load a trace (the paper's dict), cached read-only   -> {"ok": true}
+#   b"P" <u32 n><header JSON, n bytes><f64 LE block>  load a pooltool trace sent by columns (the same
+#                                   dict, built from columns: floats travel as raw doubles) -> {"ok": true}
 #   b"E" {"ids": [...]}             evict traces                                        -> {"ok": true}
 #   b"C" {"id", "code"}             check and compile a detector                        -> {"ok": true} | error
 #   b"R" {"detector", "trace"}      run it                                              -> patterns | error
 # Before every request the soft RLIMIT_CPU is re-armed to (CPU used + cpu_seconds), a backstop behind the
 # Rust side's wall-clock timer.
 # An error reply is {"ok": false, "error": {"category", "message", "line", "column", ...}}.
+import array
 import ast
 import builtins as _builtins
 import gc
@@ -313,6 +316,41 @@ TRACES = {}
 DETECTORS = {}
 
 
+def load_pool_columns(frame):
+    """Rebuilds a pooltool trace dict, identical to the JSON path's, from its columns: the header holds
+    the trace without timesteps plus per-step and per-object columns; the block holds every step's t,
+    then per object position[3], velocity[3], angular_velocity[3], radius."""
+    (hlen,) = _PACK.unpack(frame[1:5])
+    head = json.loads(frame[5:5 + hlen], object_hook=_freeze)
+    block = array.array("d")
+    block.frombytes(frame[5 + hlen:])
+    if sys.byteorder != "little":
+        block.byteswap()
+    nums = block.tolist()
+    counts, indices = head["n"], head["index"]
+    n_steps = len(counts)
+    fd = FrozenDict
+    objs = []
+    k = n_steps
+    for bid, kind, code, state in zip(head["ball_id"], head["kind"], head["code"], head["state"]):
+        objs.append(fd(kind=kind, ball_id=bid, position=tuple(nums[k:k + 3]),
+                       velocity=tuple(nums[k + 3:k + 6]), angular_velocity=tuple(nums[k + 6:k + 9]),
+                       motion_state_code=code, motion_state=state, radius=nums[k + 9]))
+        k += 10
+    extras = head.get("step_extra")
+    steps = []
+    j = 0
+    for s, (n, ix) in enumerate(zip(counts, indices)):
+        d = {"index": ix, "t": nums[s], "objects": tuple(objs[j:j + n])}
+        if extras and extras[s]:
+            for key, v in extras[s].items():
+                d[key] = v
+        steps.append(fd(d))
+        j += n
+    shell = head["trace"]
+    return head["id"], fd((key, tuple(steps) if key == "timesteps" else v) for key, v in shell.items())
+
+
 def _error(category, message, line=None, column=None, **extra):
     e = {"category": category, "message": message}
     if line is not None:
@@ -442,16 +480,21 @@ def serve():
         kind = frame[:1]
         _set_cpu_limit(CPU_SECONDS)
         try:
-            if kind == b"T":
+            if kind == b"T" or kind == b"P":
                 gc.disable()
                 try:
-                    msg = json.loads(frame[1:], object_hook=_freeze)
-                    TRACES[msg["id"]] = msg["trace"]
+                    if kind == b"P":
+                        key, trace = load_pool_columns(frame)
+                        TRACES[key] = trace
+                        del trace
+                    else:
+                        msg = json.loads(frame[1:], object_hook=_freeze)
+                        TRACES[msg["id"]] = msg["trace"]
+                        del msg
                 finally:
                     gc.enable()
                 # The cached trace never holds cycles: keep it out of every later collection.
                 gc.freeze()
-                del msg
                 _reply({"ok": True})
             elif kind == b"E":
                 msg = json.loads(frame[1:])

@@ -236,3 +236,46 @@ fn a_library_that_is_not_there_is_an_input_error() {
     .code(2)
     .stderr_has("library.toml");
 }
+
+#[test]
+fn detectors_see_the_paper_dict_whichever_way_the_trace_travels() {
+    // A pooltool trace goes to the worker by columns; one with an unknown object field as JSON. Both
+    // must arrive as exactly the paper's dict (values and key order).
+    let plain = straight_pot(2.5, 0.3, 0.1);
+    let mut odd = plain.clone();
+    odd.trace_id = "odd".into();
+    odd.timesteps[0].objects[0]
+        .extra
+        .insert("note".into(), serde_json::json!("x"));
+    odd.timesteps[1]
+        .extra
+        .insert("state".into(), serde_json::json!({"k": [1, 2]}));
+    fn traces_base_clone(t: &Trace) -> Trace {
+        let mut c = t.clone();
+        c.timesteps[0].objects[0].extra.clear();
+        c
+    }
+    let echo = annotrace::detect::Detector::new(
+        annotrace::trace::Env::Pooltool,
+        "echo",
+        "def find_pattern(trace):\n    return [{'label': 'echo', 'start_timestep': 0, 'end_timestep': 0, 'parameters': {'object_details': {}, 'trace': trace}}]\n",
+        "test",
+    );
+    let pool = WorkerPool::new(SandboxLimits {
+        workers: 1,
+        ..SandboxLimits::default()
+    })
+    .unwrap();
+    // Only a timestep field: still by columns, with the field in place.
+    let mut stepped = traces_base_clone(&odd);
+    stepped.trace_id = "stepped".into();
+    let traces = [plain, odd, stepped];
+    let batch = pool.run(&[echo], &traces);
+    for (r, t) in batch.results.iter().zip(&traces) {
+        assert_eq!(r.status, CandidateStatus::Ok, "{r:?}");
+        let got = serde_json::to_string(&r.patterns[0].parameters["trace"]).unwrap();
+        let want = serde_json::to_string(&annotrace::trace::json::to_value(t)).unwrap();
+        assert_eq!(got, want, "trace {}", t.trace_id);
+        assert!(t.trace_id != "stepped" || got.contains(r#""state":{"k":[1,2]}"#));
+    }
+}
