@@ -10,7 +10,7 @@
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Instant;
 
 use serde_json::Value;
@@ -167,28 +167,55 @@ impl WorkerPool {
 
     /// Runs every detector on every trace. Never fails as a whole: a detector that fails is a
     /// [`CandidateStatus::Failed`] result, and a worker that cannot be restarted fails its calls as
-    /// `crashed`.
+    /// `crashed`. Each worker first takes the traces it already holds, then the rest in order.
     pub fn run(&self, detectors: &[Detector], traces: &[Trace]) -> BatchResult {
         let nd = detectors.len();
+        let keys: Vec<String> = traces.iter().map(trace_key).collect();
+        let taken: Vec<AtomicBool> = traces.iter().map(|_| AtomicBool::new(false)).collect();
         let next = AtomicUsize::new(0);
         let shared = Shared {
             dead: Mutex::new(HashMap::new()),
         };
         let results: Mutex<Vec<Option<CallResult>>> = Mutex::new(vec![None; nd * traces.len()]);
         let stats = Mutex::new(RunStats::default());
+        let claim = |t: usize| {
+            taken[t]
+                .compare_exchange(false, true, Ordering::SeqCst, Ordering::SeqCst)
+                .is_ok()
+        };
         std::thread::scope(|s| {
             for slot in &self.slots {
-                let (next, shared, results, stats) = (&next, &shared, &results, &stats);
+                let (next, shared, results, stats, keys, claim) =
+                    (&next, &shared, &results, &stats, &keys, &claim);
                 s.spawn(move || {
                     let mut guard = slot.lock().unwrap_or_else(|p| p.into_inner());
                     let mut local = RunStats::default();
+                    // Traces this worker holds already (a search runs many candidates over one set).
+                    let mut mine: Vec<usize> = match guard.as_ref() {
+                        Some(w) => (0..traces.len())
+                            .filter(|&t| w.traces.contains(&keys[t]))
+                            .collect(),
+                        None => Vec::new(),
+                    };
+                    mine.reverse();
                     loop {
-                        let t = next.fetch_add(1, Ordering::SeqCst);
-                        if t >= traces.len() {
-                            break;
-                        }
-                        let out = self
-                            .run_trace(&mut guard, detectors, t, &traces[t], shared, &mut local);
+                        let t = match mine.pop() {
+                            Some(t) if claim(t) => t,
+                            Some(_) => continue,
+                            None => {
+                                let t = next.fetch_add(1, Ordering::SeqCst);
+                                if t >= traces.len() {
+                                    break;
+                                }
+                                if !claim(t) {
+                                    continue;
+                                }
+                                t
+                            }
+                        };
+                        let out = self.run_trace(
+                            &mut guard, detectors, t, &keys[t], &traces[t], shared, &mut local,
+                        );
                         let mut r = results.lock().unwrap_or_else(|p| p.into_inner());
                         for (d, res) in out.into_iter().enumerate() {
                             r[t * nd + d] = Some(res);
@@ -240,117 +267,85 @@ impl WorkerPool {
         }
     }
 
+    /// Loads the trace into the worker (once), compiles the detectors it lacks (once), then runs
+    /// them all with one request: the worker streams one reply per detector, each awaited with the call
+    /// deadline, so Rust validates a result while the worker runs the next. When a call kills the
+    /// worker, the detectors after it go to a fresh worker.
+    #[allow(clippy::too_many_arguments)]
     fn run_trace(
         &self,
         slot: &mut Option<Worker>,
         detectors: &[Detector],
         t: usize,
+        key: &str,
         trace: &Trace,
         shared: &Shared,
         stats: &mut RunStats,
     ) -> Vec<CallResult> {
-        let key = trace_key(trace);
         let steps = trace
             .timesteps
             .first()
             .zip(trace.timesteps.last())
             .map(|(a, b)| (a.index, b.index));
         let timeout = self.limits.call_timeout;
-        let mut out = Vec::with_capacity(detectors.len());
-        for (d, det) in detectors.iter().enumerate() {
-            let mut res = CallResult {
-                detector: d,
-                trace: t,
-                status: CandidateStatus::Ok,
-                patterns: Vec::new(),
-                wall_s: 0.0,
-                cpu_s: 0.0,
-                round_trip_s: 0.0,
-                printed: String::new(),
-            };
-            let fail = |mut res: CallResult, e: DetectorError| {
-                res.status = CandidateStatus::Failed(e);
-                res
-            };
-            if let Some(e) = shared.dead_error(det.id.as_str()) {
-                out.push(fail(res, e));
-                continue;
+        let blank = |d: usize| CallResult {
+            detector: d,
+            trace: t,
+            status: CandidateStatus::Ok,
+            patterns: Vec::new(),
+            wall_s: 0.0,
+            cpu_s: 0.0,
+            round_trip_s: 0.0,
+            printed: String::new(),
+        };
+        let mut out: Vec<CallResult> = (0..detectors.len()).map(blank).collect();
+        fn fail(out: &mut [CallResult], d: usize, e: DetectorError) {
+            out[d].status = CandidateStatus::Failed(e);
+        }
+        let mut pending: Vec<usize> = (0..detectors.len()).collect();
+        // Each pass either finishes `pending` or loses its worker and retries the rest on a new one;
+        // every pass settles at least one detector, so this ends.
+        while !pending.is_empty() {
+            pending.retain(|&d| match shared.dead_error(detectors[d].id.as_str()) {
+                Some(e) => {
+                    fail(&mut out, d, e);
+                    false
+                }
+                None => true,
+            });
+            if pending.is_empty() {
+                break;
             }
             let worker = match self.ensure_worker(slot, stats) {
                 Ok(w) => w,
                 Err(e) => {
-                    out.push(fail(res, e));
-                    continue;
+                    for &d in &pending {
+                        fail(&mut out, d, e.clone());
+                    }
+                    break;
                 }
             };
             // Load the trace (once per worker while it stays cached).
-            if !worker.traces.contains(&key) {
-                let c0 = Instant::now();
-                let (kind, body) = protocol::load_request(&key, trace);
-                stats.convert_s += c0.elapsed().as_secs_f64();
-                let l0 = Instant::now();
-                match worker.request(kind, &body, timeout.max(std::time::Duration::from_secs(30))) {
-                    Reply::Frame(f) if parse(&f).is_ok_and(|v| v["ok"] == Value::Bool(true)) => {}
-                    Reply::Frame(_) => {
-                        *slot = None;
-                        out.push(fail(
-                            res,
-                            DetectorError::Memory {
-                                limit_bytes: self.limits.memory_bytes,
-                            },
-                        ));
-                        continue;
-                    }
-                    Reply::Timeout => {
-                        *slot = None;
-                        out.push(fail(
-                            res,
-                            DetectorError::Crashed {
-                                message: "loading the trace timed out".into(),
-                            },
-                        ));
-                        continue;
-                    }
-                    Reply::Died(death) => {
-                        *slot = None;
-                        out.push(fail(
-                            res,
-                            DetectorError::Crashed {
-                                message: format!("while loading the trace: {}", death.message),
-                            },
-                        ));
-                        continue;
-                    }
+            if let Err(e) = self.load(worker, key, trace, stats) {
+                *slot = None;
+                for &d in &pending {
+                    fail(&mut out, d, e.clone());
                 }
-                stats.load_s += l0.elapsed().as_secs_f64();
-                stats.traces_loaded += 1;
-                let worker = slot.as_mut().expect("alive");
-                worker.traces.push_back(key.clone());
-                if worker.traces.len() > self.limits.trace_cache.max(1) {
-                    let old: Vec<String> = worker.traces.pop_front().into_iter().collect();
-                    if !matches!(
-                        worker.request(EVICT, &protocol::evict_body(&old), timeout),
-                        Reply::Frame(_)
-                    ) {
-                        *slot = None;
-                        out.push(fail(
-                            res,
-                            DetectorError::Crashed {
-                                message: "evicting a trace failed".into(),
-                            },
-                        ));
-                        continue;
-                    }
-                }
-            } else {
-                // Most recently used goes to the back.
-                let worker = slot.as_mut().expect("alive");
-                worker.traces.retain(|k| k != &key);
-                worker.traces.push_back(key.clone());
+                break;
             }
-            let worker = slot.as_mut().expect("alive");
-            // Compile (once per worker).
-            if !worker.detectors.contains(det.id.as_str()) {
+            // Compile what this worker lacks.
+            let mut lost = false;
+            let mut ready = Vec::with_capacity(pending.len());
+            for &d in &pending {
+                let det = &detectors[d];
+                let Some(worker) = slot.as_mut() else {
+                    lost = true;
+                    break;
+                };
+                if worker.detectors.contains(det.id.as_str()) {
+                    ready.push(d);
+                    continue;
+                }
                 let c0 = Instant::now();
                 let reply = worker.request(
                     COMPILE,
@@ -363,6 +358,7 @@ impl WorkerPool {
                         if let Some(w) = slot.as_mut() {
                             w.detectors.insert(det.id.0.clone());
                         }
+                        ready.push(d);
                     }
                     Ok(v) => {
                         let e = error_of(&v["error"], &self.limits);
@@ -370,59 +366,130 @@ impl WorkerPool {
                             *slot = None;
                         }
                         shared.kill(det.id.as_str(), &e);
-                        out.push(fail(res, e));
-                        continue;
+                        fail(&mut out, d, e);
                     }
                     Err(e) => {
                         shared.kill(det.id.as_str(), &e);
-                        out.push(fail(res, e));
-                        continue;
+                        fail(&mut out, d, e);
                     }
                 }
             }
-            let Some(worker) = slot.as_mut() else {
-                out.push(fail(
-                    res,
-                    DetectorError::Crashed {
-                        message: "worker lost".into(),
-                    },
-                ));
+            if lost || slot.is_none() {
+                // The worker died while compiling: start over with what is not settled yet.
+                pending.retain(|&d| out[d].status == CandidateStatus::Ok);
                 continue;
-            };
-            let r0 = Instant::now();
-            let reply = worker.request(RUN, &protocol::run_body(det.id.as_str(), &key), timeout);
-            let parsed = self.interpret(reply, slot);
-            res.round_trip_s = r0.elapsed().as_secs_f64();
-            stats.calls += 1;
-            stats.round_trip_s += res.round_trip_s;
-            match parsed {
-                Ok(mut v) => {
-                    res.wall_s = v["wall"].as_f64().unwrap_or(0.0);
-                    res.cpu_s = v["cpu"].as_f64().unwrap_or(0.0);
-                    stats.detector_wall_s += res.wall_s;
-                    if v["ok"] == Value::Bool(true) {
-                        res.printed = v["printed"].as_str().unwrap_or_default().to_string();
-                        match validate(v["patterns"].take(), det, steps) {
-                            Ok(p) => res.patterns = p,
-                            Err(e) => res.status = CandidateStatus::Failed(e),
+            }
+            let Some(worker) = slot.as_mut() else { break };
+            let ids: Vec<&str> = ready.iter().map(|&d| detectors[d].id.as_str()).collect();
+            let mut started = Instant::now();
+            let mut first = Some(worker.request(RUN, &protocol::run_body(&ids, key), timeout));
+            let mut settled = 0;
+            for (pos, &d) in ready.iter().enumerate() {
+                let reply = match first.take() {
+                    Some(r) => r,
+                    None => match slot.as_mut() {
+                        Some(w) => w.wait(timeout),
+                        None => break,
+                    },
+                };
+                let det = &detectors[d];
+                let parsed = self.interpret(reply, slot);
+                let res = &mut out[d];
+                res.round_trip_s = started.elapsed().as_secs_f64();
+                started = Instant::now();
+                stats.calls += 1;
+                stats.round_trip_s += res.round_trip_s;
+                settled = pos + 1;
+                let worker_gone = parsed.is_err();
+                match parsed {
+                    Ok(mut v) => {
+                        res.wall_s = v["wall"].as_f64().unwrap_or(0.0);
+                        res.cpu_s = v["cpu"].as_f64().unwrap_or(0.0);
+                        stats.detector_wall_s += res.wall_s;
+                        if v["ok"] == Value::Bool(true) {
+                            res.printed = v["printed"].as_str().unwrap_or_default().to_string();
+                            match validate(v["patterns"].take(), det, steps) {
+                                Ok(p) => res.patterns = p,
+                                Err(e) => res.status = CandidateStatus::Failed(e),
+                            }
+                        } else {
+                            let e = error_of(&v["error"], &self.limits);
+                            if error_is_fatal_for_worker(&v["error"]) {
+                                // The worker exits after a fatal error; its remaining replies never come.
+                                *slot = None;
+                                shared.kill(det.id.as_str(), &e);
+                            }
+                            res.status = CandidateStatus::Failed(e);
                         }
-                    } else {
-                        let e = error_of(&v["error"], &self.limits);
-                        if error_is_fatal_for_worker(&v["error"]) {
-                            *slot = None;
-                            shared.kill(det.id.as_str(), &e);
-                        }
+                    }
+                    Err(e) => {
+                        shared.kill(det.id.as_str(), &e);
                         res.status = CandidateStatus::Failed(e);
                     }
                 }
-                Err(e) => {
-                    shared.kill(det.id.as_str(), &e);
-                    res.status = CandidateStatus::Failed(e);
+                if worker_gone || slot.is_none() {
+                    break;
                 }
             }
-            out.push(res);
+            pending = ready[settled..].to_vec();
         }
         out
+    }
+
+    /// Makes sure the worker holds the trace, evicting its least recently used one beyond the cache size.
+    fn load(
+        &self,
+        worker: &mut Worker,
+        key: &str,
+        trace: &Trace,
+        stats: &mut RunStats,
+    ) -> Result<(), DetectorError> {
+        if worker.traces.iter().any(|k| k == key) {
+            worker.traces.retain(|k| k != key);
+            worker.traces.push_back(key.to_string());
+            return Ok(());
+        }
+        let c0 = Instant::now();
+        let (kind, body) = protocol::load_request(key, trace);
+        stats.convert_s += c0.elapsed().as_secs_f64();
+        let l0 = Instant::now();
+        let wait = self
+            .limits
+            .call_timeout
+            .max(std::time::Duration::from_secs(30));
+        match worker.request(kind, &body, wait) {
+            Reply::Frame(f) if parse(&f).is_ok_and(|v| v["ok"] == Value::Bool(true)) => {}
+            Reply::Frame(_) => {
+                return Err(DetectorError::Memory {
+                    limit_bytes: self.limits.memory_bytes,
+                });
+            }
+            Reply::Timeout => {
+                return Err(DetectorError::Crashed {
+                    message: "loading the trace timed out".into(),
+                });
+            }
+            Reply::Died(death) => {
+                return Err(DetectorError::Crashed {
+                    message: format!("while loading the trace: {}", death.message),
+                });
+            }
+        }
+        stats.traces_loaded += 1;
+        worker.traces.push_back(key.to_string());
+        if worker.traces.len() > self.limits.trace_cache.max(1) {
+            let old: Vec<String> = worker.traces.pop_front().into_iter().collect();
+            if !matches!(
+                worker.request(EVICT, &protocol::evict_body(&old), wait),
+                Reply::Frame(_)
+            ) {
+                return Err(DetectorError::Crashed {
+                    message: "evicting a trace failed".into(),
+                });
+            }
+        }
+        stats.load_s += l0.elapsed().as_secs_f64();
+        Ok(())
     }
 
     /// Turns a reply into JSON, or into the error of a killed or dead worker (which is then dropped).

@@ -139,9 +139,9 @@ pub(crate) fn compile_body(id: &str, code: &str) -> Vec<u8> {
     serde_json::to_vec(&serde_json::json!({"id": id, "code": code})).expect("serialises")
 }
 
-/// The body of a run request.
-pub(crate) fn run_body(detector: &str, trace: &str) -> Vec<u8> {
-    serde_json::to_vec(&serde_json::json!({"detector": detector, "trace": trace}))
+/// The body of a run request: run each detector in turn on the trace; one reply per detector.
+pub(crate) fn run_body(detectors: &[&str], trace: &str) -> Vec<u8> {
+    serde_json::to_vec(&serde_json::json!({"detectors": detectors, "trace": trace}))
         .expect("serialises")
 }
 

@@ -17,7 +17,7 @@
 #                                   dict, built from columns: floats travel as raw doubles) -> {"ok": true}
 #   b"E" {"ids": [...]}             evict traces                                        -> {"ok": true}
 #   b"C" {"id", "code"}             check and compile a detector                        -> {"ok": true} | error
-#   b"R" {"detector", "trace"}      run it                                              -> patterns | error
+#   b"R" {"detectors", "trace"}     run each detector in turn      -> one reply per detector: patterns | error
 # Before every request the soft RLIMIT_CPU is re-armed to (CPU used + cpu_seconds), a backstop behind the
 # Rust side's wall-clock timer.
 # An error reply is {"ok": false, "error": {"category", "message", "line", "column", ...}}.
@@ -430,9 +430,9 @@ def _not_json(o):
     raise TypeError("a value of type %s is not JSON (use dict, list, str, int, float, bool, None)" % type(o).__name__)
 
 
-def run_detector(msg):
-    fn = DETECTORS.get(msg["detector"])
-    trace = TRACES.get(msg["trace"])
+def run_detector(detector_id, trace_key):
+    fn = DETECTORS.get(detector_id)
+    trace = TRACES.get(trace_key)
     if fn is None or trace is None:
         return None, _error("internal", "detector or trace not loaded")
     _SINK.take()
@@ -498,22 +498,24 @@ def serve():
                 _reply({"ok": True})
             elif kind == b"E":
                 msg = json.loads(frame[1:])
+                # Traces hold no cycles: dropping the last reference frees them, frozen or not, with
+                # no collection over the other cached traces.
                 for i in msg.get("ids", []):
                     TRACES.pop(i, None)
-                gc.unfreeze()
-                gc.collect()
-                gc.freeze()
                 _reply({"ok": True})
             elif kind == b"C":
                 _reply(compile_detector(json.loads(frame[1:])))
             elif kind == b"R":
-                raw, err = run_detector(json.loads(frame[1:]))
-                if raw is not None:
-                    _send(raw)
-                else:
-                    _reply(err)
-                    if err["error"].get("fatal"):
-                        sys.exit(3)
+                msg = json.loads(frame[1:])
+                for detector_id in msg["detectors"]:
+                    _set_cpu_limit(CPU_SECONDS)
+                    raw, err = run_detector(detector_id, msg["trace"])
+                    if raw is not None:
+                        _send(raw)
+                    else:
+                        _reply(err)
+                        if err["error"].get("fatal"):
+                            sys.exit(3)
             else:
                 _reply(_error("internal", "unknown message type %r" % kind))
         except MemoryError:

@@ -160,6 +160,12 @@ impl Worker {
         self.wait_reply(timeout)
     }
 
+    /// Waits up to `timeout` for the next reply (of a request that has several). On timeout the worker
+    /// is killed.
+    pub fn wait(&mut self, timeout: Duration) -> Reply {
+        self.wait_reply(timeout)
+    }
+
     fn wait_reply(&mut self, timeout: Duration) -> Reply {
         let deadline = Instant::now() + timeout;
         match self

@@ -1,0 +1,144 @@
+//! Detector runtime speed: the built-in pooltool library (12 detectors) over simulated 9-ball shots, with
+//! one worker and with one worker per core.
+//!
+//! `cargo bench --bench detect` (`DETECT_BENCH_TRACES=N` to change the default 1000 traces). The traces
+//! are those of `annotrace simulate --seed 7` at the default dt = 0.01 s, simulated in chunks of 100
+//! outside the timer (1000 traces at once would hold about a gigabyte of frames). Each configuration runs
+//! a fresh `WorkerPool` over every chunk; the timer covers `WorkerPool::run` only: converting each trace,
+//! loading it into a worker, compiling the detectors (once per worker), running them, validating the
+//! output. Printed per configuration: wall time, traces/s, detector calls/s, the speed-up over one
+//! worker, and where the time went (`RunStats`): detector time inside the workers, and the overhead
+//! (conversion, loading, compiling, protocol and validation) as a share of detector time; then the
+//! last 16 traces again while still cached in the workers (the steady state of a search, where many
+//! candidates run over one training set), where only the calls and the protocol remain.
+
+use std::time::{Duration, Instant};
+
+use annotrace::detect::{Library, RunStats, SandboxLimits, WorkerPool};
+use annotrace::envs::pool::{
+    PoolConfig, Scene, SimOptions, TraceOptions, rack, simulate, trace_of,
+};
+use annotrace::trace::Trace;
+
+const SEED: u64 = 7;
+const CHUNK: usize = 100;
+
+fn chunk(config: &PoolConfig, lo: usize, hi: usize) -> Vec<Trace> {
+    (lo..hi)
+        .map(|i| {
+            let mut scene = Scene::nine_ball(config, rack::scene_seed(SEED, i as u64));
+            scene.scene_id = format!("pool-{SEED}-{i:06}");
+            let shot = rack::dataset_shot(&scene, &mut rack::shot_rng(SEED, i as u64, 0));
+            let system = scene.system(config).expect("a rack is a valid scene");
+            let sim =
+                simulate(&system, &shot, &SimOptions::default()).expect("a dataset shot simulates");
+            trace_of(
+                &sim,
+                &scene,
+                &shot,
+                &format!("{}-000", scene.scene_id),
+                &TraceOptions::default(),
+            )
+        })
+        .collect()
+}
+
+fn add(total: &mut RunStats, s: &RunStats) {
+    total.traces_loaded += s.traces_loaded;
+    total.convert_s += s.convert_s;
+    total.load_s += s.load_s;
+    total.compile_s += s.compile_s;
+    total.calls += s.calls;
+    total.detector_wall_s += s.detector_wall_s;
+    total.round_trip_s += s.round_trip_s;
+    total.restarts += s.restarts;
+}
+
+fn main() {
+    // Accept and ignore the arguments cargo bench passes (`--bench`, filters).
+    let n: usize = std::env::var("DETECT_BENCH_TRACES")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1000);
+    let lib = Library::load(
+        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/libraries/pooltool"),
+    )
+    .expect("the built-in library loads");
+    let config = PoolConfig::default_7ft();
+    let cores = std::thread::available_parallelism()
+        .map(|c| c.get())
+        .unwrap_or(1);
+    let mut configs = vec![1];
+    if cores > 1 {
+        configs.push(cores);
+    }
+    println!(
+        "detect: {} detectors of {} over {n} simulated traces (dt 0.01 s), {cores} core(s)",
+        lib.detectors.len(),
+        lib.name
+    );
+    let mut base = None;
+    let (mut frames, mut steps) = (0usize, 0usize);
+    for &workers in &configs {
+        let pool = WorkerPool::new(SandboxLimits {
+            workers,
+            call_timeout: Duration::from_secs(30),
+            ..SandboxLimits::default()
+        })
+        .expect("workers start");
+        let mut total = RunStats::default();
+        let mut wall = 0.0;
+        let mut failed = 0usize;
+        let (mut f, mut s) = (0usize, 0usize);
+        for lo in (0..n).step_by(CHUNK) {
+            let traces = chunk(&config, lo, (lo + CHUNK).min(n));
+            f += traces.iter().map(Trace::frame_rows).sum::<usize>();
+            s += traces.iter().map(|t| t.timesteps.len()).sum::<usize>();
+            let t0 = Instant::now();
+            let batch = pool.run(&lib.detectors, &traces);
+            wall += t0.elapsed().as_secs_f64();
+            failed += batch
+                .results
+                .iter()
+                .filter(|r| r.status.error().is_some())
+                .count();
+            add(&mut total, &batch.stats);
+        }
+        (frames, steps) = (f, s);
+        // Steady state of a search: the same traces again, still cached in the workers (the last chunk's
+        // last `trace_cache` traces), so only the calls and the protocol remain.
+        let last = chunk(&config, n.saturating_sub(16), n);
+        let t0 = Instant::now();
+        let again = pool.run(&lib.detectors, &last);
+        let cached_wall = t0.elapsed().as_secs_f64();
+        let c = &again.stats;
+        let speedup = base.map_or(1.0, |b: f64| b / wall);
+        if base.is_none() {
+            base = Some(wall);
+        }
+        let over = total.overhead();
+        println!(
+            "  {workers} worker(s): {wall:.2} s wall, {:.0} traces/s, {:.0} calls/s, speed-up {speedup:.2}x, {failed} failed call(s)",
+            n as f64 / wall,
+            total.calls as f64 / wall,
+        );
+        println!(
+            "    detector time {:.2} s ({:.3} ms/call); overhead {:.1}% of it: convert {:.2} s, load {:.2} s, compile {:.2} s, protocol+validation {:.2} s",
+            total.detector_wall_s,
+            1000.0 * total.detector_wall_s / total.calls.max(1) as f64,
+            100.0 * over,
+            total.convert_s,
+            total.load_s,
+            total.compile_s,
+            total.round_trip_s - total.detector_wall_s,
+        );
+        println!(
+            "    cached re-run of {} traces: {cached_wall:.3} s wall, {} trace load(s), detector time {:.3} s, protocol+validation {:.1}% of it",
+            last.len(),
+            c.traces_loaded,
+            c.detector_wall_s,
+            100.0 * (c.round_trip_s - c.detector_wall_s) / c.detector_wall_s.max(1e-9),
+        );
+    }
+    println!("  ({steps} timesteps, {frames} frame rows in all)");
+}
