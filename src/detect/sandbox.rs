@@ -57,6 +57,10 @@ pub struct SandboxLimits {
     pub recursion_limit: u32,
     /// Apply the OS layers (Landlock, seccomp). Default true.
     pub os_layers: bool,
+    /// Apply the Landlock layer (when `os_layers`). Default true; off only to test seccomp alone.
+    pub landlock: bool,
+    /// Apply the seccomp layer (when `os_layers`). Default true; off only to test Landlock alone.
+    pub seccomp: bool,
     /// Refuse to start when seccomp is unavailable. Default false (then `layers()` says what is active).
     pub require_seccomp: bool,
     /// The Python layer (source check, reduced builtins). Default true. Turn it off only to test the OS
@@ -79,6 +83,8 @@ impl Default for SandboxLimits {
             max_output_bytes: 4 << 20,
             recursion_limit: 2000,
             os_layers: true,
+            landlock: true,
+            seccomp: true,
             require_seccomp: false,
             python_guard: true,
         }
@@ -152,6 +158,8 @@ pub(crate) fn worker_command(python: &PathBuf, limits: &SandboxLimits, script: &
         "max_output_bytes": limits.max_output_bytes,
         "python_guard": limits.python_guard,
         "os_layers": limits.os_layers,
+        "landlock": limits.landlock,
+        "seccomp": limits.seccomp,
         "recursion_limit": limits.recursion_limit,
         "cpu_seconds": limits.call_timeout.as_secs_f64().ceil() + 1.0,
     });

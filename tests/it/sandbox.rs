@@ -113,6 +113,29 @@ fn reading_a_file_is_refused_by_the_os_layers() {
 }
 
 #[test]
+fn landlock_and_seccomp_each_stop_file_access_alone() {
+    let read = det(&wrap("return [open('/etc/hostname').read()]"));
+    for (landlock, seccomp, errno) in [(true, false, "Errno 13"), (false, true, "Errno 1")] {
+        let pool = WorkerPool::new(SandboxLimits {
+            landlock,
+            seccomp,
+            ..limits(false)
+        })
+        .unwrap();
+        let l = pool.layers();
+        assert_eq!(l.landlock != "unavailable", landlock, "{}", l.describe());
+        assert_eq!(l.seccomp == "filter", seccomp, "{}", l.describe());
+        let batch = pool.run(std::slice::from_ref(&read), &traces()[..1]);
+        match &batch.results[0].status {
+            CandidateStatus::Failed(DetectorError::Runtime { message, .. }) => {
+                assert!(message.contains(errno), "{message}")
+            }
+            other => panic!("landlock {landlock}, seccomp {seccomp}: {other:?}"),
+        }
+    }
+}
+
+#[test]
 fn writing_a_file_is_refused_by_the_os_layers() {
     let dir = tempfile::tempdir().unwrap();
     let target = dir.path().join("owned.txt");

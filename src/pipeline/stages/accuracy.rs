@@ -61,7 +61,7 @@ pub static KIND: StageKind = StageKind {
           annotations) and scores the event-grounded labels against the simulator's event log: cue strike, \
           ball collision (same-pair contacts closer than `merge` merged), cushion rebound, ball pocketed, \
           rolling/sliding ball (sliding-to-rolling transitions) and spinning ball. A detection matches an \
-          event of its label that involves only balls it names and falls in its time span ± `tolerance`. \
+          event of its label whose balls it all names and falls in its time span ± `tolerance`. \
           Writes the accuracy table (one row per label). Billiards only until PHYRE/I-PHYRE simulators exist.",
     writes: "accuracy",
     params: PARAMS,
