@@ -46,10 +46,15 @@ impl Environment for PoolEnv {
         Env::Pooltool
     }
 
-    /// Seeded 9-ball racks; scene `i` uses the rack seed `seed ⊕ i` mixed (see `rack::scene_seed`).
+    /// Seeded 9-ball racks: scene `i` is the rack of `rack::scene_seed(seed, i)`, named
+    /// `pool-<seed>-<i:06>` (the ids the `simulate` stage gives them).
     fn scenes(&self, n: usize, seed: u64) -> Result<Vec<Scene>, EnvError> {
         Ok((0..n as u64)
-            .map(|i| Scene::nine_ball(&self.config, super::rack::scene_seed(seed, i)))
+            .map(|i| {
+                let mut scene = Scene::nine_ball(&self.config, super::rack::scene_seed(seed, i));
+                scene.scene_id = format!("pool-{seed}-{i:06}");
+                scene
+            })
             .collect())
     }
 

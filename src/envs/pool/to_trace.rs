@@ -1,8 +1,8 @@
 //! A finished [`Simulation`] as an annotrace [`Trace`] in the paper's PoolTool layout.
 //!
 //! * **Timesteps** lie on pooltool's `continuize` grid, t = 0, dt, 2·dt, … plus the time of the last
-//!   event ([`sample_times`]); every ball's state at each of them is evaluated from the closed-form
-//!   motion after the latest event ([`state_at`]), not re-simulated. Every ball appears at every step
+//!   event ([`resample`]); every ball's state at each of them is evaluated from the closed-form
+//!   motion after the latest event, not re-simulated. Every ball appears at every step
 //!   (pocketed balls with `motion_state = "pocketed"`), as `kind, ball_id, position, velocity,
 //!   angular_velocity, motion_state_code, motion_state, radius`.
 //! * **Events** are `shot_prepared` (t = 0, the shot), then one `physics_<kind>` per simulated event
@@ -16,10 +16,10 @@
 use serde_json::{Value, json};
 
 use super::events::{Agent, EventKind};
-use super::sample::sample_times;
+use super::sample::resample;
 use super::scene::Scene;
 use super::shot::Shot;
-use super::simulate::{Simulation, Status, state_at};
+use super::simulate::{Simulation, Status};
 use crate::trace::{Body, Env, Event, JsonMap, Object, Outcome, PoolBall, Timestep, Trace};
 
 /// Options of the conversion.
@@ -60,32 +60,33 @@ pub fn trace_of(
     trace_id: &str,
     opts: &TraceOptions,
 ) -> Trace {
-    let mut times = sample_times(sim.t_end, opts.dt);
+    let mut samples = resample(sim, opts.dt);
     // The final sample is the last event's time; drop it when it repeats the grid (t_end = k·dt, or
     // a shot without events), so that times stay strictly increasing.
-    times.dedup_by(|later, earlier| *later <= *earlier);
-    let timesteps = times
-        .iter()
+    samples.dedup_by(|later, earlier| later.t <= earlier.t);
+    let kind = String::from("ball");
+    let timesteps = samples
+        .into_iter()
         .enumerate()
-        .map(|(index, &t)| Timestep {
+        .map(|(index, sample)| Timestep {
             index: index as i64,
-            t,
-            objects: (0..sim.ball_ids.len())
-                .filter_map(|b| {
-                    let s = state_at(sim, b, t)?;
-                    Some(Object {
-                        body: Body::Pool(PoolBall {
-                            kind: "ball".into(),
-                            ball_id: sim.ball_ids[b].clone(),
-                            position: s.r,
-                            velocity: s.v,
-                            angular_velocity: s.w,
-                            motion_state_code: i64::from(s.s.as_int()),
-                            motion_state: s.s.name().into(),
-                            radius: sim.ball_params[b].r,
-                        }),
-                        extra: JsonMap::new(),
-                    })
+            t: sample.t,
+            objects: sample
+                .balls
+                .iter()
+                .enumerate()
+                .map(|(b, s)| Object {
+                    body: Body::Pool(PoolBall {
+                        kind: kind.clone(),
+                        ball_id: sim.ball_ids[b].clone(),
+                        position: s.r,
+                        velocity: s.v,
+                        angular_velocity: s.w,
+                        motion_state_code: i64::from(s.s.as_int()),
+                        motion_state: s.s.name().into(),
+                        radius: sim.ball_params[b].r,
+                    }),
+                    extra: JsonMap::new(),
                 })
                 .collect(),
             extra: JsonMap::new(),
