@@ -318,3 +318,23 @@ fn bad_input_names_the_fault_exits_2_and_writes_nothing() {
     .stderr_has("missing.json");
     assert!(!t.path("r").exists(), "nothing is written on bad input");
 }
+
+#[test]
+fn a_second_dataset_with_the_same_seed_is_refused() {
+    let t = TestRun::new();
+    t.run(&[
+        "simulate", "--scenes", "2", "--seed", "5", "--dt", "0.1", "--run", "r",
+    ])
+    .ok();
+    t.run(&[
+        "simulate", "--scenes", "3", "--seed", "5", "--dt", "0.1", "--run", "r",
+    ])
+    .code(2)
+    .stderr_has("\"pool-5-000000-000\" is already in the run");
+    t.run(&[
+        "simulate", "--scenes", "3", "--seed", "6", "--dt", "0.1", "--run", "r",
+    ])
+    .ok();
+    let csv = t.csv("r", "SELECT count(*) FROM traces");
+    assert_eq!(csv.lines().nth(1), Some("5"));
+}

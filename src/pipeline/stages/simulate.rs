@@ -264,6 +264,7 @@ impl Stage for SimulateStage {
             Work::Replay { .. } => vec![(0, 1)],
         };
         let total: u64 = shards.iter().map(|(a, b)| b - a).sum();
+        self.check_ids_are_new(ctx, total)?;
         ctx.progress().set_total(ctx.stage_id(), total);
         let records: Vec<Value> = shards
             .par_iter()
@@ -340,6 +341,39 @@ impl ShardSinks<'_, '_> {
 }
 
 impl SimulateStage {
+    /// Fails when a trace id this stage would write is already in the run (written by another stage,
+    /// e.g. an earlier dataset command with the same seed); the stage's own earlier output was removed
+    /// by the runner before a rerun.
+    fn check_ids_are_new(&self, ctx: &StageContext<'_>, scenes: u64) -> Result<(), StageError> {
+        let existing: std::collections::HashSet<String> = crate::store::trace_ids(ctx.run())?
+            .into_iter()
+            .map(|(_, id)| id)
+            .collect();
+        if existing.is_empty() {
+            return Ok(());
+        }
+        for index in 0..scenes {
+            let ids: Vec<String> = match &self.work {
+                Work::Dataset { shots, seed, .. } => (0..*shots)
+                    .map(|k| format!("pool-{seed}-{index:06}-{k:03}"))
+                    .collect(),
+                Work::Replay { .. } => self
+                    .scene_work(index)
+                    .1
+                    .into_iter()
+                    .map(|(id, _)| id)
+                    .collect(),
+            };
+            if let Some(id) = ids.iter().find(|id| existing.contains(*id)) {
+                return Err(StageError::Input(format!(
+                    "trace id {id:?} is already in the run {} (written by another stage); use another seed or run folder",
+                    ctx.run().root().display()
+                )));
+            }
+        }
+        Ok(())
+    }
+
     /// The (scene, shots) pairs of scenes `lo..hi`.
     fn scene_work(&self, index: u64) -> (Scene, Vec<(String, Shot)>) {
         match &self.work {
