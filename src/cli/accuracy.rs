@@ -23,6 +23,9 @@ pub struct Args {
     /// Same-pair contacts closer than this (s) are one event.
     #[arg(long, default_value_t = 0.05)]
     merge: f64,
+    /// Give the detectors the traces without their event log (scoring still uses it).
+    #[arg(long)]
+    hide_events: bool,
     /// Python worker processes (0 = one per core).
     #[arg(long, default_value_t = 0)]
     workers: u64,
@@ -46,6 +49,7 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
     let mut extra = toml::Table::new();
     extra.insert("tolerance".into(), toml::Value::Float(args.tolerance));
     extra.insert("merge".into(), toml::Value::Float(args.merge));
+    extra.insert("hide_events".into(), toml::Value::Boolean(args.hide_events));
     let stage = run_one("accuracy", &a, extra, quiet)?;
     println!("{}", stage.summary["markdown"].as_str().unwrap_or_default());
     println!("{}", stage_line(&stage.summary));
@@ -54,7 +58,14 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
 
 fn stage_line(s: &serde_json::Value) -> String {
     format!(
-        "{} trace(s), tolerance {} s, contacts merged within {} s",
-        s["traces"], s["tolerance"], s["merge"]
+        "{} trace(s), tolerance {} s, contacts merged within {} s{}",
+        s["traces"],
+        s["tolerance"],
+        s["merge"],
+        if s["hide_events"] == true {
+            ", detectors given no event log"
+        } else {
+            ""
+        }
     )
 }

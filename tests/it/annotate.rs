@@ -279,3 +279,20 @@ fn detectors_see_the_paper_dict_whichever_way_the_trace_travels() {
         assert!(t.trace_id != "stepped" || got.contains(r#""state":{"k":[1,2]}"#));
     }
 }
+
+#[test]
+fn without_an_event_log_the_contacts_are_inferred_from_the_timesteps() {
+    let mut pot = straight_pot(2.5, 0.0, 0.01);
+    pot.events.clear();
+    let (_, found) = run_library(&[pot]);
+    let found = &found[0];
+    assert_eq!(count(found, "cue strike"), 1, "{found:?}");
+    let hit: Vec<_> = found.iter().filter(|f| f.0 == "ball collision").collect();
+    assert_eq!(hit.len(), 1, "{found:?}");
+    assert!(hit[0].1.contains(&"9".to_string()) && hit[0].1.contains(&"cue".to_string()));
+    let pocketed: Vec<_> = found.iter().filter(|f| f.0 == "ball pocketed").collect();
+    assert_eq!(pocketed.len(), 1);
+    assert!(pocketed[0].1.contains(&"9".to_string()));
+    assert_eq!(count(found, "cushion rebound"), 0, "{found:?}");
+    assert!(count(found, "rolling ball") >= 1 && count(found, "sliding ball") >= 1);
+}

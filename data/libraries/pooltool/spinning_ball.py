@@ -108,7 +108,10 @@ def _episodes(trace, starts, ends, state_name):
             out.append((b, t0, t_end))
         out.sort(key=lambda x: (x[1], x[0]))
         return out
+    # From frames, the state changed somewhere between two samples: an episode runs from the sample
+    # before its first frame to the first sample after it, the narrowest span that holds both changes.
     runs = {}
+    t_prev = None
     for s in trace.get("timesteps", []):
         t = float(s.get("t", 0.0))
         seen = set()
@@ -117,14 +120,15 @@ def _episodes(trace, starts, ends, state_name):
             seen.add(b)
             if o.get("motion_state") == state_name:
                 if b not in runs:
-                    runs[b] = [t, t]
+                    runs[b] = [t if t_prev is None else t_prev, t]
                 runs[b][1] = t
             elif b in runs:
                 t0, t1 = runs.pop(b)
-                out.append((b, t0, t1))
+                out.append((b, t0, t))
         for b in [b for b in runs if b not in seen]:
             t0, t1 = runs.pop(b)
-            out.append((b, t0, t1))
+            out.append((b, t0, t))
+        t_prev = t
     for b, (t0, t1) in runs.items():
         out.append((b, t0, t1))
     out.sort(key=lambda x: (x[1], x[0]))

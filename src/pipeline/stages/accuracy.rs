@@ -24,7 +24,7 @@ use crate::pipeline::params::{ParamSpec, ParamType};
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
-use crate::trace::Env;
+use crate::trace::{Env, Trace};
 
 const PARAMS: &[ParamSpec] = &[
     SANDBOX_PARAMS[0],
@@ -43,6 +43,13 @@ const PARAMS: &[ParamSpec] = &[
         ParamType::Float,
         "0.05",
         "contacts of the same pair (or ball and cushion) closer than this (s) are one event",
+    ),
+    ParamSpec::optional(
+        "hide_events",
+        ParamType::Bool,
+        "false",
+        "give the detectors the traces without their event log (scoring still uses it): measures \
+         what they infer from the timesteps alone",
     ),
     ParamSpec::optional(
         "use_annotations",
@@ -73,6 +80,7 @@ pub static KIND: StageKind = StageKind {
 pub struct AccuracyStage {
     setup: DetectorSetup,
     use_annotations: bool,
+    hide_events: bool,
     tolerance: f64,
     merge: f64,
 }
@@ -101,6 +109,7 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     };
     Ok(Box::new(AccuracyStage {
         use_annotations: def.params["use_annotations"].as_bool().unwrap_or(false),
+        hide_events: def.params["hide_events"].as_bool().unwrap_or(false),
         tolerance: num("tolerance")?,
         merge: num("merge")?,
         setup,
@@ -181,7 +190,18 @@ impl Stage for AccuracyStage {
                         pool = Some(self.setup.pool()?);
                     }
                     let pool = pool.as_ref().expect("just started");
-                    let batch = pool.run(&lib.detectors, &traces);
+                    let batch = if self.hide_events {
+                        let blind: Vec<Trace> = traces
+                            .iter()
+                            .map(|t| Trace {
+                                events: Vec::new(),
+                                ..t.clone()
+                            })
+                            .collect();
+                        pool.run(&lib.detectors, &blind)
+                    } else {
+                        pool.run(&lib.detectors, &traces)
+                    };
                     for (k, v) in status_counts(&batch) {
                         *statuses.entry(k).or_default() += v;
                     }
@@ -222,6 +242,7 @@ impl Stage for AccuracyStage {
                 "traces": n_traces,
                 "tolerance": self.tolerance,
                 "merge": self.merge,
+                "hide_events": self.hide_events,
                 "statuses": statuses,
                 "scores": ordered.iter().map(|s| json!({
                     "label": s.label, "events": s.events, "detections": s.detections,
