@@ -1,8 +1,8 @@
 //! Simulation environments that produce traces: one module per environment behind [`Environment`].
 //!
 //! **Owns:** the [`Environment`] trait (scenes, action validation, simulate → [`Trace`], success,
-//! rendering) and its implementations: [`pool`] (billiards, pooltool 0.6.0 physics). PHYRE and I-PHYRE
-//! arrive later as `phyre/` and `iphyre/`.
+//! rendering) and its implementations: [`pool`] (billiards, pooltool 0.6.0 physics) and [`iphyre`]
+//! (I-PHYRE on rapier2d). PHYRE arrives later as `phyre/`.
 //! **Does not:** write run folders or order stages (`pipeline/`), parse command lines (`cli/`). It uses
 //! only [`crate::trace`] below it.
 //!
@@ -16,6 +16,7 @@
 //! assert_eq!(trace.events[1].kind, "physics_stick_ball");
 //! ```
 
+pub mod iphyre;
 pub mod pool;
 
 use crate::trace::{Env, Trace};
@@ -50,6 +51,9 @@ pub enum EnvError {
     /// A billiards scene, shot or simulation failed.
     #[error(transparent)]
     Pool(#[from] pool::PoolError),
+    /// An I-PHYRE game, click list or simulation failed.
+    #[error(transparent)]
+    Iphyre(#[from] iphyre::IphyreError),
     /// Rendering failed.
     #[error("rendering: {0}")]
     Render(String),

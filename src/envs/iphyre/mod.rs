@@ -1,0 +1,46 @@
+//! I-PHYRE (interactive physical reasoning, Li et al. ICLR 2024): 40 games of capsule blocks and balls on
+//! a 600×600 screen, where an agent removes eliminable blocks at chosen times so that every ball falls out
+//! of the bottom. Re-implemented on rapier2d after iphyre 0.2.3 (pymunk 6.11.1), following
+//! `shared/reference/phyre-iphyre.md` §2 and §5.
+//!
+//! **Owns:** the games as data ([`Games`], default `data/games/iphyre_games.json`), the physics constants
+//! ([`PhysicsParams`]), the rapier2d world ([`World`]: bodies, capsules, rods, springs, contact events),
+//! clicks and their quirks ([`Click`], [`ClickSchedule`], the discrete adapter [`click_block`]), the
+//! episode loop ([`Episode`] in `step.rs`), success and reward ([`success`]), and the conversion into an
+//! annotrace [`Trace`](crate::trace::Trace) ([`trace_of`]).
+//! **Does not:** write Parquet or run stages (`pipeline/`), read argv, print, or compare against pymunk
+//! (fidelity and speed checks are separate work). rapier handles never leave this module: the
+//! boundary speaks in the games' object indices.
+//!
+//! **Entry point:** [`IphyreEnv`] (the [`Environment`](super::Environment) implementation), or an episode
+//! directly:
+//!
+//! ```
+//! use annotrace::envs::iphyre::{Games, PhysicsParams, click_block, play};
+//! let games = Games::default_games().unwrap();
+//! let support = games.get("support").unwrap();
+//! // Remove both eliminable blocks at 0.5 s (one per step); the ball falls out of the screen.
+//! let clicks = [click_block(support, 0, 0.5).unwrap(), click_block(support, 1, 0.5).unwrap()];
+//! let result = play(support, &clicks, &PhysicsParams::with_fps(10.0)).unwrap();
+//! assert!(result.success);
+//! assert_eq!(result.eliminations, 2);
+//! ```
+
+pub mod action;
+mod env;
+mod error;
+mod game;
+mod params;
+mod step;
+pub mod success;
+pub mod to_trace;
+mod world;
+
+pub use action::{Click, ClickSchedule, Due, SCREEN, click_block, hits_block, validate_clicks};
+pub use env::IphyreEnv;
+pub use error::{IphyreError, Result};
+pub use game::{DEFAULT_GAMES_JSON, FOLDS, Game, GameObject, Games, ObjectKind};
+pub use params::PhysicsParams;
+pub use step::{Episode, EpisodeEvent, EpisodeResult, Frame, play};
+pub use to_trace::trace_of;
+pub use world::{ContactChange, ObjectState, World};

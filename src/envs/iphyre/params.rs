@@ -1,0 +1,136 @@
+//! [`PhysicsParams`]: I-PHYRE's physics constants as one knob struct (reference §2.3).
+
+use super::error::{IphyreError, Result};
+
+/// I-PHYRE's physics constants. [`Default`] gives iphyre 0.2.3's values (pymunk 6.11.1 / Chipmunk 7.0.3),
+/// in screen pixels (600×600, y down) and seconds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PhysicsParams {
+    /// Downward gravity (px/s²): 100.
+    pub gravity: f64,
+    /// Physics steps per second; one step per frame, no substeps: 60 (the gym wrappers and DeepPHY use 10).
+    pub fps: f64,
+    /// Episode length (s): 15.
+    pub max_time: f64,
+    /// Per-shape friction coefficient: 0.5. Chipmunk multiplies the two shapes' values, so the effective
+    /// contact friction is 0.25; the world sets rapier's `Multiply` combine rule to match.
+    pub friction: f64,
+    /// Per-shape elasticity: 0.1 (effective restitution 0.01 by the same product rule).
+    pub restitution: f64,
+    /// Block capsule radius (px): 10.
+    pub block_radius: f64,
+    /// Mass of every ball, whatever its radius: 1 (inertia r²/2).
+    pub ball_mass: f64,
+    /// Mass of a dynamic block: 1.
+    pub block_mass: f64,
+    /// Rotational inertia of a dynamic block: `moment_for_segment(1, (0,0), (0,0), 10)` = 66.67,
+    /// independent of its length (an I-PHYRE quirk kept on purpose, reference §2.3).
+    pub block_inertia: f64,
+    /// Spring rest length (px): 20.
+    pub spring_rest_length: f64,
+    /// Spring stiffness (force per px): 1.
+    pub spring_stiffness: f64,
+    /// Spring damping (force per px/s): 0.3.
+    pub spring_damping: f64,
+    /// Solver iterations per step: 10 (Chipmunk's default `Space.iterations`).
+    pub solver_iterations: usize,
+    /// rapier's `length_unit` (its tolerances assume metre-sized objects; I-PHYRE objects are ~100 px).
+    pub length_unit: f64,
+}
+
+impl Default for PhysicsParams {
+    fn default() -> Self {
+        PhysicsParams {
+            gravity: 100.0,
+            fps: 60.0,
+            max_time: 15.0,
+            friction: 0.5,
+            restitution: 0.1,
+            block_radius: 10.0,
+            ball_mass: 1.0,
+            block_mass: 1.0,
+            block_inertia: 1.0 * 10.0 * 10.0 * 2.0 / 3.0,
+            spring_rest_length: 20.0,
+            spring_stiffness: 1.0,
+            spring_damping: 0.3,
+            solver_iterations: 10,
+            length_unit: 100.0,
+        }
+    }
+}
+
+impl PhysicsParams {
+    /// The defaults at another frame rate (the gym wrappers' and DeepPHY's 10 fps, for instance).
+    pub fn with_fps(fps: f64) -> Self {
+        PhysicsParams {
+            fps,
+            ..PhysicsParams::default()
+        }
+    }
+
+    /// The time step `1 / fps` (s).
+    pub fn dt(&self) -> f64 {
+        1.0 / self.fps
+    }
+
+    /// Checks every value is finite and in range.
+    pub fn validate(&self) -> Result<()> {
+        let positive = [
+            ("fps", self.fps),
+            ("max_time", self.max_time),
+            ("block_radius", self.block_radius),
+            ("ball_mass", self.ball_mass),
+            ("block_mass", self.block_mass),
+            ("block_inertia", self.block_inertia),
+            ("length_unit", self.length_unit),
+        ];
+        let non_negative = [
+            ("gravity", self.gravity.abs()),
+            ("friction", self.friction),
+            ("restitution", self.restitution),
+            ("spring_rest_length", self.spring_rest_length),
+            ("spring_stiffness", self.spring_stiffness),
+            ("spring_damping", self.spring_damping),
+        ];
+        for (field, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(IphyreError::InvalidParams {
+                    field,
+                    message: format!("{v} is not a positive number"),
+                });
+            }
+        }
+        for (field, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(IphyreError::InvalidParams {
+                    field,
+                    message: format!("{v} is not a finite non-negative number"),
+                });
+            }
+        }
+        if self.solver_iterations == 0 {
+            return Err(IphyreError::InvalidParams {
+                field: "solver_iterations",
+                message: "must be at least 1".into(),
+            });
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_iphyres() {
+        let p = PhysicsParams::default();
+        assert!((p.block_inertia - 66.67).abs() < 0.01);
+        assert!((p.dt() - 1.0 / 60.0).abs() < 1e-15);
+        assert!((p.friction * p.friction - 0.25).abs() < 1e-12);
+        assert!((p.restitution * p.restitution - 0.01).abs() < 1e-12);
+        p.validate().unwrap();
+        assert!(PhysicsParams::with_fps(0.0).validate().is_err());
+        assert!(PhysicsParams::with_fps(f64::NAN).validate().is_err());
+    }
+}

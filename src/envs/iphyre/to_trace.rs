@@ -1,0 +1,202 @@
+//! Conversion of an [`EpisodeResult`] into an annotrace [`Trace`] in the paper's I-PHYRE layout
+//! (reference §2.6 and §2.8): one timestep per physics step, objects as
+//! `index, x1, y1, x2, y2, radius, eliminable, dynamic, joint, spring` plus `angle, vx, vy,
+//! angular_velocity`; removed objects disappear from later timesteps.
+//!
+//! Events, each with a payload whose `agents` lists the object ids involved (decimal object indices,
+//! as [`crate::trace::Object::object_id`] spells them):
+//! `scheduled_action` (t = the click time; `x`, `y`), `action_ignored_t0`, `action_applied` (t = the time
+//! counter; `x`, `y`, `t_scheduled`, `step`, `eliminated_object` or null, `effective`),
+//! `contact_begin` / `contact_end` (`objects`, `step`), `ball_exit` (`object`, `step`) and `success`
+//! (`step`).
+
+use serde_json::{Value, json};
+
+use super::game::Game;
+use super::step::{EpisodeEvent, EpisodeResult};
+use crate::trace::{Body, Env, Event, IphyreObject, JsonMap, Object, Outcome, Timestep, Trace};
+
+fn map(v: Value) -> JsonMap {
+    match v {
+        Value::Object(m) => m,
+        _ => JsonMap::new(),
+    }
+}
+
+fn event(kind: &str, t: f64, payload: Value) -> Event {
+    Event {
+        kind: kind.to_string(),
+        t: Some(t),
+        payload: Some(payload),
+        extra: JsonMap::new(),
+    }
+}
+
+/// The trace of `result`, played on `game`, named `trace_id`.
+pub fn trace_of(result: &EpisodeResult, game: &Game, trace_id: &str) -> Trace {
+    let timesteps = result
+        .frames
+        .iter()
+        .map(|f| Timestep {
+            index: f.step as i64,
+            t: f.t,
+            objects: f
+                .objects
+                .iter()
+                .map(|s| {
+                    let o = &game.objects[s.index];
+                    Object {
+                        body: Body::Iphyre(IphyreObject {
+                            index: s.index as i64,
+                            x1: s.p1[0],
+                            y1: s.p1[1],
+                            x2: s.p2[0],
+                            y2: s.p2[1],
+                            radius: o.radius,
+                            eliminable: if o.eliminable { 1.0 } else { 0.0 },
+                            dynamic: if o.dynamic { 1.0 } else { 0.0 },
+                            joint: o.joint,
+                            spring: o.spring,
+                            angle: Some(s.angle),
+                            vx: Some(s.velocity[0]),
+                            vy: Some(s.velocity[1]),
+                            angular_velocity: Some(s.angular_velocity),
+                        }),
+                        extra: JsonMap::new(),
+                    }
+                })
+                .collect(),
+            extra: JsonMap::new(),
+        })
+        .collect();
+    let ids = |objects: &[usize]| objects.iter().map(|i| i.to_string()).collect::<Vec<_>>();
+    let events = result
+        .events
+        .iter()
+        .map(|e| match e {
+            EpisodeEvent::ScheduledAction(c) => event(
+                "scheduled_action",
+                c.t,
+                json!({"agents": [], "x": c.x, "y": c.y}),
+            ),
+            EpisodeEvent::ActionIgnoredT0(c) => event(
+                "action_ignored_t0",
+                c.t,
+                json!({"agents": [], "x": c.x, "y": c.y}),
+            ),
+            EpisodeEvent::ActionApplied {
+                step,
+                t,
+                click,
+                block,
+            } => event(
+                "action_applied",
+                *t,
+                json!({
+                    "agents": block.map(|b| ids(&[b])).unwrap_or_default(),
+                    "step": step, "x": click.x, "y": click.y, "t_scheduled": click.t,
+                    "eliminated_object": block, "effective": block.is_some(),
+                }),
+            ),
+            EpisodeEvent::ContactBegin { step, t, objects } => event(
+                "contact_begin",
+                *t,
+                json!({"agents": ids(objects), "objects": objects, "step": step}),
+            ),
+            EpisodeEvent::ContactEnd { step, t, objects } => event(
+                "contact_end",
+                *t,
+                json!({"agents": ids(objects), "objects": objects, "step": step}),
+            ),
+            EpisodeEvent::BallExit { step, t, object } => event(
+                "ball_exit",
+                *t,
+                json!({"agents": ids(&[*object]), "object": object, "step": step}),
+            ),
+            EpisodeEvent::Success { step, t } => {
+                let balls: Vec<usize> = game.balls().map(|b| b.index).collect();
+                event("success", *t, json!({"agents": ids(&balls), "step": step}))
+            }
+        })
+        .collect();
+    let success_time = result.events.iter().find_map(|e| match e {
+        EpisodeEvent::Success { t, .. } => Some(*t),
+        _ => None,
+    });
+    let outcome = Outcome {
+        success: result.success,
+        terminal_status: if result.success { "success" } else { "timeout" }.to_string(),
+        metrics: map(json!({
+            "success_time_s": success_time,
+            "steps_simulated": result.steps,
+            "sim_time_s": result.time,
+            "effective_eliminations": result.eliminations,
+            "reward": result.reward,
+            "fps": result.fps,
+        })),
+        extra: JsonMap::new(),
+    };
+    let clicks: Vec<Value> = result
+        .clicks
+        .iter()
+        .map(|c| json!({"x": c.x, "y": c.y, "t": c.t}))
+        .collect();
+    Trace {
+        trace_id: trace_id.to_string(),
+        env: Env::Iphyre,
+        task_id: game.name.clone(),
+        timesteps,
+        events,
+        outcome,
+        extra: map(json!({
+            "task_index": game.index,
+            "fold": game.fold,
+            "actions": clicks,
+            "simulator": {"engine": "rapier2d", "fps": result.fps, "screen": [600, 600]},
+        })),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::envs::iphyre::action::click_block;
+    use crate::envs::iphyre::game::Games;
+    use crate::envs::iphyre::params::PhysicsParams;
+    use crate::envs::iphyre::step::play;
+
+    #[test]
+    fn trace_has_the_iphyre_layout_and_events() {
+        let games = Games::default_games().unwrap();
+        let g = games.get("support").unwrap();
+        let clicks = [
+            click_block(g, 0, 0.5).unwrap(),
+            click_block(g, 1, 0.5).unwrap(),
+        ];
+        let r = play(g, &clicks, &PhysicsParams::with_fps(10.0)).unwrap();
+        let tr = trace_of(&r, g, "support-test");
+        assert_eq!(tr.env, Env::Iphyre);
+        assert_eq!(tr.timesteps.len(), r.steps + 1);
+        assert_eq!(tr.timesteps[0].objects.len(), 3);
+        assert_eq!(tr.timesteps.last().unwrap().objects.len(), 1);
+        let Body::Iphyre(ball) = &tr.timesteps[0].objects[2].body else {
+            panic!("not an I-PHYRE body");
+        };
+        assert_eq!(
+            (ball.index, ball.x1, ball.y1, ball.radius),
+            (2, 250.0, 340.0, 20.0)
+        );
+        let kinds: Vec<&str> = tr.events.iter().map(|e| e.kind.as_str()).collect();
+        assert_eq!(&kinds[..2], ["scheduled_action", "scheduled_action"]);
+        assert!(kinds.contains(&"action_applied") && kinds.contains(&"ball_exit"));
+        assert_eq!(kinds.last(), Some(&"success"));
+        let applied = tr
+            .events
+            .iter()
+            .find(|e| e.kind == "action_applied")
+            .unwrap();
+        assert_eq!(applied.payload.as_ref().unwrap()["agents"], json!(["0"]));
+        assert!(tr.outcome.success);
+        assert_eq!(tr.outcome.metrics["effective_eliminations"], json!(2));
+    }
+}
