@@ -5,8 +5,8 @@
 //!
 //! **Owns:** the games as data ([`Games`], default `data/games/iphyre_games.json`), the physics constants
 //! ([`PhysicsParams`]), the rapier2d world ([`World`]: bodies, capsules, rods, springs, contact events),
-//! clicks and their quirks ([`Click`], [`ClickSchedule`], the discrete adapter [`click_block`]), the
-//! episode loop ([`Episode`] in `step.rs`), success and reward ([`success`]), and the conversion into an
+//! clicks and their quirks ([`Click`], [`ClickSchedule`], the discrete adapter [`click_block`], seeded
+//! random click sets [`random_clicks`]), the episode loop ([`Episode`] in `step.rs`), success and reward ([`success`]), and the conversion into an
 //! annotrace [`Trace`](crate::trace::Trace) ([`trace_of`]).
 //! **Does not:** write Parquet or run stages (`pipeline/`), read argv, print, or compare against pymunk
 //! (fidelity and speed checks are separate work). rapier handles never leave this module: the
@@ -31,6 +31,7 @@ mod env;
 mod error;
 mod game;
 mod params;
+mod sample;
 mod step;
 pub mod success;
 pub mod to_trace;
@@ -41,6 +42,7 @@ pub use env::IphyreEnv;
 pub use error::{IphyreError, Result};
 pub use game::{DEFAULT_GAMES_JSON, FOLDS, Game, GameObject, Games, ObjectKind};
 pub use params::PhysicsParams;
+pub use sample::{MAX_TENTHS, SKIP_PROBABILITY, clicks_rng, random_clicks};
 pub use step::{Episode, EpisodeEvent, EpisodeResult, Frame, play};
 pub use to_trace::trace_of;
 pub use world::{ContactChange, ObjectState, World};

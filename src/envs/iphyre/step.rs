@@ -406,6 +406,48 @@ mod tests {
     }
 
     #[test]
+    fn every_game_plays_to_the_end_with_finite_states() {
+        // Robustness, not fidelity: each game, every eliminable block clicked (0.5 s apart from 0.5 s),
+        // at the gym wrappers' 10 fps. Every frame must stay finite and the record must be consistent.
+        let games = Games::default_games().unwrap();
+        let params = PhysicsParams::with_fps(10.0);
+        for g in games.all() {
+            let clicks: Vec<Click> = (0..g.eliminable().count())
+                .map(|k| click_block(g, k, 0.5 * (k + 1) as f64).unwrap())
+                .collect();
+            let r = play(g, &clicks, &params).unwrap();
+            assert_eq!(r.frames.len(), r.steps + 1, "{}", g.name);
+            assert!(r.steps <= 151, "{}: {} steps", g.name, r.steps);
+            assert!(r.eliminations <= clicks.len(), "{}", g.name);
+            for f in &r.frames {
+                for o in &f.objects {
+                    let values = [
+                        o.p1[0],
+                        o.p1[1],
+                        o.p2[0],
+                        o.p2[1],
+                        o.angle,
+                        o.velocity[0],
+                        o.velocity[1],
+                    ];
+                    assert!(
+                        values.iter().all(|v| v.is_finite()),
+                        "{} step {}: {o:?}",
+                        g.name,
+                        f.step
+                    );
+                }
+            }
+            assert_eq!(
+                r.success,
+                matches!(r.events.last(), Some(EpisodeEvent::Success { .. })),
+                "{}",
+                g.name
+            );
+        }
+    }
+
+    #[test]
     fn bad_clicks_are_errors_not_panics() {
         let g = support();
         let err = play(
