@@ -199,4 +199,36 @@ mod tests {
         assert!(tr.outcome.success);
         assert_eq!(tr.outcome.metrics["effective_eliminations"], json!(2));
     }
+
+    #[test]
+    fn trace_fits_the_trace_tables() {
+        let games = Games::default_games().unwrap();
+        let g = games.get("pendulum").unwrap();
+        let clicks = [
+            click_block(g, 0, 1.0).unwrap(),
+            click_block(g, 1, 2.0).unwrap(),
+        ];
+        let r = play(g, &clicks, &PhysicsParams::with_fps(10.0)).unwrap();
+        let tr = trace_of(&r, g, "pendulum-test");
+        let mut builder = crate::trace::TraceBatchBuilder::new();
+        for ts in &tr.timesteps {
+            builder.push_timestep(ts);
+        }
+        let b = builder
+            .finish(&crate::trace::TraceMeta {
+                trace_id: &tr.trace_id,
+                scene_id: &tr.task_id,
+                task_id: &tr.task_id,
+                events: &tr.events,
+                outcome: &tr.outcome,
+                extra: &tr.extra,
+                source: "test",
+            })
+            .unwrap();
+        let objects: usize = tr.timesteps.iter().map(|t| t.objects.len()).sum();
+        assert_eq!(b.traces.num_rows(), 1);
+        assert_eq!(b.timesteps.num_rows(), tr.timesteps.len());
+        assert_eq!(b.frames.num_rows(), objects);
+        assert_eq!(b.events.num_rows(), tr.events.len());
+    }
 }
