@@ -94,10 +94,12 @@ impl World {
     /// Builds the bodies, colliders and constraints of `game` in its initial state.
     pub fn new(game: &Game, params: &PhysicsParams) -> Result<World> {
         params.validate()?;
-        let mut integration = IntegrationParameters::default();
-        integration.dt = params.dt() as f32;
-        integration.num_solver_iterations = params.solver_iterations;
-        integration.length_unit = params.length_unit as f32;
+        let integration = IntegrationParameters {
+            dt: params.dt() as f32,
+            num_solver_iterations: params.solver_iterations,
+            length_unit: params.length_unit as f32,
+            ..IntegrationParameters::default()
+        };
 
         let mut bodies = RigidBodySet::new();
         let mut colliders = ColliderSet::new();
