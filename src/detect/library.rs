@@ -12,7 +12,13 @@
 //! file = "cue_strike.py"        # defines find_pattern(trace)
 //! aliases = ["stick strike"]    # optional: other spellings the validator accepts
 //! weight = 1.0                  # optional: its value in the annotation matrix
+//! prelude = ["_contacts.py"]     # optional: helper files prepended to this detector only
 //! ```
+//!
+//! `[library] prelude = [...]` lists helper files prepended to every detector. Detectors cannot import,
+//! so shared helpers live in prelude files; the loaded code (library preludes, then the detector's, then
+//! its file) is what runs, is hashed into the detector id and is stored, so every detector stays
+//! self-contained. Line numbers in its errors count from the top of that combined code.
 //!
 //! Several detectors may share a label (an ensemble). Unknown keys are errors, so a typo does not pass
 //! silently.
@@ -63,6 +69,8 @@ struct Header {
     env: String,
     #[serde(default)]
     description: String,
+    #[serde(default)]
+    prelude: Vec<String>,
 }
 
 #[derive(Deserialize)]
@@ -74,6 +82,8 @@ struct Entry {
     aliases: Vec<String>,
     #[serde(default = "one")]
     weight: f64,
+    #[serde(default)]
+    prelude: Vec<String>,
 }
 
 fn one() -> f64 {
@@ -116,6 +126,15 @@ impl Library {
         if m.detectors.is_empty() {
             return Err(bad("the library lists no [[detector]]".into()));
         }
+        let read = |name: &str| {
+            let file = dir.join(name);
+            std::fs::read_to_string(&file).map_err(|source| LibraryError::Io { path: file, source })
+        };
+        let mut shared = String::new();
+        for name in &m.library.prelude {
+            shared.push_str(&read(name)?);
+            shared.push_str("\n\n");
+        }
         let mut detectors = Vec::with_capacity(m.detectors.len());
         for e in m.detectors {
             if e.label.trim().is_empty() {
@@ -130,11 +149,12 @@ impl Library {
                     e.label
                 )));
             }
-            let file = dir.join(&e.file);
-            let code = std::fs::read_to_string(&file).map_err(|source| LibraryError::Io {
-                path: file.clone(),
-                source,
-            })?;
+            let mut code = shared.clone();
+            for name in &e.prelude {
+                code.push_str(&read(name)?);
+                code.push_str("\n\n");
+            }
+            code.push_str(&read(&e.file)?);
             detectors.push(Detector {
                 id: DetectorId::of(env, &e.label, &code),
                 label: e.label,
