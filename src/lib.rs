@@ -15,8 +15,10 @@
 
 pub mod detect;
 pub mod envs;
+pub mod fitness;
 pub mod pipeline;
 pub mod query;
+pub mod search;
 pub mod store;
 pub mod trace;
 
