@@ -18,6 +18,7 @@ pub mod envs;
 pub mod fitness;
 pub mod pipeline;
 pub mod query;
+pub mod reward;
 pub mod search;
 pub mod store;
 pub mod trace;

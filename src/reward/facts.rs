@@ -1,0 +1,295 @@
+//! The annotated trace a reward program reads: the library's pattern occurrences by label, plus the
+//! facts the environment knows from the trace itself (billiards: the first ball the cue ball hits),
+//! object lookup by colour and shape, and positions at a normalised time.
+
+use std::collections::HashMap;
+
+use serde_json::{Map, Value};
+
+use super::error::{ErrorCategory, Pos, RewardError};
+use crate::detect::{Annotation, normalise_label};
+use crate::trace::{Body, Env, Trace};
+
+/// One occurrence of a pattern or built-in event.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Occurrence {
+    /// Start time (s): the time of its first timestep.
+    pub t0: f64,
+    /// End time (s).
+    pub t1: f64,
+    /// The objects it names; the first is its subject (`ball=`).
+    pub objects: Vec<String>,
+    /// Its parameters.
+    pub params: Map<String, Value>,
+}
+
+/// A trace with its annotations, ready for evaluation.
+#[derive(Debug)]
+pub struct AnnotatedTrace<'a> {
+    /// The trace.
+    pub trace: &'a Trace,
+    by_label: HashMap<String, Vec<Occurrence>>,
+    cue_hit: Option<(String, Occurrence)>,
+}
+
+/// Unit length of `NEARBY_AT` thresholds per environment: `threshold_strength × scale` is the radius.
+/// PHYRE scenes are 256 px wide, I-PHYRE screens 600 px; billiards positions are table metres, so a
+/// threshold of 0.1 is 10 cm.
+pub fn nearby_scale(env: Env) -> f64 {
+    match env {
+        Env::Pooltool => 1.0,
+        Env::Phyre => 256.0,
+        Env::Iphyre => 600.0,
+    }
+}
+
+/// The time of the last timestep at or before `t` (the first timestep's time when `t` is earlier):
+/// how the detectors place an instant on the trace's clock.
+fn snap(trace: &Trace, t: f64) -> f64 {
+    let i = trace.timesteps.partition_point(|s| s.t <= t);
+    trace
+        .timesteps
+        .get(i.saturating_sub(1))
+        .map(|s| s.t)
+        .unwrap_or(t)
+}
+
+impl<'a> AnnotatedTrace<'a> {
+    /// Indexes `annotations` (those of other traces are ignored) and derives the built-in facts.
+    pub fn new<'b>(
+        trace: &'a Trace,
+        annotations: impl IntoIterator<Item = &'b Annotation>,
+    ) -> Self {
+        let mut by_label: HashMap<String, Vec<Occurrence>> = HashMap::new();
+        for a in annotations {
+            if a.trace_id != trace.trace_id {
+                continue;
+            }
+            by_label
+                .entry(normalise_label(&a.label))
+                .or_default()
+                .push(Occurrence {
+                    t0: a.t_start,
+                    t1: a.t_end,
+                    objects: a.objects.clone(),
+                    params: a.parameters.clone(),
+                });
+        }
+        for v in by_label.values_mut() {
+            v.sort_by(|x, y| x.t0.total_cmp(&y.t0));
+        }
+        let cue_hit = if trace.env == Env::Pooltool {
+            first_cue_contact(trace).or_else(|| {
+                // No event log: the earliest annotated collision that involves the cue ball.
+                let cue = cue_ball(trace);
+                by_label.get("ball collision").and_then(|v| {
+                    v.iter().find(|o| o.objects.contains(&cue)).and_then(|o| {
+                        let other = o.objects.iter().find(|x| **x != cue)?.clone();
+                        Some((other, o.clone()))
+                    })
+                })
+            })
+        } else {
+            None
+        };
+        AnnotatedTrace {
+            trace,
+            by_label,
+            cue_hit,
+        }
+    }
+
+    /// Occurrences of a (canonical) label, in start order.
+    pub fn occurrences(&self, label: &str) -> &[Occurrence] {
+        self.by_label
+            .get(&normalise_label(label))
+            .map(Vec::as_slice)
+            .unwrap_or(&[])
+    }
+
+    /// The first ball the cue ball touches, and that contact as an occurrence.
+    pub fn cue_hit(&self) -> Option<&(String, Occurrence)> {
+        self.cue_hit.as_ref()
+    }
+
+    /// The id of the object of `color` and `shape` in the trace's first timestep.
+    pub fn object_id(&self, color: &str, shape: &str, pos: Pos) -> Result<String, RewardError> {
+        let color = color.trim().to_lowercase();
+        let shape = shape.trim().to_lowercase();
+        let first = self.trace.timesteps.first().map(|t| t.objects.as_slice());
+        let present = |id: &str| {
+            first
+                .into_iter()
+                .flatten()
+                .any(|o| o.body.object_id() == id)
+        };
+        let found = match self.trace.env {
+            Env::Pooltool => pool_ball_of(&color, &shape)
+                .into_iter()
+                .find(|id| present(id))
+                .map(str::to_string),
+            _ => first.into_iter().flatten().find_map(|o| match &o.body {
+                Body::Phyre(p) => (p.color.eq_ignore_ascii_case(&color)
+                    && shape_matches(&p.shape, &shape))
+                .then(|| o.body.object_id()),
+                Body::Iphyre(p) => {
+                    let is_ball = p.x1 == p.x2 && p.y1 == p.y2;
+                    let c = if is_ball {
+                        "red"
+                    } else if p.eliminable > 0.5 {
+                        "gray"
+                    } else if p.dynamic > 0.5 {
+                        "blue"
+                    } else {
+                        "black"
+                    };
+                    let s = if is_ball { "ball" } else { "block" };
+                    (colour_eq(c, &color) && shape_matches(s, &shape)).then(|| o.body.object_id())
+                }
+                Body::Pool(_) => None,
+            }),
+        };
+        found.ok_or_else(|| {
+            RewardError::new(
+                ErrorCategory::Runtime,
+                pos,
+                format!(
+                    "OBJECT_ID: no {color} {shape} in trace {} ({})",
+                    self.trace.trace_id, self.trace.env
+                ),
+            )
+        })
+    }
+
+    /// The planar position of object `id` at normalised time `t` in [0, 1] (the last timestep at or
+    /// before that instant).
+    pub fn position_at(&self, id: &str, t: f64, pos: Pos) -> Result<(f64, f64), RewardError> {
+        let steps = &self.trace.timesteps;
+        let missing = || {
+            RewardError::new(
+                ErrorCategory::Runtime,
+                pos,
+                format!(
+                    "NEARBY_AT: no object {id:?} in trace {}",
+                    self.trace.trace_id
+                ),
+            )
+        };
+        let (Some(a), Some(b)) = (steps.first(), steps.last()) else {
+            return Err(missing());
+        };
+        let at = a.t + t.clamp(0.0, 1.0) * (b.t - a.t);
+        let i = steps
+            .partition_point(|s| s.t <= at + 1e-9)
+            .saturating_sub(1);
+        steps[i]
+            .objects
+            .iter()
+            .find(|o| o.body.object_id() == id)
+            .map(|o| o.body.centre())
+            .ok_or_else(missing)
+    }
+}
+
+fn colour_eq(a: &str, b: &str) -> bool {
+    let n = |s: &str| {
+        if s == "grey" {
+            "gray".to_string()
+        } else {
+            s.to_string()
+        }
+    };
+    n(a) == n(b)
+}
+
+fn shape_matches(have: &str, want: &str) -> bool {
+    let canon = |s: &str| match s {
+        "circle" | "ball" | "disc" => "ball".to_string(),
+        "bar" | "block" | "rod" | "stick" | "rectangle" => "block".to_string(),
+        other => other.to_string(),
+    };
+    canon(&have.to_lowercase()) == canon(want)
+}
+
+/// Pool ball ids by colour: solids 1–8 (yellow, blue, red, purple, orange, green, brown, black) and
+/// stripes 9–15 in the same colour order; the cue ball is white. A shape of `stripe` picks the
+/// striped ball, anything else the solid first.
+fn pool_ball_of(color: &str, shape: &str) -> Vec<&'static str> {
+    const SOLIDS: [(&str, &str, Option<&str>); 8] = [
+        ("yellow", "1", Some("9")),
+        ("blue", "2", Some("10")),
+        ("red", "3", Some("11")),
+        ("purple", "4", Some("12")),
+        ("orange", "5", Some("13")),
+        ("green", "6", Some("14")),
+        ("brown", "7", Some("15")),
+        ("black", "8", None),
+    ];
+    let color = match color {
+        "maroon" | "burgundy" => "brown",
+        "violet" => "purple",
+        c => c,
+    };
+    if color == "white" {
+        return vec!["cue"];
+    }
+    let Some((_, solid, stripe)) = SOLIDS.iter().find(|(c, _, _)| *c == color) else {
+        return Vec::new();
+    };
+    if shape.contains("stripe") {
+        stripe.into_iter().copied().collect()
+    } else {
+        std::iter::once(*solid).chain(*stripe).collect()
+    }
+}
+
+/// The cue ball's id (from the `shot_prepared` event; `cue` when absent).
+pub fn cue_ball(trace: &Trace) -> String {
+    trace
+        .events
+        .iter()
+        .find(|e| e.kind == "shot_prepared")
+        .and_then(|e| {
+            e.payload
+                .as_ref()?
+                .get("cue_ball")?
+                .as_str()
+                .map(str::to_string)
+        })
+        .unwrap_or_else(|| "cue".to_string())
+}
+
+/// The first `physics_ball_ball` event involving the cue ball: the other ball and the contact.
+fn first_cue_contact(trace: &Trace) -> Option<(String, Occurrence)> {
+    let cue = cue_ball(trace);
+    let mut contacts: Vec<(f64, String)> = trace
+        .events
+        .iter()
+        .filter(|e| e.kind == "physics_ball_ball")
+        .filter_map(|e| {
+            let t = e.t?;
+            let agents = e.payload.as_ref()?.get("agents")?.as_array()?;
+            let ids: Vec<&str> = agents.iter().filter_map(Value::as_str).collect();
+            if ids.len() == 2 && ids.contains(&cue.as_str()) {
+                let other = ids.iter().find(|x| **x != cue)?;
+                Some((t, other.to_string()))
+            } else {
+                None
+            }
+        })
+        .collect();
+    contacts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let (t, other) = contacts.into_iter().next()?;
+    let t0 = snap(trace, t);
+    let mut params = Map::new();
+    params.insert("t".into(), Value::from(t));
+    Some((
+        other.clone(),
+        Occurrence {
+            t0,
+            t1: t0,
+            objects: vec![cue, other],
+            params,
+        },
+    ))
+}

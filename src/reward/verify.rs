@@ -1,0 +1,544 @@
+//! Verification rules: hand-written success tests of a goal that read the simulator's event log and
+//! states directly (never detectors), in the same call syntax as the DSL (`docs/reward.md`).
+//!
+//! Event functions give timed occurrences:
+//! - billiards: `FIRST_HIT(b)` (the first ball the cue ball touches is b), `HIT(a, b, state=, min_cut=,
+//!   max_speed=)` (a ball–ball contact of a and b, `"*"` for any ball; a's motion state just before,
+//!   the cut angle in degrees, the approach speed in m/s), `CUSHION(b)` (contacts of b with cushions,
+//!   50 ms bursts merged), `POCKET(b, pocket?)`, `TRANSITION(b, to)` (a motion-state change of b into
+//!   `to`), `CURVE(b)` (between two events of b its heading turns by more than 8° while another ball
+//!   passes within 4 radii without touching it);
+//! - PHYRE / I-PHYRE: `CONTACT(a, b)` (`contact_begin`, `"*"` for any), `EXIT(obj)` (`ball_exit`),
+//!   `SUCCESS()` (the task's success).
+//!
+//! Combinators: `SEQ(e1, e2, …)` (distinct occurrences in time order, each no earlier than the previous),
+//! `ALL(…)`, `ANY(…)`, `NOT(c)`, `NONE(e)` (no occurrence), `AT_LEAST(e, n)`. An event used as a
+//! condition holds when it occurs.
+
+use serde_json::Value;
+
+use super::error::{ErrorCategory, Pos, RewardError};
+use super::facts::cue_ball;
+use super::parser::{Arg, Expr, ExprKind, parse};
+use crate::trace::{Body, Env, Trace};
+
+/// A parsed verification rule.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rule {
+    /// The rule's text.
+    pub source: String,
+    root: Expr,
+}
+
+const EVENTS: &[&str] = &[
+    "FIRST_HIT",
+    "HIT",
+    "CUSHION",
+    "POCKET",
+    "TRANSITION",
+    "CURVE",
+    "CONTACT",
+    "EXIT",
+    "SUCCESS",
+    "SEQ",
+];
+const CONDITIONS: &[&str] = &["ALL", "ANY", "NOT", "NONE", "AT_LEAST"];
+
+fn err(cat: ErrorCategory, pos: Pos, m: impl Into<String>) -> RewardError {
+    RewardError::new(cat, pos, m)
+}
+
+fn name_of(e: &Expr) -> Option<(String, &[Arg])> {
+    match &e.kind {
+        ExprKind::Call { name, args } => Some((name.to_ascii_uppercase(), args.as_slice())),
+        _ => None,
+    }
+}
+
+impl Rule {
+    /// Parses a rule and checks its function names and argument counts.
+    pub fn parse(text: &str) -> Result<Rule, RewardError> {
+        let root = parse(text)?;
+        check(&root)?;
+        Ok(Rule {
+            source: text.to_string(),
+            root,
+        })
+    }
+
+    /// Whether the rule holds on `trace`.
+    pub fn holds(&self, trace: &Trace) -> Result<bool, RewardError> {
+        let v = Verifier::new(trace);
+        v.cond(&self.root)
+    }
+}
+
+fn check(e: &Expr) -> Result<(), RewardError> {
+    let Some((name, args)) = name_of(e) else {
+        return Err(err(
+            ErrorCategory::ArgumentType,
+            e.pos,
+            format!("expected a rule function call, found {}", e.type_name()),
+        ));
+    };
+    let n = args.len();
+    let (lo, hi) = match name.as_str() {
+        "FIRST_HIT" | "CUSHION" | "CURVE" | "EXIT" | "NOT" | "NONE" => (1, 1),
+        "POCKET" => (1, 2),
+        "TRANSITION" | "AT_LEAST" | "CONTACT" => (2, 2),
+        "HIT" => (2, 5),
+        "SUCCESS" => (0, 0),
+        "SEQ" | "ALL" | "ANY" => (1, usize::MAX),
+        _ => {
+            return Err(err(
+                ErrorCategory::UnknownFunction,
+                e.pos,
+                format!(
+                    "unknown verification function `{name}` (events: {}; conditions: {})",
+                    EVENTS.join(", "),
+                    CONDITIONS.join(", ")
+                ),
+            ));
+        }
+    };
+    if n < lo || n > hi {
+        return Err(err(
+            ErrorCategory::Arity,
+            e.pos,
+            format!("{name} takes {lo}..{hi} arguments, found {n}"),
+        ));
+    }
+    for a in args {
+        if matches!(a.value.kind, ExprKind::Call { .. }) {
+            check(&a.value)?;
+        }
+        if let Some((k, p)) = &a.name
+            && !(name == "HIT" && ["state", "min_cut", "max_speed"].contains(&k.as_str()))
+        {
+            return Err(err(
+                ErrorCategory::Arity,
+                *p,
+                format!("{name} has no keyword `{k}`"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// An event instance: time and (for SEQ) its identity.
+type Hit = (f64, usize);
+
+struct Verifier<'a> {
+    trace: &'a Trace,
+    cue: String,
+}
+
+fn text(e: &Expr) -> Result<String, RewardError> {
+    match &e.kind {
+        ExprKind::Str(s) => Ok(s.clone()),
+        ExprKind::Num(n) if n.fract() == 0.0 => Ok(format!("{}", *n as i64)),
+        _ => Err(err(
+            ErrorCategory::ArgumentType,
+            e.pos,
+            format!("expected an object id, found {}", e.type_name()),
+        )),
+    }
+}
+
+fn number(e: &Expr) -> Result<f64, RewardError> {
+    match e.kind {
+        ExprKind::Num(n) => Ok(n),
+        _ => Err(err(
+            ErrorCategory::ArgumentType,
+            e.pos,
+            format!("expected a number, found {}", e.type_name()),
+        )),
+    }
+}
+
+fn agents(p: &Option<Value>) -> Vec<String> {
+    p.as_ref()
+        .and_then(|p| p.get("agents"))
+        .and_then(Value::as_array)
+        .map(|a| {
+            a.iter()
+                .filter_map(|x| match x {
+                    Value::String(s) => Some(s.clone()),
+                    Value::Number(n) => Some(n.to_string()),
+                    _ => None,
+                })
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+fn is(id: &str, want: &str) -> bool {
+    want == "*" || id.eq_ignore_ascii_case(want)
+}
+
+impl<'a> Verifier<'a> {
+    fn new(trace: &'a Trace) -> Self {
+        Verifier {
+            trace,
+            cue: cue_ball(trace),
+        }
+    }
+
+    fn require_env(&self, e: &Expr, name: &str, pool: bool) -> Result<(), RewardError> {
+        if (self.trace.env == Env::Pooltool) != pool {
+            return Err(err(
+                ErrorCategory::Runtime,
+                e.pos,
+                format!("{name} does not apply to {} traces", self.trace.env),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Events of `kind` (several kinds allowed) as (index, time, agents).
+    fn events(&self, kinds: &[&str]) -> Vec<(usize, f64, Vec<String>, Option<&Value>)> {
+        self.trace
+            .events
+            .iter()
+            .enumerate()
+            .filter(|(_, e)| kinds.contains(&e.kind.as_str()))
+            .filter_map(|(i, e)| Some((i, e.t?, agents(&e.payload), e.payload.as_ref())))
+            .collect()
+    }
+
+    /// The state of ball `id` at the last timestep at or before `t`.
+    fn ball_at(&self, id: &str, t: f64) -> Option<&crate::trace::PoolBall> {
+        let i = self
+            .trace
+            .timesteps
+            .partition_point(|s| s.t <= t)
+            .saturating_sub(1);
+        self.trace
+            .timesteps
+            .get(i)?
+            .objects
+            .iter()
+            .find_map(|o| match &o.body {
+                Body::Pool(b) if b.ball_id == id => Some(b),
+                _ => None,
+            })
+    }
+
+    fn occurrences(&self, e: &Expr) -> Result<Vec<Hit>, RewardError> {
+        let (name, args) = name_of(e).expect("checked");
+        let arg = |i: usize| text(&args[i].value);
+        let mut out: Vec<Hit> = match name.as_str() {
+            "FIRST_HIT" => {
+                self.require_env(e, &name, true)?;
+                let b = arg(0)?;
+                self.events(&["physics_ball_ball"])
+                    .into_iter()
+                    .find(|(_, _, ids, _)| ids.contains(&self.cue))
+                    .filter(|(_, _, ids, _)| ids.iter().any(|x| *x != self.cue && is(x, &b)))
+                    .map(|(i, t, _, _)| (t, i))
+                    .into_iter()
+                    .collect()
+            }
+            "HIT" => {
+                self.require_env(e, &name, true)?;
+                let (a, b) = (arg(0)?, arg(1)?);
+                let mut state = None;
+                let (mut min_cut, mut max_speed) = (None, None);
+                for x in &args[2..] {
+                    match x.name.as_ref().map(|n| n.0.as_str()) {
+                        Some("state") => state = Some(text(&x.value)?),
+                        Some("min_cut") => min_cut = Some(number(&x.value)?),
+                        Some("max_speed") => max_speed = Some(number(&x.value)?),
+                        _ => {
+                            return Err(err(
+                                ErrorCategory::Arity,
+                                x.value.pos,
+                                "HIT takes two ball ids and the keywords state=, min_cut=, max_speed=",
+                            ));
+                        }
+                    }
+                }
+                let mut hits = Vec::new();
+                for (i, t, ids, payload) in self.events(&["physics_ball_ball"]) {
+                    if ids.len() != 2 {
+                        continue;
+                    }
+                    let (x, y) = if is(&ids[0], &a) && is(&ids[1], &b) {
+                        (&ids[0], &ids[1])
+                    } else if is(&ids[1], &a) && is(&ids[0], &b) {
+                        (&ids[1], &ids[0])
+                    } else {
+                        continue;
+                    };
+                    if let Some(s) = &state
+                        && !self
+                            .ball_at(x, t)
+                            .is_some_and(|ba| ba.motion_state.eq_ignore_ascii_case(s))
+                    {
+                        continue;
+                    }
+                    if let Some(m) = max_speed {
+                        let v = payload
+                            .and_then(|p| p.get("approach_speed"))
+                            .and_then(Value::as_f64)
+                            .map(f64::abs);
+                        if !v.is_some_and(|v| v <= m) {
+                            continue;
+                        }
+                    }
+                    if let Some(m) = min_cut
+                        && !self.cut_angle(x, y, t).is_some_and(|c| c >= m)
+                    {
+                        continue;
+                    }
+                    hits.push((t, i));
+                }
+                hits
+            }
+            "CUSHION" => {
+                self.require_env(e, &name, true)?;
+                let b = arg(0)?;
+                let mut last = f64::NEG_INFINITY;
+                let mut hits = Vec::new();
+                for (i, t, ids, _) in self.events(&[
+                    "physics_ball_linear_cushion",
+                    "physics_ball_circular_cushion",
+                ]) {
+                    if ids.first().is_some_and(|x| is(x, &b)) {
+                        if t - last > 0.05 {
+                            hits.push((t, i));
+                        }
+                        last = t;
+                    }
+                }
+                hits
+            }
+            "POCKET" => {
+                self.require_env(e, &name, true)?;
+                let b = arg(0)?;
+                let pocket = if args.len() > 1 { Some(arg(1)?) } else { None };
+                self.events(&["physics_ball_pocket"])
+                    .into_iter()
+                    .filter(|(_, _, ids, _)| {
+                        ids.first().is_some_and(|x| is(x, &b))
+                            && pocket
+                                .as_ref()
+                                .is_none_or(|p| ids.get(1).is_some_and(|x| is(x, p)))
+                    })
+                    .map(|(i, t, _, _)| (t, i))
+                    .collect()
+            }
+            "TRANSITION" => {
+                self.require_env(e, &name, true)?;
+                let (b, to) = (arg(0)?, arg(1)?);
+                self.trace
+                    .events
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, ev)| ev.kind.starts_with("physics_"))
+                    .filter_map(|(i, ev)| {
+                        let p = ev.payload.as_ref()?;
+                        let ball = p.get("ball")?.as_str()?;
+                        let state = p.get("to")?.as_str()?;
+                        (is(ball, &b) && state.eq_ignore_ascii_case(&to)).then_some((ev.t?, i))
+                    })
+                    .collect()
+            }
+            "CURVE" => {
+                self.require_env(e, &name, true)?;
+                self.curves(&arg(0)?)
+            }
+            "CONTACT" => {
+                self.require_env(e, &name, false)?;
+                let (a, b) = (arg(0)?, arg(1)?);
+                self.events(&["contact_begin"])
+                    .into_iter()
+                    .filter(|(_, _, ids, _)| {
+                        ids.len() == 2
+                            && ((is(&ids[0], &a) && is(&ids[1], &b))
+                                || (is(&ids[1], &a) && is(&ids[0], &b)))
+                    })
+                    .map(|(i, t, _, _)| (t, i))
+                    .collect()
+            }
+            "EXIT" => {
+                self.require_env(e, &name, false)?;
+                let b = arg(0)?;
+                self.events(&["ball_exit"])
+                    .into_iter()
+                    .filter(|(_, _, ids, _)| ids.iter().any(|x| is(x, &b)))
+                    .map(|(i, t, _, _)| (t, i))
+                    .collect()
+            }
+            "SUCCESS" => {
+                let t = self
+                    .trace
+                    .events
+                    .iter()
+                    .enumerate()
+                    .find(|(_, ev)| ev.kind == "success")
+                    .and_then(|(i, ev)| Some((ev.t?, i)));
+                match t {
+                    Some(h) => vec![h],
+                    None if self.trace.outcome.success => {
+                        vec![(
+                            self.trace.timesteps.last().map(|s| s.t).unwrap_or(0.0),
+                            usize::MAX,
+                        )]
+                    }
+                    None => Vec::new(),
+                }
+            }
+            "SEQ" => {
+                let mut prev: Option<Hit> = None;
+                let mut used: Vec<(usize, f64, usize)> = Vec::new();
+                for (k, a) in args.iter().enumerate() {
+                    let occ = self.occurrences(&a.value)?;
+                    let next = occ.into_iter().find(|h| {
+                        prev.is_none_or(|p| h.0 >= p.0)
+                            && !used.iter().any(|(_, t, i)| *i == h.1 && *t == h.0)
+                    });
+                    match next {
+                        Some(h) => {
+                            used.push((k, h.0, h.1));
+                            prev = Some(h);
+                        }
+                        None => return Ok(Vec::new()),
+                    }
+                }
+                prev.into_iter().collect()
+            }
+            _ => {
+                return Err(err(
+                    ErrorCategory::ArgumentType,
+                    e.pos,
+                    format!("{name} is a condition, not an event"),
+                ));
+            }
+        };
+        out.sort_by(|x, y| x.0.total_cmp(&y.0));
+        Ok(out)
+    }
+
+    fn cond(&self, e: &Expr) -> Result<bool, RewardError> {
+        let (name, args) = name_of(e).expect("checked");
+        Ok(match name.as_str() {
+            "ALL" => {
+                for a in args {
+                    if !self.cond(&a.value)? {
+                        return Ok(false);
+                    }
+                }
+                true
+            }
+            "ANY" => {
+                for a in args {
+                    if self.cond(&a.value)? {
+                        return Ok(true);
+                    }
+                }
+                false
+            }
+            "NOT" => !self.cond(&args[0].value)?,
+            "NONE" => self.occurrences(&args[0].value)?.is_empty(),
+            "AT_LEAST" => {
+                let n = number(&args[1].value)?;
+                self.occurrences(&args[0].value)?.len() as f64 >= n
+            }
+            _ => !self.occurrences(e)?.is_empty(),
+        })
+    }
+
+    /// The cut angle (degrees) of striker `x` on `y` at contact time `t`: the angle between x's
+    /// velocity and the line of centres, with positions extrapolated from the last timestep.
+    fn cut_angle(&self, x: &str, y: &str, t: f64) -> Option<f64> {
+        let (bx, by) = (self.ball_at(x, t)?, self.ball_at(y, t)?);
+        let i = self
+            .trace
+            .timesteps
+            .partition_point(|s| s.t <= t)
+            .saturating_sub(1);
+        let dt = t - self.trace.timesteps.get(i)?.t;
+        let p = |b: &crate::trace::PoolBall| {
+            [
+                b.position[0] + b.velocity[0] * dt,
+                b.position[1] + b.velocity[1] * dt,
+            ]
+        };
+        let (px, py) = (p(bx), p(by));
+        let n = [py[0] - px[0], py[1] - px[1]];
+        let v = [
+            bx.velocity[0] - by.velocity[0],
+            bx.velocity[1] - by.velocity[1],
+        ];
+        let (nn, vn) = (n[0].hypot(n[1]), v[0].hypot(v[1]));
+        if nn == 0.0 || vn == 0.0 {
+            return None;
+        }
+        let c = ((n[0] * v[0] + n[1] * v[1]) / (nn * vn)).clamp(-1.0, 1.0);
+        Some(c.acos().to_degrees())
+    }
+
+    /// Stretches between consecutive events of `b` where its heading turns by more than 8° while
+    /// another ball comes within 4 radii (without a contact in between, as no event splits it).
+    fn curves(&self, b: &str) -> Vec<Hit> {
+        let mut times: Vec<f64> = self
+            .trace
+            .events
+            .iter()
+            .filter(|e| e.kind.starts_with("physics_"))
+            .filter(|e| agents(&e.payload).iter().any(|x| x == b))
+            .filter_map(|e| e.t)
+            .collect();
+        times.sort_by(f64::total_cmp);
+        let steps = &self.trace.timesteps;
+        let mut out = Vec::new();
+        for w in times.windows(2) {
+            let (t0, t1) = (w[0], w[1]);
+            let inside: Vec<usize> = (0..steps.len())
+                .filter(|&k| steps[k].t > t0 + 1e-9 && steps[k].t < t1 - 1e-9)
+                .collect();
+            if inside.len() < 2 {
+                continue;
+            }
+            let state = |k: usize| {
+                steps[k].objects.iter().find_map(|o| match &o.body {
+                    Body::Pool(p) if p.ball_id == b => Some(p),
+                    _ => None,
+                })
+            };
+            let (Some(s0), Some(s1)) = (state(inside[0]), state(*inside.last().expect("len>=2")))
+            else {
+                continue;
+            };
+            let h = |p: &crate::trace::PoolBall| p.velocity[1].atan2(p.velocity[0]);
+            if s0.velocity[0].hypot(s0.velocity[1]) < 1e-3
+                || s1.velocity[0].hypot(s1.velocity[1]) < 1e-3
+            {
+                continue;
+            }
+            let mut turn = (h(s1) - h(s0)).to_degrees().abs() % 360.0;
+            if turn > 180.0 {
+                turn = 360.0 - turn;
+            }
+            if turn <= 8.0 {
+                continue;
+            }
+            let r = s0.radius.max(1e-6);
+            let near = inside.iter().any(|&k| {
+                let Some(me) = state(k) else { return false };
+                steps[k].objects.iter().any(|o| match &o.body {
+                    Body::Pool(p) if p.ball_id != b && p.motion_state != "pocketed" => {
+                        (p.position[0] - me.position[0]).hypot(p.position[1] - me.position[1])
+                            < 4.0 * r
+                    }
+                    _ => false,
+                })
+            });
+            if near {
+                out.push((steps[inside[0]].t, usize::MAX - out.len()));
+            }
+        }
+        out
+    }
+}
