@@ -14,6 +14,7 @@ mod import;
 mod progress;
 mod query;
 mod render;
+mod reward;
 mod run;
 mod show;
 mod simulate;
@@ -86,6 +87,8 @@ enum Command {
     Accuracy(accuracy::Args),
     /// Print a trace with its annotations as compact text for language models, with a token count.
     Show(show::Args),
+    /// Reward programs: check one, evaluate it on a trace, or synthesise one from a goal sentence.
+    Reward(reward::Args),
     /// Write one trace of a run back in the paper's JSON format.
     Export(export::Args),
     /// Run SQL over a run's tables.
@@ -107,6 +110,7 @@ pub fn main() -> ExitCode {
         Command::Annotate(a) => annotate::run(a, cli.quiet),
         Command::Accuracy(a) => accuracy::run(a, cli.quiet),
         Command::Show(a) => show::run(a),
+        Command::Reward(a) => reward::run(a),
         Command::Export(a) => export::run(a),
         Command::Query(a) => query::run(a),
         Command::Tables(a) => tables::run(a),

@@ -13,6 +13,7 @@
 //! **Owns:** the DSL, its checker and interpreter, goal files and verification rules ([`goals`],
 //! [`verify`]). **Does not:** run detectors (`detect/`), simulate (`envs/`), optimise (`optimise/`).
 
+pub mod annotate;
 pub mod check;
 pub mod error;
 pub mod eval;
