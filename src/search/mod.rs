@@ -1,9 +1,34 @@
-//! The evolutionary search for detector programs (section 3.2, Algorithms 1–2 of the paper).
+//! The evolutionary search for detector programs (section 3.2, Algorithms 1–2 and appendix F of the
+//! paper): for each label, evolve programs whose annotations vary with the traces as the traces vary
+//! and that add something the library does not already say; accept the best if ν > δ.
 //!
-//! **Owns:** the proposer interface ([`Proposer`]).
-//! **Does not:** run candidate code (`detect/` workers do), compute fitness (`fitness/`), talk to LLMs
-//! (`llm/`).
+//! - [`proposer`]: the interface proposers implement ([`Proposer`]); [`mutate`]: the offline proposer;
+//! - [`islands`]: the program database (FunSearch islands, hill-climb, best-of-n);
+//! - [`evaluator`]: cheap checks (probe set, behaviour signatures) and Evaluate in the worker pool;
+//! - [`run`]: one label's search in rounds, checkpointed and resumable; [`discover`]: Algorithm 2;
+//! - [`candidate`]: the `candidates` table; [`library_out`]: the grown library as a folder;
+//!   [`tables`]: the other evolution tables.
+//!
+//! **Owns:** everything above. **Does not:** run candidate code in this process (`detect/` workers do),
+//! compute distances (`fitness/`), talk to LLMs (`llm/`), or read/write the run (the `evolve` stage).
 
+pub mod candidate;
+pub mod discover;
+pub mod evaluator;
+pub mod islands;
+pub mod library_out;
+pub mod mutate;
 pub mod proposer;
+pub mod run;
+pub mod skeleton;
+pub mod tables;
 
+pub use self::candidate::{CandidateRecord, code_hash};
+pub use self::discover::{ConvergenceRow, Discovery, LabelResult};
+pub use self::evaluator::{EvalSettings, Evaluation, Evaluator};
+pub use self::islands::{Database, Program, Strategy, Temperatures};
+pub use self::mutate::MutateProposer;
 pub use self::proposer::{Parent, Proposal, ProposalRequest, ProposeError, Proposer, count_lines};
+pub use self::run::{
+    Checkpoint, LabelOutcome, LabelSearch, MemoryCheckpoint, SearchConfig, SearchError,
+};

@@ -1,0 +1,554 @@
+//! One label's search (FunSearch, Algorithm 1 of appendix F, or a baseline) and the discovery loop
+//! around it (Algorithm 2: one search per label, accept the best if ν > δ, grow the library).
+//!
+//! A search runs in *rounds* of `parallel` steps. At the start of a round, every step of it samples an
+//! island and its parents from the database as it stands, with a random generator seeded from
+//! (run seed, label index, step) — so step k's choices do not depend on how earlier steps were
+//! scheduled — and the proposer is asked for all of the round's children at once (concurrently: an LLM
+//! proposer's requests overlap). Children are then checked and scored in step order, each result is
+//! applied to the database, and every T_r steps the weaker half of the islands is reset. The round's
+//! records are handed to a [`Checkpoint`]; a resumed search *replays* saved rounds (applying their
+//! records without proposing or evaluating again) and continues with the first unsaved round. With a
+//! deterministic proposer (`mutate`) and a deterministic score (ψ off) a resumed search therefore equals
+//! an uninterrupted one record for record.
+
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use sha2::{Digest, Sha256};
+
+use super::candidate::{CandidateRecord, code_hash};
+use super::evaluator::{Evaluation, Evaluator};
+use super::islands::{Database, Program, Strategy, Temperatures};
+use super::proposer::{Parent, Proposal, ProposalRequest, ProposeError, Proposer, count_lines};
+use crate::detect::DetectorError;
+use crate::envs::pool::rack::SplitMix64;
+
+/// The knobs of a search (the paper's I, s, T_r, budget and δ, and ours).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SearchConfig {
+    /// How parents are picked.
+    pub strategy: Strategy,
+    /// Islands I.
+    pub islands: usize,
+    /// Prompt size s: parents per request.
+    pub prompt_size: usize,
+    /// Reset period T_r (steps); 0 never resets.
+    pub reset_period: u64,
+    /// Proposals per label.
+    pub budget: u64,
+    /// Acceptance threshold δ on ν.
+    pub delta: f64,
+    /// Proposals requested at once (one round).
+    pub parallel: usize,
+    /// Repair attempts per child that fails with a repairable error.
+    pub repair_attempts: u32,
+    /// Sampling temperatures.
+    pub temperatures: Temperatures,
+    /// The run seed.
+    pub seed: u64,
+}
+
+impl Default for SearchConfig {
+    fn default() -> Self {
+        SearchConfig {
+            strategy: Strategy::Island,
+            islands: 4,
+            prompt_size: 2,
+            reset_period: 100,
+            budget: 200,
+            delta: 0.0,
+            parallel: 4,
+            repair_attempts: 2,
+            temperatures: Temperatures::default(),
+            seed: 0,
+        }
+    }
+}
+
+/// A search could not go on.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SearchError {
+    /// No seed program of the label could be scored.
+    #[error("label {label:?}: no seed program could be evaluated: {message}")]
+    Seed {
+        /// The label.
+        label: String,
+        /// The seed's failure.
+        message: String,
+    },
+    /// The proposer cannot be reached.
+    #[error("label {label:?}: {source}")]
+    Proposer {
+        /// The label.
+        label: String,
+        /// The proposer's error.
+        #[source]
+        source: ProposeError,
+    },
+    /// Saving or loading a checkpoint failed.
+    #[error("checkpoint: {0}")]
+    Checkpoint(String),
+}
+
+/// Where a search keeps its finished rounds (round 0 holds the seed programs).
+pub trait Checkpoint: Sync {
+    /// The records of a finished round, if it was saved.
+    fn load(
+        &self,
+        label_index: u32,
+        round: u64,
+    ) -> Result<Option<Vec<CandidateRecord>>, SearchError>;
+    /// Saves a finished round.
+    fn save(
+        &self,
+        label_index: u32,
+        round: u64,
+        records: &[CandidateRecord],
+    ) -> Result<(), SearchError>;
+}
+
+/// A checkpoint in memory (for tests and one-shot searches); `stop_after` rounds saved in total makes
+/// `save` fail, to simulate a kill.
+#[derive(Debug, Default)]
+pub struct MemoryCheckpoint {
+    /// Saved rounds.
+    pub rounds: Mutex<BTreeMap<(u32, u64), Vec<CandidateRecord>>>,
+    /// Fail the save after this many rounds are stored.
+    pub stop_after: Option<usize>,
+}
+
+impl Checkpoint for MemoryCheckpoint {
+    fn load(&self, l: u32, r: u64) -> Result<Option<Vec<CandidateRecord>>, SearchError> {
+        Ok(self
+            .rounds
+            .lock()
+            .expect("not poisoned")
+            .get(&(l, r))
+            .cloned())
+    }
+    fn save(&self, l: u32, r: u64, records: &[CandidateRecord]) -> Result<(), SearchError> {
+        let mut m = self.rounds.lock().expect("not poisoned");
+        m.insert((l, r), records.to_vec());
+        if self.stop_after.is_some_and(|n| m.len() >= n) {
+            return Err(SearchError::Checkpoint(format!(
+                "stopped after {} rounds",
+                m.len()
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// What one label's search found.
+#[derive(Clone, Debug)]
+pub struct LabelOutcome {
+    /// The label.
+    pub label: String,
+    /// The best program (possibly the seed).
+    pub best: Program,
+    /// The best seed program's ν.
+    pub seed_nu: f64,
+    /// Every candidate, seed programs first, in step order.
+    pub records: Vec<CandidateRecord>,
+    /// Best ν after each step (the curve that should go up).
+    pub best_by_step: Vec<f64>,
+    /// Wall time of the search (s), this process only.
+    pub wall_s: f64,
+    /// Wall time spent waiting for the proposer (s), this process only.
+    pub propose_s: f64,
+    /// Whether the proposer's budget ran out before the step budget.
+    pub budget_exhausted: bool,
+}
+
+fn mix(parts: &[u64]) -> u64 {
+    let mut h = Sha256::new();
+    for p in parts {
+        h.update(p.to_le_bytes());
+    }
+    u64::from_le_bytes(h.finalize()[..8].try_into().expect("8 bytes"))
+}
+
+/// The generator of step `step` of label `label_index`'s search.
+pub fn step_rng(seed: u64, label_index: u32, step: u64) -> SplitMix64 {
+    SplitMix64::new(mix(&[seed, u64::from(label_index), step, 0x57E9]))
+}
+
+fn repairable(e: &DetectorError) -> bool {
+    matches!(
+        e.category(),
+        "syntax" | "forbidden" | "no_find_pattern" | "runtime" | "invalid_output"
+    )
+}
+
+/// The search state rebuilt from records (live or replayed).
+struct State {
+    db: Option<Database>,
+    seen: HashMap<String, (Option<crate::fitness::FitnessTerms>, Option<String>)>,
+    known: HashMap<String, String>,
+    best_by_step: Vec<f64>,
+}
+
+impl State {
+    fn apply(&mut self, r: &CandidateRecord, cfg: &SearchConfig, label_index: u32) {
+        if !r.code.is_empty() {
+            self.seen
+                .entry(r.code_hash.clone())
+                .or_insert((r.terms, r.signature.clone()));
+        }
+        if let Some(sig) = &r.signature {
+            self.known.entry(sig.clone()).or_insert(r.code_hash.clone());
+        }
+        if r.scored() {
+            let p = Program {
+                hash: r.code_hash.clone(),
+                code: r.code.clone(),
+                terms: r.terms.expect("scored"),
+                lines: r.lines as usize,
+            };
+            match &mut self.db {
+                None => {
+                    self.db = Some(Database::new(
+                        cfg.strategy,
+                        cfg.islands,
+                        p,
+                        cfg.temperatures,
+                    ))
+                }
+                Some(db) if r.step < 0 => {
+                    // A further seed program: onto every island.
+                    for i in 0..db.islands() {
+                        db.insert(i, p.clone());
+                    }
+                }
+                Some(db) => db.insert(r.island.max(0) as usize, p),
+            }
+        }
+        if r.step >= 0 {
+            let step = r.step as u64;
+            if let Some(db) = &mut self.db {
+                self.best_by_step.push(db.best().terms.nu);
+                if cfg.reset_period > 0 && (step + 1) % cfg.reset_period == 0 {
+                    let mut rng =
+                        SplitMix64::new(mix(&[cfg.seed, u64::from(label_index), step, 0x4E5E7]));
+                    db.reset(&mut rng);
+                }
+            }
+        }
+    }
+}
+
+/// Everything one label's search needs.
+pub struct LabelSearch<'a> {
+    /// The knobs.
+    pub config: &'a SearchConfig,
+    /// Position of the label in the run's label list.
+    pub label_index: u32,
+    /// Scores candidates (knows the label, traces and library).
+    pub evaluator: &'a Evaluator<'a>,
+    /// Makes children.
+    pub proposer: &'a dyn Proposer,
+    /// The seed programs g₀ (the library's detectors for the label, or the skeleton).
+    pub seeds: Vec<String>,
+    /// Labels of the current library.
+    pub library_labels: Vec<String>,
+    /// Keeps finished rounds.
+    pub checkpoint: &'a dyn Checkpoint,
+}
+
+impl LabelSearch<'_> {
+    fn base_record(&self, island: i64, step: i64) -> CandidateRecord {
+        CandidateRecord {
+            label: self.evaluator.label.clone(),
+            label_index: self.label_index,
+            seed: self.config.seed,
+            strategy: self.config.strategy.as_str().into(),
+            proposer: self.proposer.name().into(),
+            island,
+            step,
+            parents: Vec::new(),
+            code_hash: String::new(),
+            code: String::new(),
+            status: String::new(),
+            error: None,
+            error_line: None,
+            failed_on_probe: false,
+            repairs: 0,
+            terms: None,
+            lines: 0,
+            mean_time_s: None,
+            activation_rate: None,
+            signature: None,
+            tokens_in: 0,
+            tokens_out: 0,
+            calls: 0,
+            propose_s: 0.0,
+            eval_s: 0.0,
+        }
+    }
+
+    /// Checks, scores and records one piece of code (used for seeds, children and repairs).
+    fn score_into(
+        &self,
+        rec: &mut CandidateRecord,
+        code: String,
+        state: &State,
+    ) -> Option<DetectorError> {
+        let t0 = Instant::now();
+        let mut failure = None;
+        rec.code_hash = code_hash(&code);
+        rec.lines = count_lines(&code) as u64;
+        rec.code = code;
+        if let Some((terms, sig)) = state.seen.get(&rec.code_hash) {
+            rec.status = "duplicate".into();
+            rec.terms = *terms;
+            rec.signature = sig.clone();
+        } else {
+            match self
+                .evaluator
+                .evaluate(&rec.code, rec.lines as usize, &state.known)
+            {
+                Evaluation::Failed { error, on_probe } => {
+                    rec.status = error.category().into();
+                    rec.error_line = error.line();
+                    rec.error = Some(error.to_string());
+                    rec.failed_on_probe = on_probe;
+                    rec.terms = None;
+                    rec.signature = None;
+                    failure = Some(error);
+                }
+                Evaluation::SameBehaviour { of, signature } => {
+                    rec.status = "same_behaviour".into();
+                    rec.error = Some(format!("behaves like {of} on the probe set"));
+                    rec.signature = Some(signature);
+                }
+                Evaluation::Scored {
+                    terms,
+                    mean_time,
+                    activation_rate,
+                    signature,
+                } => {
+                    rec.status = "ok".into();
+                    rec.error = None;
+                    rec.error_line = None;
+                    rec.failed_on_probe = false;
+                    rec.terms = Some(terms);
+                    rec.mean_time_s = Some(mean_time);
+                    rec.activation_rate = Some(activation_rate);
+                    rec.signature = Some(signature);
+                }
+            }
+        }
+        rec.eval_s += t0.elapsed().as_secs_f64();
+        failure
+    }
+
+    fn request(&self, island: usize, parents: &[Program], seed: u64, step: u64) -> ProposalRequest {
+        ProposalRequest {
+            env: self.evaluator.env,
+            label: self.evaluator.label.clone(),
+            parents: parents
+                .iter()
+                .map(|p| Parent {
+                    code: p.code.clone(),
+                    fitness: Some(p.terms),
+                    lines: p.lines,
+                })
+                .collect(),
+            library_labels: self.library_labels.clone(),
+            seed,
+            island,
+            step,
+        }
+    }
+
+    /// Runs (or resumes) the search.
+    pub fn run(&self) -> Result<LabelOutcome, SearchError> {
+        let cfg = self.config;
+        let started = Instant::now();
+        let mut propose_s = 0.0;
+        let mut state = State {
+            db: None,
+            seen: HashMap::new(),
+            known: HashMap::new(),
+            best_by_step: Vec::new(),
+        };
+        let mut all = Vec::new();
+        let label = self.evaluator.label.clone();
+        // Round 0: the seed programs.
+        let seeds = match self.checkpoint.load(self.label_index, 0)? {
+            Some(r) => r,
+            None => {
+                let mut out = Vec::new();
+                for code in &self.seeds {
+                    let mut rec = self.base_record(-1, -1);
+                    self.score_into(&mut rec, code.clone(), &state);
+                    if rec.status == "ok" {
+                        rec.status = "seed".into();
+                    }
+                    state.apply(&rec, cfg, self.label_index);
+                    out.push(rec);
+                }
+                state = State {
+                    db: None,
+                    seen: HashMap::new(),
+                    known: HashMap::new(),
+                    best_by_step: Vec::new(),
+                };
+                if out.iter().any(CandidateRecord::scored) {
+                    self.checkpoint.save(self.label_index, 0, &out)?;
+                }
+                out
+            }
+        };
+        for r in &seeds {
+            state.apply(r, cfg, self.label_index);
+        }
+        let Some(seed_nu) = state.db.as_ref().map(|d| d.best().terms.nu) else {
+            let message = seeds
+                .iter()
+                .filter_map(|r| r.error.clone())
+                .next()
+                .unwrap_or_else(|| "no seed program given".into());
+            return Err(SearchError::Seed { label, message });
+        };
+        all.extend(seeds);
+        let per_round = cfg.parallel.max(1) as u64;
+        let rounds = cfg.budget.div_ceil(per_round);
+        let mut exhausted = false;
+        for round in 1..=rounds {
+            if let Some(saved) = self.checkpoint.load(self.label_index, round)? {
+                for r in &saved {
+                    state.apply(r, cfg, self.label_index);
+                    exhausted |= r.status == "budget_exhausted";
+                }
+                all.extend(saved);
+                continue;
+            }
+            if exhausted {
+                break;
+            }
+            let steps: Vec<u64> =
+                ((round - 1) * per_round..(round * per_round).min(cfg.budget)).collect();
+            let db = state.db.as_ref().expect("seeded");
+            let plans: Vec<(u64, usize, Vec<Program>, u64)> = steps
+                .iter()
+                .map(|&step| {
+                    let mut rng = step_rng(cfg.seed, self.label_index, step);
+                    let (island, parents) = db.sample(cfg.prompt_size, &mut rng);
+                    (step, island, parents, rng.next_u64())
+                })
+                .collect();
+            let t0 = Instant::now();
+            let proposals: Vec<(Result<Proposal, ProposeError>, f64)> = if plans.len() == 1 {
+                let (step, island, parents, seed) = &plans[0];
+                let req = self.request(*island, parents, *seed, *step);
+                let t = Instant::now();
+                vec![(self.proposer.propose(&req), t.elapsed().as_secs_f64())]
+            } else {
+                std::thread::scope(|sc| {
+                    let handles: Vec<_> = plans
+                        .iter()
+                        .map(|(step, island, parents, seed)| {
+                            let req = self.request(*island, parents, *seed, *step);
+                            sc.spawn(move || {
+                                let t = Instant::now();
+                                (self.proposer.propose(&req), t.elapsed().as_secs_f64())
+                            })
+                        })
+                        .collect();
+                    handles
+                        .into_iter()
+                        .map(|h| {
+                            h.join().unwrap_or_else(|_| {
+                                (
+                                    Err(ProposeError::Other("the proposer panicked".into())),
+                                    0.0,
+                                )
+                            })
+                        })
+                        .collect()
+                })
+            };
+            propose_s += t0.elapsed().as_secs_f64();
+            let mut records = Vec::new();
+            for ((step, island, parents, seed), (proposal, took)) in
+                plans.into_iter().zip(proposals)
+            {
+                let mut rec = self.base_record(island as i64, step as i64);
+                rec.parents = parents.iter().map(|p| p.hash.clone()).collect();
+                rec.propose_s = took;
+                match proposal {
+                    Err(ProposeError::Unavailable(m)) => {
+                        return Err(SearchError::Proposer {
+                            label,
+                            source: ProposeError::Unavailable(m),
+                        });
+                    }
+                    Err(e) => {
+                        rec.status = if matches!(e, ProposeError::BudgetExhausted(_)) {
+                            exhausted = true;
+                            "budget_exhausted".into()
+                        } else {
+                            "proposer".into()
+                        };
+                        rec.error = Some(e.to_string());
+                    }
+                    Ok(p) => {
+                        rec.tokens_in = p.tokens_in;
+                        rec.tokens_out = p.tokens_out;
+                        rec.calls = p.calls;
+                        let mut failure = self.score_into(&mut rec, p.code, &state);
+                        let req = self.request(island, &parents, seed, step);
+                        while rec.repairs < cfg.repair_attempts {
+                            let Some(err) = failure.take() else { break };
+                            if !repairable(&err) {
+                                break;
+                            }
+                            let t = Instant::now();
+                            let fixed =
+                                self.proposer.repair(&req, &rec.code, &err, rec.repairs + 1);
+                            let dt = t.elapsed().as_secs_f64();
+                            rec.propose_s += dt;
+                            propose_s += dt;
+                            match fixed {
+                                Ok(Some(p)) => {
+                                    rec.repairs += 1;
+                                    rec.tokens_in += p.tokens_in;
+                                    rec.tokens_out += p.tokens_out;
+                                    rec.calls += p.calls;
+                                    failure = self.score_into(&mut rec, p.code, &state);
+                                }
+                                Ok(None) => break,
+                                Err(ProposeError::Unavailable(m)) => {
+                                    return Err(SearchError::Proposer {
+                                        label,
+                                        source: ProposeError::Unavailable(m),
+                                    });
+                                }
+                                Err(_) => break,
+                            }
+                        }
+                    }
+                }
+                state.apply(&rec, cfg, self.label_index);
+                records.push(rec);
+            }
+            self.checkpoint.save(self.label_index, round, &records)?;
+            all.extend(records);
+        }
+        let db = state.db.as_ref().expect("seeded");
+        Ok(LabelOutcome {
+            label,
+            best: db.best().clone(),
+            seed_nu,
+            records: all,
+            best_by_step: state.best_by_step,
+            wall_s: started.elapsed().as_secs_f64(),
+            propose_s,
+            budget_exhausted: exhausted,
+        })
+    }
+}

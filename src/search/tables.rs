@@ -1,0 +1,134 @@
+//! The Arrow schemas and rows of the evolution tables besides `candidates`: `evolution_labels` (one row
+//! per label searched: seed and best fitness, acceptance, time inside and outside the proposer) and
+//! `evolution_convergence` (section 4.5's pairs).
+
+use std::sync::Arc;
+
+use arrow::array::{
+    ArrayRef, BooleanArray, Float64Array, Int64Array, RecordBatch, StringArray, UInt64Array,
+};
+use arrow::datatypes::{DataType, Field, Schema, SchemaRef};
+use arrow::error::ArrowError;
+
+use super::discover::{ConvergenceRow, LabelResult};
+use super::run::SearchConfig;
+
+/// The schema of `evolution_labels`.
+pub fn labels_schema() -> SchemaRef {
+    let f = |n: &str, t: DataType| Field::new(n, t, false);
+    let fo = |n: &str, t: DataType| Field::new(n, t, true);
+    Arc::new(Schema::new(vec![
+        f("run_stage", DataType::Utf8),
+        f("label", DataType::Utf8),
+        f("label_index", DataType::Int64),
+        f("seed", DataType::UInt64),
+        f("strategy", DataType::Utf8),
+        f("proposer", DataType::Utf8),
+        f("budget", DataType::Int64),
+        f("candidates", DataType::Int64),
+        f("scored", DataType::Int64),
+        f("seed_nu", DataType::Float64),
+        f("best_nu", DataType::Float64),
+        f("best_rho", DataType::Float64),
+        f("best_eta", DataType::Float64),
+        f("best_lambda", DataType::Float64),
+        f("best_psi", DataType::Float64),
+        f("best_code_hash", DataType::Utf8),
+        f("best_lines", DataType::Int64),
+        f("delta", DataType::Float64),
+        f("accepted", DataType::Boolean),
+        f("wall_s", DataType::Float64),
+        f("propose_s", DataType::Float64),
+        fo("outside_proposer_share", DataType::Float64),
+    ]))
+}
+
+/// The `evolution_labels` row of one label.
+pub fn labels_batch(
+    stage: &str,
+    config: &SearchConfig,
+    proposer: &str,
+    index: u32,
+    r: &LabelResult,
+) -> Result<RecordBatch, ArrowError> {
+    let o = &r.outcome;
+    let t = &o.best.terms;
+    let s = |v: &str| -> ArrayRef { Arc::new(StringArray::from(vec![v.to_string()])) };
+    let i = |v: i64| -> ArrayRef { Arc::new(Int64Array::from(vec![v])) };
+    let x = |v: f64| -> ArrayRef { Arc::new(Float64Array::from(vec![v])) };
+    let share = (o.wall_s > 0.0).then(|| ((o.wall_s - o.propose_s) / o.wall_s).clamp(0.0, 1.0));
+    RecordBatch::try_new(
+        labels_schema(),
+        vec![
+            s(stage),
+            s(&o.label),
+            i(i64::from(index)),
+            Arc::new(UInt64Array::from(vec![config.seed])),
+            s(config.strategy.as_str()),
+            s(proposer),
+            i(config.budget as i64),
+            i(o.records.iter().filter(|r| r.step >= 0).count() as i64),
+            i(o.records
+                .iter()
+                .filter(|r| r.step >= 0 && r.scored())
+                .count() as i64),
+            x(o.seed_nu),
+            x(t.nu),
+            x(t.rho),
+            x(t.eta),
+            x(t.lambda),
+            x(t.psi),
+            s(&o.best.hash),
+            i(o.best.lines as i64),
+            x(config.delta),
+            Arc::new(BooleanArray::from(vec![r.accepted])),
+            x(o.wall_s),
+            x(o.propose_s),
+            Arc::new(Float64Array::from(vec![share])),
+        ],
+    )
+}
+
+/// The schema of `evolution_convergence`.
+pub fn convergence_schema() -> SchemaRef {
+    let f = |n: &str, t: DataType| Field::new(n, t, false);
+    Arc::new(Schema::new(vec![
+        f("run_stage", DataType::Utf8),
+        f("label", DataType::Utf8),
+        f("bin", DataType::Int64),
+        f("code_hash", DataType::Utf8),
+        f("final_hash", DataType::Utf8),
+        f("similarity", DataType::Float64),
+        f("traces", DataType::Int64),
+    ]))
+}
+
+/// The `evolution_convergence` rows.
+pub fn convergence_batch(stage: &str, rows: &[ConvergenceRow]) -> Result<RecordBatch, ArrowError> {
+    RecordBatch::try_new(
+        convergence_schema(),
+        vec![
+            Arc::new(StringArray::from(vec![stage.to_string(); rows.len()])),
+            Arc::new(StringArray::from(
+                rows.iter().map(|r| r.label.clone()).collect::<Vec<_>>(),
+            )),
+            Arc::new(Int64Array::from(
+                rows.iter().map(|r| i64::from(r.bin)).collect::<Vec<_>>(),
+            )),
+            Arc::new(StringArray::from(
+                rows.iter().map(|r| r.code_hash.clone()).collect::<Vec<_>>(),
+            )),
+            Arc::new(StringArray::from(
+                rows.iter()
+                    .map(|r| r.final_hash.clone())
+                    .collect::<Vec<_>>(),
+            )),
+            Arc::new(Float64Array::from(
+                rows.iter().map(|r| r.similarity).collect::<Vec<_>>(),
+            )),
+            Arc::new(Int64Array::from(
+                rows.iter().map(|r| r.traces as i64).collect::<Vec<_>>(),
+            )),
+        ],
+    )
+}
