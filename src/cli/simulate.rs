@@ -1,10 +1,12 @@
-//! `annotrace simulate`: simulates billiards shots into a run, as a one-stage pipeline.
+//! `annotrace simulate`: simulates billiards shots or I-PHYRE episodes into a run, as a one-stage pipeline.
 //!
 //! Dataset mode (`--scenes N --shots K --seed S`) and replay mode (`--scene FILE --shot JSON`) both
 //! become a `simulate` stage (`pipeline/stages/simulate.rs`) recorded in the run's manifest as
 //! `simulate-<hash of its arguments>`, so the same command again is a no-op and an interrupted one
 //! resumes. Bad input (a scene file that is not JSON, a ball off the table, overlapping balls, an
 //! invalid shot) is reported with the file or field at fault, exit code 2, and nothing is written.
+//! `--env iphyre` takes `--games`/`--shots`/`--seed` (random click sets) or `--game`/`--clicks`
+//! (a replay) and `--fps 60|10`; an unknown game or a bad click fails the same way.
 
 use std::path::{Path, PathBuf};
 
@@ -19,7 +21,7 @@ use super::{CliError, CliResult, fault_from_env, run_error};
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Environment to simulate.
-    #[arg(long, default_value = "pooltool", value_parser = ["pooltool"])]
+    #[arg(long, default_value = "pooltool", value_parser = ["pooltool", "iphyre"])]
     env: String,
     /// Run folder to write into (created if needed).
     #[arg(long)]
@@ -27,7 +29,7 @@ pub struct Args {
     /// Dataset mode: number of random 9-ball racks.
     #[arg(long, default_value_t = 10, conflicts_with = "scene")]
     scenes: u64,
-    /// Dataset mode: random shots per rack.
+    /// Dataset mode: random shots per rack (iphyre: random click sets per game).
     #[arg(long, default_value_t = 1, conflicts_with = "scene")]
     shots: u64,
     /// Dataset mode: seed of racks and shots.
@@ -51,9 +53,22 @@ pub struct Args {
     /// Stop a shot at the first event at or after this time (s).
     #[arg(long)]
     max_time: Option<f64>,
-    /// Scenes per output file (a resumed run redoes at most the unfinished shards).
+    /// Scenes per output file (a resumed run redoes at most the unfinished shards; iphyre: traces per file).
     #[arg(long, default_value_t = 100)]
     scenes_per_shard: u64,
+    /// iphyre dataset mode: comma-separated game and fold names (basic, noisy, compositional,
+    /// multi_ball), or all.
+    #[arg(long, default_value = "all", conflicts_with = "game")]
+    games: String,
+    /// iphyre: physics steps per second (I-PHYRE's 60, or the gym wrappers' and DeepPHY's 10).
+    #[arg(long, default_value = "60", value_parser = ["60", "10"])]
+    fps: String,
+    /// iphyre replay mode: the game to play.
+    #[arg(long, requires = "clicks")]
+    game: Option<String>,
+    /// iphyre replay mode: clicks `x,y,t;…` (px, s) or `k@t;…` (remove eliminable block k at t s).
+    #[arg(long, requires = "game")]
+    clicks: Option<String>,
 }
 
 #[derive(Serialize)]
@@ -83,6 +98,14 @@ struct SimulateStage {
     #[serde(skip_serializing_if = "Option::is_none")]
     max_time: Option<f64>,
     scenes_per_shard: u64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    games: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    fps: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    game: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    clicks: Option<String>,
 }
 
 fn absolute(p: &Path, what: &str) -> Result<String, CliError> {
@@ -99,8 +122,16 @@ fn absolute(p: &Path, what: &str) -> Result<String, CliError> {
 }
 
 pub fn run(args: Args, quiet: bool) -> CliResult {
+    if args.env == "iphyre" {
+        return run_iphyre(args, quiet);
+    }
+    if args.game.is_some() {
+        return Err(CliError::input(anyhow::anyhow!(
+            "--game and --clicks are for --env iphyre"
+        )));
+    }
     let replay = args.scene.is_some();
-    let mut stage = SimulateStage {
+    let stage = SimulateStage {
         id: String::new(),
         kind: "simulate",
         env: args.env.clone(),
@@ -122,7 +153,46 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
         max_events: args.max_events,
         max_time: args.max_time,
         scenes_per_shard: args.scenes_per_shard.max(1),
+        games: None,
+        fps: None,
+        game: None,
+        clicks: None,
     };
+    run_stage(stage, &args, quiet)
+}
+
+/// `--env iphyre`: random click sets on the chosen games, or one replayed click list.
+fn run_iphyre(args: Args, quiet: bool) -> CliResult {
+    if args.scene.is_some() || args.table.is_some() {
+        return Err(CliError::input(anyhow::anyhow!(
+            "--scene, --shot and --table are for --env pooltool; I-PHYRE replays take --game and --clicks"
+        )));
+    }
+    let replay = args.game.is_some();
+    let stage = SimulateStage {
+        id: String::new(),
+        kind: "simulate",
+        env: args.env.clone(),
+        scenes: None,
+        shots: (!replay).then_some(args.shots),
+        seed: (!replay).then_some(args.seed),
+        scene_file: None,
+        shot: None,
+        table: None,
+        dt: args.dt,
+        max_events: args.max_events,
+        max_time: None,
+        scenes_per_shard: args.scenes_per_shard.max(1),
+        games: (!replay).then(|| args.games.clone()),
+        fps: Some(if args.fps == "10" { 10.0 } else { 60.0 }),
+        game: args.game.clone(),
+        clicks: args.clicks.clone(),
+    };
+    run_stage(stage, &args, quiet)
+}
+
+/// Runs `stage` as a one-stage pipeline into `--run` and prints what it did.
+fn run_stage(mut stage: SimulateStage, args: &Args, quiet: bool) -> CliResult {
     let key = toml::to_string(&stage)
         .map_err(|e| CliError::failed(anyhow::anyhow!("internal error: {e}")))?;
     stage.id = format!("simulate-{}", &hex(&Sha256::digest(key.as_bytes()))[..10]);
@@ -142,8 +212,16 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
         ))
     })?;
     let s = &stage.summary;
+    let detail = if args.env == "iphyre" {
+        format!(
+            "mean reward {:.1}",
+            s["mean_reward"].as_f64().unwrap_or(0.0)
+        )
+    } else {
+        format!("{} capped", s["capped"].as_u64().unwrap_or(0))
+    };
     println!(
-        "{} {} {} trace(s) ({} successful, {} capped; {} frame rows) into {}{}",
+        "{} {} {} trace(s) ({} successful, {detail}; {} frame rows) into {}{}",
         if stage.cached {
             "already simulated:"
         } else {
@@ -152,7 +230,6 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
         s["traces"].as_u64().unwrap_or(0),
         args.env,
         s["successes"].as_u64().unwrap_or(0),
-        s["capped"].as_u64().unwrap_or(0),
         stage.rows.get("frames").copied().unwrap_or(0),
         args.run.display(),
         if stage.cached { " (nothing to do)" } else { "" }

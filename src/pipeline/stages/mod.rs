@@ -8,6 +8,7 @@ pub mod annotate;
 pub mod export;
 pub mod import;
 pub mod simulate;
+pub mod simulate_iphyre;
 pub mod sql;
 mod trace_files;
 

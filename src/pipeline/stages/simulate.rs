@@ -45,7 +45,7 @@ pub static KIND: StageKind = StageKind {
     params: &[
         ParamSpec::optional(
             "env",
-            ParamType::Choice(&["pooltool"]),
+            ParamType::Choice(&["pooltool", "iphyre"]),
             "\"pooltool\"",
             "environment to simulate",
         ),
@@ -98,6 +98,22 @@ pub static KIND: StageKind = StageKind {
             ParamType::Float,
             "stop a shot at the first event at or after this time (s) (terminal_status max_time)",
         ),
+        ParamSpec::maybe(
+            "games",
+            ParamType::Str,
+            "iphyre dataset mode: comma-separated game and fold names, or all (default all 40); `shots` click sets per game",
+        ),
+        ParamSpec::maybe(
+            "fps",
+            ParamType::Float,
+            "iphyre: physics steps per second, 60 (I-PHYRE's default) or 10 (the gym wrappers and DeepPHY)",
+        ),
+        ParamSpec::maybe("game", ParamType::Str, "iphyre replay mode: the game name"),
+        ParamSpec::maybe(
+            "clicks",
+            ParamType::Str,
+            "iphyre replay mode: `x,y,t;…` clicks (px, s) or `k@t;…` (remove eliminable block k at t)",
+        ),
         ParamSpec::optional(
             "scenes_per_shard",
             ParamType::Count,
@@ -131,6 +147,9 @@ pub struct SimulateStage {
 
 fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
     let p = &def.params;
+    if p.get("env").and_then(Value::as_str) == Some("iphyre") {
+        return super::simulate_iphyre::build(def, spec);
+    }
     let (config, table_text) = match p.get("table").and_then(Value::as_str) {
         None => (PoolConfig::default_7ft(), None),
         Some(t) => {
@@ -303,15 +322,31 @@ impl Stage for SimulateStage {
     }
 }
 
-/// The open Parquet files of one shard, one per table.
-struct ShardSinks<'a, 'c> {
+/// The open Parquet files of one shard, one per table (also used by the other environments' halves).
+pub(super) struct ShardSinks<'a, 'c> {
     ctx: &'a StageContext<'c>,
+    env: Env,
     name: String,
     sinks: BTreeMap<&'static str, ParquetSink>,
 }
 
-impl ShardSinks<'_, '_> {
-    fn write(&mut self, table: &'static str, batch: &RecordBatch) -> Result<(), StageError> {
+impl<'a, 'c> ShardSinks<'a, 'c> {
+    /// No file open yet; shard `name` of `env`.
+    pub(super) fn new(ctx: &'a StageContext<'c>, env: Env, name: String) -> Self {
+        ShardSinks {
+            ctx,
+            env,
+            name,
+            sinks: BTreeMap::new(),
+        }
+    }
+
+    /// Appends `batch` to `table`'s file, opening it on first use (empty batches open nothing).
+    pub(super) fn write(
+        &mut self,
+        table: &'static str,
+        batch: &RecordBatch,
+    ) -> Result<(), StageError> {
         if batch.num_rows() == 0 {
             return Ok(());
         }
@@ -321,7 +356,7 @@ impl ShardSinks<'_, '_> {
             let sink = self
                 .ctx
                 .staging()
-                .sink(table, Some(Env::Pooltool), &self.name, schema)?;
+                .sink(table, Some(self.env), &self.name, schema)?;
             self.sinks.insert(table, sink);
         }
         if let Some(sink) = self.sinks.get_mut(table) {
@@ -330,7 +365,8 @@ impl ShardSinks<'_, '_> {
         Ok(())
     }
 
-    fn commit(self) -> Result<BTreeMap<String, u64>, StageError> {
+    /// Commits every file; the rows written per table.
+    pub(super) fn commit(self) -> Result<BTreeMap<String, u64>, StageError> {
         let mut rows = BTreeMap::new();
         for (table, sink) in self.sinks {
             let (_, n) = sink.commit()?;
@@ -418,11 +454,7 @@ impl SimulateStage {
             return Ok(record);
         }
         let ordinal = ctx.shard_started();
-        let mut sinks = ShardSinks {
-            ctx,
-            name: name.clone(),
-            sinks: BTreeMap::new(),
-        };
+        let mut sinks = ShardSinks::new(ctx, Env::Pooltool, name.clone());
         let (mut traces, mut successes, mut capped, mut events) = (0u64, 0u64, 0u64, 0u64);
         let source = format!("simulate:{}", ctx.stage_id());
         let mut builder = TraceBatchBuilder::new();

@@ -1,0 +1,461 @@
+//! The `simulate` stage with `env = "iphyre"`: I-PHYRE episodes (rapier2d, `envs::iphyre`) into the
+//! trace tables, sharded and resumable like the billiards datasets.
+//!
+//! **Owns:** the I-PHYRE half of the `simulate` stage: reading its parameters, choosing the
+//! (game, click set) work list, trace and scene ids, and writing one shard's tables.
+//! **Does not:** declare the stage kind or its parameter list (`simulate.rs`, which routes here), or
+//! simulate anything itself (`envs::iphyre`).
+//!
+//! Two modes. **Dataset**: for every selected game (`games`: names and fold names, default all 40),
+//! `shots` seeded random click sets (`envs::iphyre::random_clicks`, drawn from (`seed`, game index,
+//! sample) alone, so the tables do not depend on sharding or thread count). The work list is game-major;
+//! every `scenes_per_shard` traces make one shard. **Replay**: `game` and `clicks` give one trace; a click
+//! list is `x,y,t` items (screen pixels, seconds) or `k@t` items ("remove eliminable block k at t"),
+//! separated by `;`. Bad input (an unknown game or fold, a click off the screen, non-finite, or after the
+//! episode, a block number the game lacks, an fps that is not positive) fails when the stage is built,
+//! before anything is written.
+//!
+//! Ids: scenes are `iphyre-<game>` (one row per game, written by the shard holding its first trace);
+//! dataset traces are `iphyre-<seed>-<game>-<sample:04>`, a replay is `iphyre-<game>-<first 8 hex digits
+//! of the click list's hash>`.
+
+use std::collections::BTreeMap;
+
+use rayon::prelude::*;
+use serde_json::{Value, json};
+use sha2::{Digest, Sha256};
+
+use super::simulate::ShardSinks;
+use crate::envs::iphyre::{
+    Click, Episode, Game, Games, PhysicsParams, click_block, clicks_rng, random_clicks, trace_of,
+    validate_clicks,
+};
+use crate::pipeline::registry::BuildError;
+use crate::pipeline::spec::{PipelineSpec, StageDef, hex};
+use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
+use crate::trace::batch::scene_batch;
+use crate::trace::{Env, TraceBatchBuilder};
+
+/// What to simulate.
+#[derive(Debug)]
+enum Work {
+    /// `samples` random click sets on each game.
+    Dataset {
+        games: Vec<Game>,
+        samples: u64,
+        seed: u64,
+    },
+    /// One game, one click list.
+    Replay { game: Box<Game>, clicks: Vec<Click> },
+}
+
+/// The `simulate` stage for I-PHYRE.
+#[derive(Debug)]
+pub struct IphyreSimulateStage {
+    params: PhysicsParams,
+    work: Work,
+    per_shard: u64,
+}
+
+/// Builds the I-PHYRE `simulate` stage from the stage's resolved parameters.
+pub(super) fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
+    let p = &def.params;
+    let fps = p.get("fps").and_then(Value::as_f64).unwrap_or(60.0);
+    let params = PhysicsParams::with_fps(fps);
+    params
+        .validate()
+        .map_err(|e| BuildError::param("fps", e.to_string()))?;
+    let all = Games::default_games().map_err(|e| BuildError::param("games", e.to_string()))?;
+    let work = match (
+        p.get("game").and_then(Value::as_str),
+        p.get("clicks").and_then(Value::as_str),
+    ) {
+        (Some(name), Some(text)) => {
+            let game = all
+                .get(name)
+                .map_err(|e| BuildError::param("game", format!("`game`: {e}")))?;
+            let clicks = parse_clicks(text, game, params.max_time)
+                .map_err(|m| BuildError::param("clicks", format!("`clicks` {m}")))?;
+            Work::Replay {
+                game: Box::new(game.clone()),
+                clicks,
+            }
+        }
+        (Some(_), None) => {
+            return Err(BuildError::param(
+                "clicks",
+                "replay mode needs `clicks` with `game`",
+            ));
+        }
+        (None, Some(_)) => {
+            return Err(BuildError::param(
+                "game",
+                "replay mode needs `game` with `clicks`",
+            ));
+        }
+        (None, None) => Work::Dataset {
+            games: select_games(
+                &all,
+                p.get("games").and_then(Value::as_str).unwrap_or("all"),
+            )
+            .map_err(|m| BuildError::param("games", format!("`games`: {m}")))?,
+            samples: p.get("shots").and_then(Value::as_u64).unwrap_or(1),
+            seed: p.get("seed").and_then(Value::as_u64).unwrap_or(spec.seed),
+        },
+    };
+    Ok(Box::new(IphyreSimulateStage {
+        params,
+        work,
+        per_shard: p
+            .get("scenes_per_shard")
+            .and_then(Value::as_u64)
+            .unwrap_or(100)
+            .max(1),
+    }))
+}
+
+/// The games a `games` list names: `all`, game names and fold names (`basic`, `noisy`,
+/// `compositional`, `multi_ball`), comma-separated; kept in I-PHYRE's game order, each once.
+pub fn select_games(all: &Games, list: &str) -> Result<Vec<Game>, String> {
+    let mut chosen = vec![false; all.all().len()];
+    for item in list.split(',').map(str::trim) {
+        if item.is_empty() {
+            continue;
+        }
+        if item == "all" {
+            chosen.iter_mut().for_each(|c| *c = true);
+            continue;
+        }
+        let fold = all.fold(item);
+        if !fold.is_empty() {
+            for g in fold {
+                chosen[g.index] = true;
+            }
+            continue;
+        }
+        let g = all.get(item).map_err(|e| format!("{item:?}: {e}"))?;
+        chosen[g.index] = true;
+    }
+    let games: Vec<Game> = all
+        .all()
+        .iter()
+        .filter(|g| chosen[g.index])
+        .cloned()
+        .collect();
+    if games.is_empty() {
+        return Err(format!("{list:?} selects no game"));
+    }
+    Ok(games)
+}
+
+/// Parses a click list: `;`-separated items, each `x,y,t` (pixels, seconds) or `k@t` (eliminable block
+/// `k`, 0-based in object order, at `t` seconds, clicked at its centre). Every click is validated
+/// against the 600×600 screen and the episode length `max_time`.
+pub fn parse_clicks(text: &str, game: &Game, max_time: f64) -> Result<Vec<Click>, String> {
+    let mut clicks = Vec::new();
+    for (i, item) in text.split(';').map(str::trim).enumerate() {
+        if item.is_empty() {
+            continue;
+        }
+        let number = |s: &str, what: &str| -> Result<f64, String> {
+            s.trim()
+                .parse::<f64>()
+                .map_err(|_| format!("item {} ({item:?}): {what} {s:?} is not a number", i + 1))
+        };
+        let click = if let Some((k, t)) = item.split_once('@') {
+            let k: usize = k.trim().parse().map_err(|_| {
+                format!(
+                    "item {} ({item:?}): block {k:?} is not a block number (0, 1, …)",
+                    i + 1
+                )
+            })?;
+            let t = number(t, "time")?;
+            click_block(game, k, t).map_err(|e| format!("item {} ({item:?}): {e}", i + 1))?
+        } else {
+            let parts: Vec<&str> = item.split(',').collect();
+            let [x, y, t] = parts[..] else {
+                return Err(format!(
+                    "item {} ({item:?}) is neither `x,y,t` nor `k@t`",
+                    i + 1
+                ));
+            };
+            Click {
+                x: number(x, "x")?,
+                y: number(y, "y")?,
+                t: number(t, "t")?,
+            }
+        };
+        clicks.push(click);
+    }
+    validate_clicks(&clicks, max_time).map_err(|e| format!("{text:?}: {e}"))?;
+    Ok(clicks)
+}
+
+impl IphyreSimulateStage {
+    /// Number of traces.
+    fn total(&self) -> u64 {
+        match &self.work {
+            Work::Dataset { games, samples, .. } => games.len() as u64 * samples,
+            Work::Replay { .. } => 1,
+        }
+    }
+
+    /// Work item `i` (game-major): the game, the sample number, the trace id and the clicks.
+    fn item(&self, i: u64) -> (&Game, u64, String, Vec<Click>) {
+        match &self.work {
+            Work::Dataset {
+                games,
+                samples,
+                seed,
+            } => {
+                let game = &games[(i / samples) as usize];
+                let sample = i % samples;
+                let clicks = random_clicks(game, &mut clicks_rng(*seed, game.index as u64, sample));
+                let id = format!("iphyre-{seed}-{}-{sample:04}", game.name);
+                (game, sample, id, clicks)
+            }
+            Work::Replay { game, clicks } => {
+                let text: Vec<String> = clicks
+                    .iter()
+                    .map(|c| format!("{:?},{:?},{:?}", c.x, c.y, c.t))
+                    .collect();
+                let h = hex(&Sha256::digest(text.join(";").as_bytes()));
+                let id = format!("iphyre-{}-{}", game.name, &h[..8]);
+                (game, 0, id, clicks.clone())
+            }
+        }
+    }
+
+    /// Fails when a trace id this stage would write was written by another stage of the run.
+    fn check_ids_are_new(&self, ctx: &StageContext<'_>) -> Result<(), StageError> {
+        let existing: std::collections::HashSet<String> = crate::store::trace_ids(ctx.run())?
+            .into_iter()
+            .filter(|(env, _)| *env == Env::Iphyre)
+            .map(|(_, id)| id)
+            .collect();
+        if existing.is_empty() {
+            return Ok(());
+        }
+        for i in 0..self.total() {
+            let (_, _, id, _) = self.item(i);
+            if existing.contains(&id) {
+                return Err(StageError::Input(format!(
+                    "trace id {id:?} is already in the run {} (written by another stage); use another seed or run folder",
+                    ctx.run().root().display()
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    fn run_shard(
+        &self,
+        ctx: &StageContext<'_>,
+        shard: usize,
+        lo: u64,
+        hi: u64,
+    ) -> Result<Value, StageError> {
+        let name = format!("{shard:05}");
+        if let Some(record) = ctx.finished_shard(&name)? {
+            ctx.progress().advance(ctx.stage_id(), hi - lo);
+            return Ok(record);
+        }
+        let ordinal = ctx.shard_started();
+        let mut sinks = ShardSinks::new(ctx, Env::Iphyre, name.clone());
+        let (mut traces, mut successes, mut eliminations, mut reward) = (0u64, 0u64, 0u64, 0.0);
+        let source = format!("simulate:{}", ctx.stage_id());
+        let mut builder = TraceBatchBuilder::new();
+        for i in lo..hi {
+            let (game, sample, trace_id, clicks) = self.item(i);
+            let scene_id = format!("iphyre-{}", game.name);
+            if sample == 0 {
+                let spec = json!({
+                    "game": game.name,
+                    "index": game.index,
+                    "fold": game.fold,
+                    "fps": self.params.fps,
+                    "objects": game.objects.len(),
+                    "eliminable": game.eliminable().count(),
+                    "joints": game.joints,
+                    "springs": game.springs,
+                });
+                let batch = scene_batch(&scene_id, &game.name, &source, game.objects.len(), &spec)?;
+                sinks.write("scenes", &batch)?;
+            }
+            let result = Episode::new(game, &clicks, &self.params, true)
+                .map_err(|e| StageError::Input(format!("trace {trace_id}: {e}")))?
+                .run();
+            let trace = trace_of(&result, game, &trace_id);
+            traces += 1;
+            successes += u64::from(result.success);
+            eliminations += result.eliminations as u64;
+            reward += result.reward;
+            for ts in &trace.timesteps {
+                builder.push_timestep(ts);
+            }
+            let b = builder.finish(&crate::trace::TraceMeta {
+                trace_id: &trace.trace_id,
+                scene_id: &scene_id,
+                task_id: &trace.task_id,
+                events: &trace.events,
+                outcome: &trace.outcome,
+                extra: &trace.extra,
+                source: &source,
+            })?;
+            sinks.write("traces", &b.traces)?;
+            sinks.write("timesteps", &b.timesteps)?;
+            sinks.write("frames", &b.frames)?;
+            if i == lo {
+                // The mid-shard fault fires with some of the shard's files half written.
+                ctx.checkpoint_mid_shard(ordinal)?;
+            }
+            sinks.write("events", &b.events)?;
+            ctx.progress().advance(ctx.stage_id(), 1);
+        }
+        let rows = sinks.commit()?;
+        let record = json!({
+            "traces": traces,
+            "successes": successes,
+            "eliminations": eliminations,
+            "reward": reward,
+            "rows": rows,
+        });
+        ctx.finish_shard(&name, &record)?;
+        Ok(record)
+    }
+}
+
+impl Stage for IphyreSimulateStage {
+    /// The resolved seed, the games and the engine: a changed pipeline seed reruns the stage.
+    fn fingerprint_extra(&self) -> Result<Value, StageError> {
+        let work = match &self.work {
+            Work::Dataset {
+                games,
+                samples,
+                seed,
+            } => json!({
+                "seed": seed,
+                "samples": samples,
+                "games": games.iter().map(|g| g.name.as_str()).collect::<Vec<_>>(),
+            }),
+            Work::Replay { game, clicks } => json!({
+                "game": game.name,
+                "clicks": clicks.iter().map(|c| [c.x, c.y, c.t]).collect::<Vec<_>>(),
+            }),
+        };
+        let games_hash = hex(&Sha256::digest(
+            crate::envs::iphyre::DEFAULT_GAMES_JSON.as_bytes(),
+        ));
+        Ok(
+            json!({"env": "iphyre", "fps": self.params.fps, "games_data": &games_hash[..16], "work": work}),
+        )
+    }
+
+    fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
+        let total = self.total();
+        let shards: Vec<(u64, u64)> = (0..total.div_ceil(self.per_shard))
+            .map(|s| (s * self.per_shard, ((s + 1) * self.per_shard).min(total)))
+            .collect();
+        self.check_ids_are_new(ctx)?;
+        ctx.progress().set_total(ctx.stage_id(), total);
+        let records: Vec<Value> = shards
+            .par_iter()
+            .enumerate()
+            .map(|(i, &(lo, hi))| self.run_shard(ctx, i, lo, hi))
+            .collect::<Result<_, _>>()?;
+        let mut rows: BTreeMap<String, u64> = BTreeMap::new();
+        let (mut traces, mut successes, mut eliminations, mut reward) = (0u64, 0u64, 0u64, 0.0);
+        for r in &records {
+            traces += r["traces"].as_u64().unwrap_or(0);
+            successes += r["successes"].as_u64().unwrap_or(0);
+            eliminations += r["eliminations"].as_u64().unwrap_or(0);
+            reward += r["reward"].as_f64().unwrap_or(0.0);
+            for (t, n) in r["rows"].as_object().into_iter().flatten() {
+                *rows.entry(t.clone()).or_default() += n.as_u64().unwrap_or(0);
+            }
+        }
+        let frames = rows.get("frames").copied().unwrap_or(0);
+        let mean_reward = if traces > 0 {
+            reward / traces as f64
+        } else {
+            0.0
+        };
+        let line = format!(
+            "{traces} iphyre trace(s) at {} fps, {successes} successful, {eliminations} blocks removed, mean reward {mean_reward:.1}; {frames} frame rows",
+            self.params.fps
+        );
+        Ok(StageOutput {
+            rows,
+            files: Vec::new(),
+            summary: json!({
+                "env": Env::Iphyre.as_str(),
+                "traces": traces,
+                "successes": successes,
+                "capped": 0,
+                "eliminations": eliminations,
+                "mean_reward": mean_reward,
+                "fps": self.params.fps,
+            }),
+            line,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn games_select_by_name_and_fold_in_game_order() {
+        let all = Games::default_games().unwrap();
+        let names = |l: &str| -> Vec<String> {
+            select_games(&all, l)
+                .unwrap()
+                .into_iter()
+                .map(|g| g.name)
+                .collect()
+        };
+        assert_eq!(names("hole, support"), ["support", "hole"]);
+        assert_eq!(names("all").len(), 40);
+        assert_eq!(names("basic,support").len(), 10);
+        assert_eq!(names("multi_ball").len(), 10);
+        let err = select_games(&all, "suport").unwrap_err();
+        assert!(err.contains("suport"), "{err}");
+        assert!(select_games(&all, " , ").is_err());
+    }
+
+    #[test]
+    fn click_lists_parse_both_forms_and_name_the_bad_item() {
+        let all = Games::default_games().unwrap();
+        let g = all.get("support").unwrap();
+        let c = parse_clicks("250,400,0.5; 1@1.5", g, 15.0).unwrap();
+        assert_eq!(
+            c,
+            [
+                Click {
+                    x: 250.0,
+                    y: 400.0,
+                    t: 0.5
+                },
+                Click {
+                    x: 250.0,
+                    y: 500.0,
+                    t: 1.5
+                }
+            ]
+        );
+        for (bad, needle) in [
+            ("250,400", "neither"),
+            ("250,abc,1", "y \"abc\""),
+            ("7@1", "block 7"),
+            ("x@1", "block number"),
+            ("250,400,16", "after the episode"),
+            ("700,400,1", "off the"),
+            ("250,400,NaN", "not finite"),
+        ] {
+            let err = parse_clicks(bad, g, 15.0).unwrap_err();
+            assert!(err.contains(needle), "{bad}: {err}");
+        }
+        assert!(parse_clicks("", g, 15.0).unwrap().is_empty());
+    }
+}
