@@ -48,6 +48,46 @@ pub(crate) struct Death {
     pub message: String,
 }
 
+type SpawnRequest = (
+    std::process::Command,
+    std::sync::mpsc::Sender<std::io::Result<Child>>,
+);
+
+/// Starts `cmd` from one thread that lives as long as the process. The sandbox sets
+/// `PR_SET_PDEATHSIG`, which the kernel fires when the *thread* that forked the child exits: a
+/// replacement worker started from a batch's scoped thread (after a timeout or crash) was killed with
+/// SIGKILL as soon as that batch ended, so the next batch found it dead.
+fn spawn_from_long_lived_thread(cmd: std::process::Command) -> std::io::Result<Child> {
+    static SPAWNER: std::sync::OnceLock<Mutex<std::sync::mpsc::Sender<SpawnRequest>>> =
+        std::sync::OnceLock::new();
+    let spawner = SPAWNER.get_or_init(|| {
+        let (tx, rx) = channel::<SpawnRequest>();
+        let started = thread::Builder::new()
+            .name("detect-spawner".into())
+            .spawn(move || {
+                for (mut cmd, reply) in rx {
+                    let _ = reply.send(cmd.spawn());
+                }
+            });
+        if let Err(e) = started {
+            tracing::warn!("could not start the worker spawner thread: {e}");
+        }
+        Mutex::new(tx)
+    });
+    let (reply_tx, reply_rx) = channel();
+    let sent = spawner
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .send((cmd, reply_tx));
+    match sent {
+        Ok(()) => reply_rx
+            .recv()
+            .unwrap_or_else(|_| Err(std::io::Error::other("the worker spawner thread stopped"))),
+        // No spawner thread: start from this thread (the old behaviour).
+        Err(std::sync::mpsc::SendError((mut cmd, _))) => cmd.spawn(),
+    }
+}
+
 /// A running worker.
 pub(crate) struct Worker {
     child: Child,
@@ -69,7 +109,7 @@ impl Worker {
         cmd.stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped());
-        let mut child = cmd.spawn().map_err(|e| DetectError::Spawn {
+        let mut child = spawn_from_long_lived_thread(cmd).map_err(|e| DetectError::Spawn {
             message: format!("{}: {e}", python.display()),
         })?;
         let stdin = child.stdin.take();
