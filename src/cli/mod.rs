@@ -9,6 +9,7 @@
 
 mod accuracy;
 mod annotate;
+mod evolve;
 mod export;
 mod import;
 mod progress;
@@ -85,6 +86,8 @@ enum Command {
     Annotate(annotate::Args),
     /// Score a library's event-grounded labels against simulator events (precision/recall/F1).
     Accuracy(accuracy::Args),
+    /// Learn detectors for labels by evolutionary search over a run's traces (resumable).
+    Evolve(evolve::Args),
     /// Print a trace with its annotations as compact text for language models, with a token count.
     Show(show::Args),
     /// Reward programs: check one, evaluate it on a trace, or synthesise one from a goal sentence.
@@ -109,6 +112,7 @@ pub fn main() -> ExitCode {
         Command::Import(a) => import::run(a, cli.quiet),
         Command::Annotate(a) => annotate::run(a, cli.quiet),
         Command::Accuracy(a) => accuracy::run(a, cli.quiet),
+        Command::Evolve(a) => evolve::run(a, cli.quiet),
         Command::Show(a) => show::run(a),
         Command::Reward(a) => reward::run(a),
         Command::Export(a) => export::run(a),

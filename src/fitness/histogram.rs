@@ -15,7 +15,7 @@
 pub const DEFAULT_BINS: usize = 10;
 
 /// Additive smoothing per bin (in units of "fraction of a bin active").
-pub const SMOOTHING: f64 = 1e-3;
+pub const SMOOTHING: f64 = 1e-2;
 
 /// The smoothed, normalised activation histogram of one detector over one trace: `active[i]` says whether
 /// timestep position i (0-based, of `active.len()`) is covered.

@@ -50,6 +50,8 @@ pub static STAGE_KINDS: &[&StageKind] = &[
     &stages::simulate::KIND,
     &stages::annotate::KIND,
     &stages::accuracy::KIND,
+    &stages::optimise::KIND,
+    &stages::evolve::KIND,
     &stages::sql::KIND,
     &stages::export::KIND,
 ];

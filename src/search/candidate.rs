@@ -20,8 +20,9 @@ pub fn code_hash(code: &str) -> String {
 }
 
 /// A candidate's status: `ok` (scored), `seed` (g₀, scored), `duplicate` (same code as an earlier
-/// candidate), `same_behaviour` (same probe output as an earlier one), `proposer` (the proposer gave
-/// no program), or a detector error category (`syntax`, `runtime`, `timeout`, …).
+/// candidate), `same_behaviour` (same probe output as an earlier one), `degenerate` (ran, but active
+/// nowhere or everywhere), `proposer` (the proposer gave no program), `budget_exhausted`, or a
+/// detector error category (`syntax`, `runtime`, `timeout`, …).
 pub type Status = String;
 
 /// One candidate of one label's search.
@@ -89,7 +90,7 @@ impl CandidateRecord {
     pub fn executable(&self) -> bool {
         matches!(
             self.status.as_str(),
-            "ok" | "seed" | "duplicate" | "same_behaviour"
+            "ok" | "seed" | "duplicate" | "same_behaviour" | "degenerate"
         )
     }
 }

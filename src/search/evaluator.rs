@@ -5,8 +5,9 @@
 //! failure there (syntax, forbidden construct, exception, timeout, invalid output) ends the evaluation
 //! early. The probe activations are hashed into a *behaviour signature*; a candidate behaving exactly
 //! like one already evaluated in this search is not evaluated further. Otherwise it runs on the remaining
-//! traces (a failure on any of them fails the candidate) and its histograms are scored against the
-//! training set's D_x and the library's histograms.
+//! traces (a failure on any of them fails the candidate). A degenerate pattern (active nowhere, or
+//! everywhere) is recorded but not scored; otherwise its histograms are scored against the training
+//! set's D_x and the library's histograms.
 
 use std::collections::HashMap;
 
@@ -52,6 +53,19 @@ pub enum Evaluation {
     SameBehaviour {
         /// The earlier candidate's code hash.
         of: String,
+        /// The behaviour signature.
+        signature: String,
+    },
+    /// It ran on every training trace but its pattern is degenerate: active nowhere, or at every
+    /// timestep of every trace. Such a pattern says nothing about the traces (ρ = 0) while its histograms
+    /// differ maximally from the library's (a large η), so it is not scored and never becomes a parent.
+    Degenerate {
+        /// `silent` or `always on`.
+        reason: &'static str,
+        /// Mean wall time per trace (s).
+        mean_time: f64,
+        /// Fraction of training traces where it reports at least one pattern.
+        activation_rate: f64,
         /// The behaviour signature.
         signature: String,
     },
@@ -111,12 +125,14 @@ pub struct Evaluator<'a> {
 
 impl Evaluator<'_> {
     /// Evaluates `code` (with `lines` lines); `known` maps behaviour signatures seen in this search to
-    /// the code hash that first showed them.
+    /// the code hash that first showed them. `seed` scores a degenerate pattern anyway (a seed program
+    /// must found the islands).
     pub fn evaluate(
         &self,
         code: &str,
         lines: usize,
         known: &HashMap<String, String>,
+        seed: bool,
     ) -> Evaluation {
         let det = Detector::new(self.env, &self.label, code, "evolve");
         let p = self
@@ -167,19 +183,36 @@ impl Evaluator<'_> {
             }
         }
         let n = act.len().max(1) as f64;
+        let mean_time = time.iter().sum::<f64>() / n;
+        let activation_rate = count.iter().filter(|&&c| c > 0).count() as f64 / n;
+        let reason = if act.iter().all(|a| !a.contains(&true)) {
+            Some("silent")
+        } else if act.iter().all(|a| !a.contains(&false)) {
+            Some("always on")
+        } else {
+            None
+        };
+        if let Some(reason) = reason.filter(|_| !seed) {
+            return Evaluation::Degenerate {
+                reason,
+                mean_time,
+                activation_rate,
+                signature,
+            };
+        }
         let out = CandidateOutput {
             hists: act
                 .iter()
                 .map(|a| histogram(a, self.settings.bins))
                 .collect(),
-            mean_time: time.iter().sum::<f64>() / n,
+            mean_time,
             lines,
         };
         let terms = evaluate(self.dx, self.library, &out, self.settings.time_penalty);
         Evaluation::Scored {
             terms,
             mean_time: out.mean_time,
-            activation_rate: count.iter().filter(|&&c| c > 0).count() as f64 / n,
+            activation_rate,
             signature,
         }
     }

@@ -10,7 +10,8 @@
 #
 # Edits, chosen with random.Random(seed) (deterministic for a given seed, parents and Python version):
 #   const   multiply a float literal by exp(N(0, 0.35)) (a zero becomes ±0.05), or move an int literal
-#           >= 2 by ±1 (ints used as subscripts or range starts are left alone);
+#           >= 2 by ±1; literals in subscripts, range() arguments, round()'s digits and exponents are
+#           left alone (changing them breaks programs rather than tuning them);
 #   compare swap a comparison operator with a neighbour (< <=, > >=, < >, == !=);
 #   splice  replace a top-level function of the first parent by the same-named, different function of
 #           another parent (recombination; needs two parents).
@@ -47,9 +48,14 @@ def _numbers(tree):
         if isinstance(node, ast.Subscript):
             for sub in ast.walk(node.slice):
                 protected.add(id(sub))
-        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "range":
-            if node.args:
-                protected.add(id(node.args[0]))
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name):
+            if node.func.id == "range":
+                for arg in node.args:
+                    protected.add(id(arg))
+            elif node.func.id == "round" and len(node.args) > 1:
+                protected.add(id(node.args[1]))
+        if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Pow):
+            protected.add(id(node.right))
     out = []
     for node in ast.walk(tree):
         if not isinstance(node, ast.Constant) or isinstance(node.value, bool):

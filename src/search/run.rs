@@ -94,7 +94,7 @@ pub enum SearchError {
 }
 
 /// Where a search keeps its finished rounds (round 0 holds the seed programs).
-pub trait Checkpoint: Sync {
+pub trait Checkpoint {
     /// The records of a finished round, if it was saved.
     fn load(
         &self,
@@ -308,7 +308,7 @@ impl LabelSearch<'_> {
         } else {
             match self
                 .evaluator
-                .evaluate(&rec.code, rec.lines as usize, &state.known)
+                .evaluate(&rec.code, rec.lines as usize, &state.known, rec.step < 0)
             {
                 Evaluation::Failed { error, on_probe } => {
                     rec.status = error.category().into();
@@ -322,6 +322,20 @@ impl LabelSearch<'_> {
                 Evaluation::SameBehaviour { of, signature } => {
                     rec.status = "same_behaviour".into();
                     rec.error = Some(format!("behaves like {of} on the probe set"));
+                    rec.signature = Some(signature);
+                }
+                Evaluation::Degenerate {
+                    reason,
+                    mean_time,
+                    activation_rate,
+                    signature,
+                } => {
+                    rec.status = "degenerate".into();
+                    rec.error = Some(format!(
+                        "degenerate pattern: {reason} on every training trace"
+                    ));
+                    rec.mean_time_s = Some(mean_time);
+                    rec.activation_rate = Some(activation_rate);
                     rec.signature = Some(signature);
                 }
                 Evaluation::Scored {
@@ -453,9 +467,10 @@ impl LabelSearch<'_> {
                         .iter()
                         .map(|(step, island, parents, seed)| {
                             let req = self.request(*island, parents, *seed, *step);
+                            let proposer = self.proposer;
                             sc.spawn(move || {
                                 let t = Instant::now();
-                                (self.proposer.propose(&req), t.elapsed().as_secs_f64())
+                                (proposer.propose(&req), t.elapsed().as_secs_f64())
                             })
                         })
                         .collect();

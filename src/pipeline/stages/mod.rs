@@ -5,8 +5,10 @@
 
 pub mod accuracy;
 pub mod annotate;
+pub mod evolve;
 pub mod export;
 pub mod import;
+pub mod optimise;
 pub mod simulate;
 pub mod simulate_iphyre;
 pub mod sql;

@@ -1,0 +1,597 @@
+//! `evolve`: learns detectors for labels by evolutionary search over a run's traces (the paper's
+//! Algorithms 1–3), starting from a library, and writes the `candidates`, `evolution_labels`,
+//! `evolution_convergence` and `trace_distances` tables and the grown library as a folder.
+//!
+//! Resumable: each round of a label's search is a shard whose record holds the round's candidates, so a
+//! killed stage replays its finished rounds and continues; each label's tables are written by a last
+//! shard of that label. The D_x matrix of the training set is looked up in the run's
+//! `trace_distances` (any stage's) before it is computed.
+
+use std::cell::RefCell;
+use std::path::PathBuf;
+
+use serde_json::{Value, json};
+use sha2::{Digest, Sha256};
+
+use super::annotate::{DetectorSetup, write};
+use super::trace_files::{read_traces, trace_file_sets};
+use crate::fitness::DistanceMatrix;
+use crate::fitness::table::{distances_batch, matrix_from_batches, set_id};
+use crate::pipeline::params::{ParamSpec, ParamType};
+use crate::pipeline::registry::{BuildError, StageKind};
+use crate::pipeline::spec::{PipelineSpec, StageDef};
+use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
+use crate::search::candidate::candidates_batch;
+use crate::search::library_out::write_library;
+use crate::search::run::Checkpoint;
+use crate::search::tables::{convergence_batch, labels_batch};
+use crate::search::{
+    CandidateRecord, Discovery, EvalSettings, MutateProposer, Proposer, SearchConfig, SearchError,
+    Strategy, Temperatures,
+};
+use crate::trace::{Env, Trace};
+
+/// The `evolve` stage kind.
+pub static KIND: StageKind = StageKind {
+    name: "evolve",
+    summary: "learn detectors for labels by evolutionary search (FunSearch islands, mutate or LLM proposer)",
+    doc: "For each label in `labels` (default: every label of the library), searches for a detector program \
+          maximising the paper's fitness ν = ρ + η − λ − ψ on the run's `env` traces (a training split; \
+          `holdout` of them kept for the convergence statistics), starting from the library's detector \
+          for the label (or a skeleton), and adds the best to the library when ν > delta (Algorithm 2). \
+          Every candidate goes to the candidates table; the grown library is written as a folder \
+          (default exports/<stage>/library) that `annotate` reads. See docs/evolution.md.",
+    writes: "candidates, evolution_labels, evolution_convergence, trace_distances, exports/<stage>/library/",
+    params: PARAMS,
+    build,
+};
+
+const PARAMS: &[ParamSpec] = &[
+    ParamSpec::optional(
+        "env",
+        ParamType::Choice(&["pooltool", "phyre", "iphyre"]),
+        "\"pooltool\"",
+        "environment whose traces are used",
+    ),
+    ParamSpec::maybe(
+        "library",
+        ParamType::Str,
+        "starting library folder, relative to the project folder (default: data/libraries/<env>)",
+    ),
+    ParamSpec::maybe(
+        "labels",
+        ParamType::StrList,
+        "labels to learn, in order (default: the library's labels)",
+    ),
+    ParamSpec::optional(
+        "strategy",
+        ParamType::Choice(&["island", "hill-climb", "best-of-n"]),
+        "\"island\"",
+        "search strategy",
+    ),
+    ParamSpec::optional(
+        "proposer",
+        ParamType::Choice(&["mutate", "llm"]),
+        "\"mutate\"",
+        "where children come from: syntax-tree edits or an LLM",
+    ),
+    ParamSpec::optional("budget", ParamType::Count, "200", "proposals per label"),
+    ParamSpec::optional("islands", ParamType::Count, "4", "islands I"),
+    ParamSpec::optional(
+        "prompt_size",
+        ParamType::Count,
+        "2",
+        "parents per proposal s",
+    ),
+    ParamSpec::optional(
+        "reset_period",
+        ParamType::Count,
+        "100",
+        "reset the weaker half of the islands every T_r steps (0: never)",
+    ),
+    ParamSpec::optional(
+        "delta",
+        ParamType::Float,
+        "0.0",
+        "acceptance threshold δ on ν",
+    ),
+    ParamSpec::optional(
+        "parallel",
+        ParamType::Count,
+        "4",
+        "proposals requested at once",
+    ),
+    ParamSpec::optional(
+        "repair_attempts",
+        ParamType::Count,
+        "2",
+        "repair requests per failed child (proposers that repair)",
+    ),
+    ParamSpec::optional(
+        "max_traces",
+        ParamType::Count,
+        "100",
+        "training traces at most (and held-out traces at most)",
+    ),
+    ParamSpec::optional(
+        "holdout",
+        ParamType::Float,
+        "0.2",
+        "fraction of traces held out for the convergence statistics",
+    ),
+    ParamSpec::optional(
+        "probe",
+        ParamType::Count,
+        "8",
+        "training traces in the probe set (cheap checks)",
+    ),
+    ParamSpec::optional(
+        "bins",
+        ParamType::Count,
+        "10",
+        "time bins b of the annotation histograms",
+    ),
+    ParamSpec::optional(
+        "samples",
+        ParamType::Count,
+        "64",
+        "normalised-time samples per trace for d_x",
+    ),
+    ParamSpec::optional(
+        "time_penalty",
+        ParamType::Bool,
+        "true",
+        "compute ψ from wall time (off: reproducible scores)",
+    ),
+    ParamSpec::optional(
+        "convergence_per_bin",
+        ParamType::Count,
+        "3",
+        "detectors per 10 % bin compared on the held-out traces (0: skip)",
+    ),
+    ParamSpec::optional(
+        "max_edits",
+        ParamType::Count,
+        "2",
+        "mutate proposer: edits per child at most",
+    ),
+    ParamSpec::maybe(
+        "seed",
+        ParamType::Int,
+        "search seed (default: the pipeline's seed)",
+    ),
+    ParamSpec::maybe(
+        "output",
+        ParamType::Str,
+        "folder for the grown library, relative to the project (default: <run>/exports/<stage>/library)",
+    ),
+    ParamSpec::optional(
+        "workers",
+        ParamType::Count,
+        "0",
+        "Python worker processes (0 = one per core)",
+    ),
+    ParamSpec::optional(
+        "timeout",
+        ParamType::Float,
+        "10.0",
+        "wall-clock limit of one detector call (s)",
+    ),
+    ParamSpec::optional(
+        "memory_mb",
+        ParamType::Count,
+        "2048",
+        "address-space limit of a worker (MiB)",
+    ),
+];
+
+/// The `evolve` stage.
+#[derive(Debug)]
+pub struct EvolveStage {
+    setup: DetectorSetup,
+    labels: Vec<String>,
+    config: SearchConfig,
+    seed: Option<u64>,
+    eval: EvalSettings,
+    proposer: String,
+    max_traces: usize,
+    holdout: f64,
+    samples: usize,
+    convergence_per_bin: usize,
+    max_edits: u32,
+    output: Option<PathBuf>,
+}
+
+fn count(p: &serde_json::Map<String, Value>, k: &str, default: u64) -> u64 {
+    p.get(k).and_then(Value::as_u64).unwrap_or(default)
+}
+
+fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
+    let setup = DetectorSetup::from_params(def, spec)?;
+    let p = &def.params;
+    let labels: Vec<String> = match p.get("labels").and_then(Value::as_array) {
+        Some(a) => a
+            .iter()
+            .filter_map(|v| v.as_str().map(str::to_string))
+            .collect(),
+        None => setup
+            .library
+            .labels()
+            .into_iter()
+            .map(str::to_string)
+            .collect(),
+    };
+    if labels.iter().any(|l| l.trim().is_empty()) {
+        return Err(BuildError::param(
+            "labels",
+            "labels must not be empty strings",
+        ));
+    }
+    if labels.is_empty() {
+        return Err(BuildError::param("labels", "no label to learn"));
+    }
+    let strategy: Strategy = p["strategy"]
+        .as_str()
+        .unwrap_or("island")
+        .parse()
+        .map_err(|e: String| BuildError::param("strategy", e))?;
+    let holdout = p["holdout"].as_f64().unwrap_or(0.2);
+    if !(0.0..1.0).contains(&holdout) {
+        return Err(BuildError::param(
+            "holdout",
+            format!("holdout must be in [0, 1), found {holdout}"),
+        ));
+    }
+    let delta = p["delta"].as_f64().unwrap_or(0.0);
+    if !delta.is_finite() {
+        return Err(BuildError::param("delta", "delta must be a finite number"));
+    }
+    let budget = count(p, "budget", 200);
+    if budget == 0 {
+        return Err(BuildError::param("budget", "budget must be at least 1"));
+    }
+    let proposer = p["proposer"].as_str().unwrap_or("mutate").to_string();
+    if proposer == "llm" {
+        return Err(BuildError::param(
+            "proposer",
+            "the llm proposer is not available in this build of the evolve stage yet; use \"mutate\"",
+        ));
+    }
+    let seed = match p.get("seed") {
+        Some(v) => Some(
+            v.as_i64()
+                .filter(|s| *s >= 0)
+                .ok_or_else(|| BuildError::param("seed", "seed must be a non-negative integer"))?
+                as u64,
+        ),
+        None => None,
+    };
+    Ok(Box::new(EvolveStage {
+        labels,
+        config: SearchConfig {
+            strategy,
+            islands: count(p, "islands", 4).max(1) as usize,
+            prompt_size: count(p, "prompt_size", 2).max(1) as usize,
+            reset_period: count(p, "reset_period", 100),
+            budget,
+            delta,
+            parallel: count(p, "parallel", 4).max(1) as usize,
+            repair_attempts: count(p, "repair_attempts", 2) as u32,
+            temperatures: Temperatures::default(),
+            seed: 0,
+        },
+        seed,
+        eval: EvalSettings {
+            bins: count(p, "bins", 10).max(1) as usize,
+            probe: count(p, "probe", 8).max(1) as usize,
+            time_penalty: p["time_penalty"].as_bool().unwrap_or(true),
+        },
+        proposer,
+        max_traces: count(p, "max_traces", 100).max(2) as usize,
+        holdout,
+        samples: count(p, "samples", 64).max(2) as usize,
+        convergence_per_bin: count(p, "convergence_per_bin", 3) as usize,
+        max_edits: count(p, "max_edits", 2).max(1) as u32,
+        output: p
+            .get("output")
+            .and_then(Value::as_str)
+            .map(|o| spec.project_dir.join(o)),
+        setup,
+    }))
+}
+
+fn hash_u64(seed: u64, s: &str) -> u64 {
+    let mut h = Sha256::new();
+    h.update(seed.to_le_bytes());
+    h.update(s.as_bytes());
+    u64::from_le_bytes(h.finalize()[..8].try_into().expect("8 bytes"))
+}
+
+/// Splits traces into (training, held-out): a trace is held out when the hash of (seed, id) falls in
+/// the held-out fraction; each side is ordered by that hash and cut to `max` traces.
+pub(crate) fn split(
+    mut traces: Vec<Trace>,
+    seed: u64,
+    holdout: f64,
+    max: usize,
+) -> (Vec<Trace>, Vec<Trace>) {
+    traces.sort_by_cached_key(|t| (hash_u64(seed, &t.trace_id), t.trace_id.clone()));
+    let cut = (holdout * u64::MAX as f64) as u64;
+    let (mut hold, mut train): (Vec<Trace>, Vec<Trace>) = traces
+        .into_iter()
+        .partition(|t| holdout > 0.0 && hash_u64(seed ^ 0x401D, &t.trace_id) < cut);
+    train.truncate(max);
+    hold.truncate(max);
+    (train, hold)
+}
+
+/// Rounds checkpointed as shards of the stage.
+struct StagingCheckpoint<'a, 'b> {
+    ctx: &'a StageContext<'b>,
+    failure: RefCell<Option<StageError>>,
+}
+
+impl StagingCheckpoint<'_, '_> {
+    fn shard(l: u32, r: u64) -> String {
+        format!("L{l:03}.R{r:05}")
+    }
+    fn fail(&self, e: StageError) -> SearchError {
+        let msg = e.to_string();
+        *self.failure.borrow_mut() = Some(e);
+        SearchError::Checkpoint(msg)
+    }
+}
+
+impl Checkpoint for StagingCheckpoint<'_, '_> {
+    fn load(&self, l: u32, r: u64) -> Result<Option<Vec<CandidateRecord>>, SearchError> {
+        let rec = self
+            .ctx
+            .finished_shard(&Self::shard(l, r))
+            .map_err(|e| self.fail(e))?;
+        match rec {
+            None => Ok(None),
+            Some(v) => {
+                let records: Vec<CandidateRecord> = serde_json::from_value(v["records"].clone())
+                    .map_err(|e| {
+                        SearchError::Checkpoint(format!("unreadable round record: {e}"))
+                    })?;
+                self.ctx.progress().advance(
+                    self.ctx.stage_id(),
+                    records.iter().filter(|r| r.step >= 0).count() as u64,
+                );
+                Ok(Some(records))
+            }
+        }
+    }
+    fn save(&self, l: u32, r: u64, records: &[CandidateRecord]) -> Result<(), SearchError> {
+        self.ctx.progress().advance(
+            self.ctx.stage_id(),
+            records.iter().filter(|r| r.step >= 0).count() as u64,
+        );
+        self.ctx
+            .finish_shard(&Self::shard(l, r), &json!({"records": records}))
+            .map_err(|e| self.fail(e))
+    }
+}
+
+impl EvolveStage {
+    fn training_distances(
+        &self,
+        ctx: &StageContext<'_>,
+        env: Env,
+        train: &[Trace],
+    ) -> Result<(DistanceMatrix, bool), StageError> {
+        let ids: Vec<String> = train.iter().map(|t| t.trace_id.clone()).collect();
+        let sid = set_id(&ids, self.samples);
+        let mut files: Vec<PathBuf> = ctx
+            .run()
+            .table("trace_distances")?
+            .files
+            .into_iter()
+            .filter(|f| f.env == Some(env))
+            .map(|f| f.path)
+            .collect();
+        files.extend(ctx.staging().table_files("trace_distances")?);
+        for f in files {
+            let batches = crate::store::read_file(&f)?;
+            if let Some(m) = matrix_from_batches(&sid, &ids, &batches) {
+                return Ok((m, true));
+            }
+        }
+        let m = DistanceMatrix::compute(train, self.samples);
+        let b = distances_batch(&sid, &m)?;
+        write(ctx, "trace_distances", env, "dx", &b)?;
+        ctx.finish_shard("dx", &json!({"set_id": sid, "pairs": m.upper.len()}))?;
+        Ok((m, false))
+    }
+}
+
+impl Stage for EvolveStage {
+    fn fingerprint_extra(&self) -> Result<Value, StageError> {
+        let h = |s: &str| crate::search::code_hash(s);
+        Ok(json!({
+            "library": self.setup.library.fingerprint(),
+            "worker": crate::detect::worker_fingerprint(),
+            "mutate": h(crate::search::mutate::MUTATE_PY),
+            "skeleton": h(&crate::search::skeleton::skeleton(self.setup.env, "x")),
+            "dx_version": crate::fitness::table::DX_VERSION,
+        }))
+    }
+
+    fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
+        let env = self.setup.env;
+        let mut config = self.config.clone();
+        config.seed = self.seed.unwrap_or(ctx.seed());
+        let mut traces = Vec::new();
+        for set in trace_file_sets(ctx.run(), env)? {
+            traces.extend(read_traces(ctx.run(), &set)?);
+        }
+        if traces.len() < 3 {
+            return Err(StageError::Input(format!(
+                "evolve needs at least 3 {env} traces in the run (found {}): add a simulate or import stage as input",
+                traces.len()
+            )));
+        }
+        let (train, holdout) = split(traces, config.seed, self.holdout, self.max_traces);
+        if train.len() < 2 {
+            return Err(StageError::Input(format!(
+                "only {} training trace(s) after the held-out split",
+                train.len()
+            )));
+        }
+        ctx.progress()
+            .set_total(ctx.stage_id(), config.budget * self.labels.len() as u64);
+        let t_dx = std::time::Instant::now();
+        let (dx, reused) = self.training_distances(ctx, env, &train)?;
+        let dx_s = t_dx.elapsed().as_secs_f64();
+        let mut limits = self.setup.limits.clone();
+        limits.trace_cache = limits.trace_cache.max(train.len() + holdout.len() + 4);
+        let pool =
+            crate::detect::WorkerPool::new(limits).map_err(|e| StageError::Input(e.to_string()))?;
+        let proposer: Box<dyn Proposer> = match self.proposer.as_str() {
+            "mutate" => Box::new(
+                MutateProposer::new(None, self.max_edits)
+                    .map_err(|e| StageError::Input(e.to_string()))?,
+            ),
+            other => {
+                return Err(StageError::Input(format!(
+                    "proposer {other:?} is not available in the evolve stage"
+                )));
+            }
+        };
+        let checkpoint = StagingCheckpoint {
+            ctx,
+            failure: RefCell::new(None),
+        };
+        let stage = ctx.stage_id().to_string();
+        let discovery = Discovery {
+            pool: &pool,
+            env,
+            train: &train,
+            holdout: &holdout,
+            dx: &dx,
+            config: &config,
+            eval: self.eval.clone(),
+            proposer: proposer.as_ref(),
+            checkpoint: &checkpoint,
+            source: format!("evolve:{stage}"),
+            convergence_per_bin: self.convergence_per_bin,
+        };
+        let mut rows: std::collections::BTreeMap<String, u64> = Default::default();
+        let mut label_lines = Vec::new();
+        let mut labels_summary = Vec::new();
+        let mut after = |m: u32, r: &crate::search::LabelResult| -> Result<(), SearchError> {
+            let o = &r.outcome;
+            labels_summary.push(json!({
+                "label": o.label, "seed_nu": o.seed_nu, "best_nu": o.best.terms.nu,
+                "best_terms": o.best.terms, "accepted": r.accepted, "candidates": o.records.len(),
+                "best_by_step": o.best_by_step, "wall_s": o.wall_s, "propose_s": o.propose_s,
+            }));
+            label_lines.push(format!(
+                "{}: ν {:.4} → {:.4}{}",
+                o.label,
+                o.seed_nu,
+                o.best.terms.nu,
+                if r.accepted { "" } else { " (rejected)" }
+            ));
+            let shard = format!("L{m:03}.final");
+            let done = ctx.finished_shard(&shard).map_err(|e| checkpoint.fail(e))?;
+            if let Some(rec) = done {
+                for (t, n) in rec["rows"].as_object().into_iter().flatten() {
+                    *rows.entry(t.clone()).or_default() += n.as_u64().unwrap_or(0);
+                }
+                return Ok(());
+            }
+            let mut written = serde_json::Map::new();
+            let mut put = |table: &str,
+                           b: Result<arrow::array::RecordBatch, arrow::error::ArrowError>|
+             -> Result<(), SearchError> {
+                let b = b.map_err(|e| checkpoint.fail(e.into()))?;
+                if b.num_rows() == 0 {
+                    return Ok(());
+                }
+                let n = write(ctx, table, env, &shard, &b).map_err(|e| checkpoint.fail(e))?;
+                *rows.entry(table.to_string()).or_default() += n;
+                written.insert(table.into(), json!(n));
+                Ok(())
+            };
+            put(
+                "candidates",
+                candidates_batch(&stage, config.budget, &o.records),
+            )?;
+            put(
+                "evolution_labels",
+                labels_batch(&stage, &config, proposer.name(), m, r),
+            )?;
+            put(
+                "evolution_convergence",
+                convergence_batch(&stage, &r.convergence),
+            )?;
+            ctx.finish_shard(&shard, &json!({"rows": written}))
+                .map_err(|e| checkpoint.fail(e))
+        };
+        let base = self.setup.library.detectors.clone();
+        let result = discovery.run(base, &self.labels, &mut after);
+        let (library, results) = match result {
+            Ok(x) => x,
+            Err(e) => {
+                return Err(checkpoint
+                    .failure
+                    .borrow_mut()
+                    .take()
+                    .unwrap_or_else(|| StageError::Input(e.to_string())));
+            }
+        };
+        if !reused {
+            *rows.entry("trace_distances".into()).or_default() += dx.upper.len() as u64;
+        }
+        let out_dir = self
+            .output
+            .clone()
+            .unwrap_or_else(|| ctx.run().exports_dir().join(&stage).join("library"));
+        let name = format!("{}-evolved", self.setup.library.name);
+        let description = format!(
+            "{} grown by evolve stage {stage} (seed {}, {} strategy, {} proposer, budget {} per label)",
+            self.setup.library.name,
+            config.seed,
+            config.strategy.as_str(),
+            proposer.name(),
+            config.budget
+        );
+        write_library(&out_dir, &name, env, &description, &library)
+            .map_err(|e| StageError::Input(format!("{}: {e}", out_dir.display())))?;
+        let wall: f64 = results.iter().map(|r| r.outcome.wall_s).sum();
+        let prop: f64 = results.iter().map(|r| r.outcome.propose_s).sum();
+        let accepted = results.iter().filter(|r| r.accepted).count();
+        let line = format!(
+            "{} label(s) on {} training / {} held-out {env} trace(s), {accepted} accepted; {}; library: {}",
+            results.len(),
+            train.len(),
+            holdout.len(),
+            label_lines.join("; "),
+            out_dir.display()
+        );
+        Ok(StageOutput {
+            rows,
+            files: vec![out_dir.clone()],
+            summary: json!({
+                "env": env.as_str(),
+                "seed": config.seed,
+                "strategy": config.strategy.as_str(),
+                "proposer": proposer.name(),
+                "budget": config.budget,
+                "train": train.len(),
+                "holdout": holdout.len(),
+                "dx": {"pairs": dx.upper.len(), "reused": reused, "seconds": dx_s},
+                "labels": labels_summary,
+                "accepted": accepted,
+                "library": out_dir.to_string_lossy(),
+                "wall_s": wall,
+                "propose_s": prop,
+                "outside_proposer_share": if wall > 0.0 { (wall - prop) / wall } else { 0.0 },
+                "sandbox": pool.layers(),
+            }),
+            line,
+        })
+    }
+}
