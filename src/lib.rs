@@ -9,6 +9,7 @@
 //! - [`store`]: the run directory on disk — atomic files, Parquet datasets, staging and commit;
 //! - [`envs`]: simulators behind one `Environment` trait (billiards: pooltool 0.6.0 physics), producing traces;
 //! - [`detect`]: sandboxed Python workers that run detector programs over traces, annotations and libraries;
+//! - [`llm`]: OpenAI-compatible chat client (retries, budget, `llm_calls` recording and replay), prompt templates;
 //! - [`query`]: DataFusion over a run's tables, and result formats (table, CSV, Markdown, LaTeX, JSON);
 //! - [`pipeline`]: pipeline files, the stage registry, fingerprints, the runner and its manifest.
 #![warn(missing_docs)]
@@ -16,6 +17,7 @@
 pub mod detect;
 pub mod envs;
 pub mod fitness;
+pub mod llm;
 pub mod pipeline;
 pub mod query;
 pub mod reward;

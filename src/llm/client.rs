@@ -1,0 +1,539 @@
+//! [`LlmClient`]: one OpenAI-compatible chat-completions endpoint, shared by every thread of a run.
+//!
+//! A call ([`LlmClient::chat`]) goes: budget check → replay lookup (when replaying) → a free slot of the
+//! concurrency limit → one HTTP request → on 408/429/5xx, a timeout or a connection error, a backoff
+//! (seeded jitter, at least the server's `Retry-After`) and another request, up to `max_retries` →
+//! the answer, with token counts from `usage` or estimated. Every attempt becomes an `llm_calls` row.
+//!
+//! It uses reqwest's **blocking** API: every caller in annotrace is synchronous (search threads, the
+//! CLI), and parallelism comes from calling one shared client from several threads. Do not call it
+//! from inside an async runtime.
+
+use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Condvar, Mutex};
+use std::time::{Duration, Instant, SystemTime};
+
+use sha2::{Digest, Sha256};
+
+use super::backoff::{delay, parse_retry_after, splitmix64};
+use super::budget::{Meter, Usage};
+use super::config::{LlmConfig, endpoint_url, redact_url};
+use super::error::LlmError;
+use super::message::{ChatReply, ChatRequest, excerpt, parse_answer};
+use super::record::{CallLog, CallRecord, now_ms, status};
+use super::replay::ReplayIndex;
+use crate::detect::count_tokens;
+use crate::store::RunDir;
+
+/// Keys shorter than this are not scrubbed from recorded text (replacing every `x` would mangle the
+/// record, and such a key is no secret).
+const MIN_SCRUB_LEN: usize = 8;
+
+static SESSIONS: AtomicU64 = AtomicU64::new(0);
+
+/// A chat-completions client with a concurrency limit, retries, a budget, recording and replay.
+///
+/// ```no_run
+/// use annotrace::llm::{ChatRequest, LlmClient, LlmConfig};
+/// use annotrace::store::RunDir;
+///
+/// let client = LlmClient::new(
+///     LlmConfig::new("http://localhost:8080", "qwen2.5-coder-7b-instruct"),
+///     Some(&RunDir::new("runs/demo")),
+/// )?;
+/// let reply = client.chat(&ChatRequest::new("demo").user("Say hello.").seed(1))?;
+/// println!("{} ({} + {} tokens)", reply.content, reply.tokens_in, reply.tokens_out);
+/// client.flush()?; // also done on drop
+/// # Ok::<(), annotrace::llm::LlmError>(())
+/// ```
+#[derive(Debug)]
+pub struct LlmClient {
+    config: LlmConfig,
+    endpoint: Option<String>,
+    shown: String,
+    http: Option<reqwest::blocking::Client>,
+    slots: Slots,
+    meter: Meter,
+    log: Option<CallLog>,
+    replay: Option<ReplayIndex>,
+    record_replayed: bool,
+    session: String,
+    seq: AtomicU64,
+}
+
+/// A counting semaphore: at most `n` requests in flight.
+#[derive(Debug)]
+struct Slots {
+    free: Mutex<usize>,
+    cv: Condvar,
+}
+
+struct SlotGuard<'a>(&'a Slots);
+
+impl Slots {
+    fn new(n: usize) -> Self {
+        Slots {
+            free: Mutex::new(n),
+            cv: Condvar::new(),
+        }
+    }
+    fn acquire(&self) -> SlotGuard<'_> {
+        let mut free = self.free.lock().unwrap_or_else(|p| p.into_inner());
+        while *free == 0 {
+            free = self.cv.wait(free).unwrap_or_else(|p| p.into_inner());
+        }
+        *free -= 1;
+        SlotGuard(self)
+    }
+}
+
+impl Drop for SlotGuard<'_> {
+    fn drop(&mut self) {
+        *self.0.free.lock().unwrap_or_else(|p| p.into_inner()) += 1;
+        self.0.cv.notify_one();
+    }
+}
+
+/// What one HTTP attempt gave.
+enum Attempt {
+    Ok {
+        http_status: u16,
+        body: String,
+        content: String,
+        finish_reason: Option<String>,
+        usage: Option<(u64, u64)>,
+    },
+    Failed {
+        status: &'static str,
+        http_status: Option<u16>,
+        body: Option<String>,
+        message: String,
+        retry_after: Option<Duration>,
+        retryable: bool,
+    },
+}
+
+fn sha_hex(s: &str) -> String {
+    Sha256::digest(s.as_bytes())
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+impl LlmClient {
+    /// A client for `config`, recording every call into `record`'s `llm_calls` table when given.
+    /// Opens the replay source when the configuration has one.
+    pub fn new(config: LlmConfig, record: Option<&RunDir>) -> Result<Self, LlmError> {
+        config.validate()?;
+        let endpoint = config.base_url.as_deref().map(endpoint_url).transpose()?;
+        let shown = endpoint.as_deref().map(redact_url).unwrap_or_default();
+        let http = match &endpoint {
+            Some(_) => Some(
+                reqwest::blocking::Client::builder()
+                    .timeout(config.timeout)
+                    .connect_timeout(config.connect_timeout)
+                    .user_agent(format!("annotrace/{}", crate::VERSION))
+                    .build()
+                    .map_err(|e| LlmError::Config(format!("HTTP client: {e}")))?,
+            ),
+            None => None,
+        };
+        let replay = config
+            .replay
+            .as_ref()
+            .map(|r| ReplayIndex::open(&r.run))
+            .transpose()?;
+        let record_replayed = match (record, &config.replay) {
+            (Some(rec), Some(rep)) => !same_dir(rec.root(), &rep.run),
+            _ => false,
+        };
+        let session = format!(
+            "{}-{}-{}",
+            now_ms(),
+            std::process::id(),
+            SESSIONS.fetch_add(1, Ordering::Relaxed)
+        );
+        Ok(LlmClient {
+            slots: Slots::new(config.parallel),
+            meter: Meter::new(config.budget),
+            log: record.map(|r| CallLog::new(r, &session)),
+            endpoint,
+            shown,
+            http,
+            replay,
+            record_replayed,
+            session,
+            seq: AtomicU64::new(0),
+            config,
+        })
+    }
+
+    /// The configuration in use (its `Debug` hides the key).
+    pub fn config(&self) -> &LlmConfig {
+        &self.config
+    }
+
+    /// The model name sent.
+    pub fn model(&self) -> &str {
+        &self.config.model
+    }
+
+    /// This client's session id (`llm_calls.session`).
+    pub fn session(&self) -> &str {
+        &self.session
+    }
+
+    /// What has been spent so far.
+    pub fn usage(&self) -> Usage {
+        self.meter.usage()
+    }
+
+    /// Writes buffered `llm_calls` rows now (also done every few calls and on drop).
+    pub fn flush(&self) -> Result<(), LlmError> {
+        match &self.log {
+            Some(log) => log.flush(),
+            None => Ok(()),
+        }
+    }
+
+    /// The SHA-256 of the body this client would send for `req` (the replay key).
+    pub fn request_hash(&self, req: &ChatRequest) -> String {
+        sha_hex(&self.body(req).to_string())
+    }
+
+    fn body(&self, req: &ChatRequest) -> serde_json::Value {
+        req.body(
+            &self.config.model,
+            self.config.temperature,
+            self.config.max_output_tokens,
+        )
+    }
+
+    fn scrub(&self, s: &str) -> String {
+        match &self.config.api_key {
+            Some(k) if k.expose().len() >= MIN_SCRUB_LEN => s.replace(k.expose(), "[redacted]"),
+            _ => s.to_string(),
+        }
+    }
+
+    fn record(&self, row: CallRecord) -> Result<(), LlmError> {
+        match &self.log {
+            Some(log) => log.push(CallRecord {
+                request_json: self.scrub(&row.request_json),
+                response_json: row.response_json.as_deref().map(|s| self.scrub(s)),
+                content: row.content.as_deref().map(|s| self.scrub(s)),
+                error: row.error.as_deref().map(|s| self.scrub(s)),
+                ..row
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// Asks for one completion. See the module docs for the order of checks, retries and recording.
+    pub fn chat(&self, req: &ChatRequest) -> Result<ChatReply, LlmError> {
+        if req.messages.is_empty() {
+            return Err(LlmError::Config(format!(
+                "request {:?} has no messages",
+                req.purpose
+            )));
+        }
+        let body = self.body(req);
+        let body_text = body.to_string();
+        let request_hash = sha_hex(&body_text);
+        let prompt_hash = sha_hex(&body["messages"].to_string());
+        self.meter.reserve()?;
+        let call_id = format!(
+            "{}-{}",
+            self.session,
+            self.seq.fetch_add(1, Ordering::Relaxed)
+        );
+        let row = |attempt: i32, started_at_ms: i64| CallRecord {
+            call_id: call_id.clone(),
+            session: self.session.clone(),
+            attempt,
+            purpose: req.purpose.clone(),
+            model: self.config.model.clone(),
+            endpoint: self.shown.clone(),
+            request_hash: request_hash.clone(),
+            prompt_hash: prompt_hash.clone(),
+            seed: req.seed,
+            request_json: body_text.clone(),
+            response_json: None,
+            content: None,
+            status: status::OK.into(),
+            http_status: None,
+            error: None,
+            tokens_in: 0,
+            tokens_out: 0,
+            usage_estimated: false,
+            latency_ms: 0.0,
+            replayed: false,
+            started_at_ms,
+        };
+
+        if let Some(replay) = &self.replay {
+            if let Some(ans) = replay.take(&request_hash) {
+                self.meter.add_tokens(ans.tokens_in, ans.tokens_out, true);
+                if self.record_replayed {
+                    self.record(CallRecord {
+                        response_json: ans.response_json.clone(),
+                        content: Some(ans.content.clone()),
+                        tokens_in: ans.tokens_in as i64,
+                        tokens_out: ans.tokens_out as i64,
+                        usage_estimated: ans.usage_estimated,
+                        latency_ms: ans.latency_ms,
+                        replayed: true,
+                        ..row(0, now_ms())
+                    })?;
+                }
+                return Ok(ChatReply {
+                    content: ans.content,
+                    finish_reason: None,
+                    tokens_in: ans.tokens_in,
+                    tokens_out: ans.tokens_out,
+                    usage_estimated: ans.usage_estimated,
+                    latency: Duration::from_secs_f64(ans.latency_ms.max(0.0) / 1e3),
+                    attempts: 0,
+                    replayed: true,
+                    request_hash,
+                    call_id,
+                });
+            }
+            if self.config.replay.as_ref().is_some_and(|r| r.strict) {
+                return Err(LlmError::ReplayMiss {
+                    request_hash,
+                    purpose: req.purpose.clone(),
+                    source_dir: replay.run().to_path_buf(),
+                });
+            }
+        }
+
+        let (Some(http), Some(endpoint)) = (&self.http, &self.endpoint) else {
+            return Err(LlmError::Config(
+                "no endpoint configured (ANNOTRACE_LLM_BASE_URL)".into(),
+            ));
+        };
+        let jitter_seed = splitmix64(
+            self.config.seed
+                ^ req
+                    .seed
+                    .unwrap_or_else(|| u64::from_str_radix(&request_hash[..16], 16).unwrap_or(0)),
+        );
+        let mut attempt: u32 = 0;
+        loop {
+            attempt += 1;
+            let started_at_ms = now_ms();
+            let t0 = Instant::now();
+            let outcome = {
+                let _slot = self.slots.acquire();
+                self.meter.add_request();
+                self.send_once(http, endpoint, &body_text)
+            };
+            let latency = t0.elapsed();
+            let latency_ms = latency.as_secs_f64() * 1e3;
+            match outcome {
+                Attempt::Ok {
+                    http_status,
+                    body,
+                    content,
+                    finish_reason,
+                    usage,
+                } => {
+                    let (tokens_in, tokens_out, usage_estimated) = match usage {
+                        Some((i, o)) => (i, o, false),
+                        None => (estimate_prompt(req), count_tokens(&content) as u64, true),
+                    };
+                    self.meter.add_tokens(tokens_in, tokens_out, false);
+                    self.record(CallRecord {
+                        response_json: Some(body),
+                        content: Some(content.clone()),
+                        http_status: Some(i32::from(http_status)),
+                        tokens_in: tokens_in as i64,
+                        tokens_out: tokens_out as i64,
+                        usage_estimated,
+                        latency_ms,
+                        ..row(attempt as i32, started_at_ms)
+                    })?;
+                    return Ok(ChatReply {
+                        content,
+                        finish_reason,
+                        tokens_in,
+                        tokens_out,
+                        usage_estimated,
+                        latency,
+                        attempts: attempt,
+                        replayed: false,
+                        request_hash,
+                        call_id,
+                    });
+                }
+                Attempt::Failed {
+                    status: st,
+                    http_status,
+                    body,
+                    message,
+                    retry_after,
+                    retryable,
+                } => {
+                    self.record(CallRecord {
+                        response_json: body.clone(),
+                        status: st.into(),
+                        http_status: http_status.map(i32::from),
+                        error: Some(message.clone()),
+                        latency_ms,
+                        ..row(attempt as i32, started_at_ms)
+                    })?;
+                    if retryable && attempt <= self.config.max_retries {
+                        let wait = delay(
+                            self.config.backoff_base,
+                            self.config.backoff_max,
+                            attempt,
+                            jitter_seed,
+                            retry_after,
+                        );
+                        tracing::warn!(
+                            "{}: {message}; retry {attempt} of {} in {:.1} s",
+                            self.shown,
+                            self.config.max_retries,
+                            wait.as_secs_f64()
+                        );
+                        std::thread::sleep(wait);
+                        continue;
+                    }
+                    let url = self.shown.clone();
+                    return Err(match (st, http_status) {
+                        (status::HTTP_ERROR, Some(code)) => LlmError::Status {
+                            status: code,
+                            url,
+                            body_excerpt: self.scrub(&excerpt(body.as_deref().unwrap_or(""), 300)),
+                            attempts: attempt,
+                        },
+                        (status::TIMEOUT, _) => LlmError::Timeout {
+                            url,
+                            seconds: self.config.timeout.as_secs_f64(),
+                            attempts: attempt,
+                        },
+                        (status::BAD_RESPONSE, _) => LlmError::BadResponse {
+                            url,
+                            message: self.scrub(&message),
+                        },
+                        _ => LlmError::Connection {
+                            url,
+                            message: self.scrub(&message),
+                            attempts: attempt,
+                        },
+                    });
+                }
+            }
+        }
+    }
+
+    fn send_once(&self, http: &reqwest::blocking::Client, endpoint: &str, body: &str) -> Attempt {
+        let mut rb = http
+            .post(endpoint)
+            .header(reqwest::header::CONTENT_TYPE, "application/json")
+            .body(body.to_string());
+        if let Some(k) = &self.config.api_key {
+            rb = rb.bearer_auth(k.expose());
+        }
+        let transport = |e: reqwest::Error| {
+            let timeout = e.is_timeout();
+            let e = e.without_url();
+            let mut message = e.to_string();
+            let mut src = std::error::Error::source(&e);
+            while let Some(s) = src {
+                message.push_str(": ");
+                message.push_str(&s.to_string());
+                src = s.source();
+            }
+            if timeout {
+                Attempt::Failed {
+                    status: status::TIMEOUT,
+                    http_status: None,
+                    body: None,
+                    message: format!(
+                        "no answer within {:.1} s",
+                        self.config.timeout.as_secs_f64()
+                    ),
+                    retry_after: None,
+                    retryable: true,
+                }
+            } else {
+                Attempt::Failed {
+                    status: status::CONNECTION,
+                    http_status: None,
+                    body: None,
+                    message,
+                    retry_after: None,
+                    retryable: true,
+                }
+            }
+        };
+        let resp = match rb.send() {
+            Ok(r) => r,
+            Err(e) => return transport(e),
+        };
+        let code = resp.status().as_u16();
+        let retry_after = resp
+            .headers()
+            .get(reqwest::header::RETRY_AFTER)
+            .and_then(|v| v.to_str().ok())
+            .and_then(|v| parse_retry_after(v, SystemTime::now()));
+        let text = match resp.text() {
+            Ok(t) => t,
+            Err(e) => return transport(e),
+        };
+        if (200..300).contains(&code) {
+            return match parse_answer(&text) {
+                Ok(a) => Attempt::Ok {
+                    http_status: code,
+                    body: text,
+                    content: a.content,
+                    finish_reason: a.finish_reason,
+                    usage: a.usage,
+                },
+                Err(message) => Attempt::Failed {
+                    status: status::BAD_RESPONSE,
+                    http_status: Some(code),
+                    body: Some(text),
+                    message,
+                    retry_after: None,
+                    retryable: false,
+                },
+            };
+        }
+        Attempt::Failed {
+            status: status::HTTP_ERROR,
+            http_status: Some(code),
+            message: format!("HTTP {code}: {}", excerpt(&text, 300)),
+            body: Some(text),
+            retry_after,
+            retryable: code == 408 || code == 429 || code >= 500,
+        }
+    }
+}
+
+impl Drop for LlmClient {
+    fn drop(&mut self) {
+        if let Err(e) = self.flush() {
+            tracing::error!("writing llm_calls: {e}");
+        }
+    }
+}
+
+/// Estimated prompt tokens: the messages' text plus a few tokens of chat framing per message.
+fn estimate_prompt(req: &ChatRequest) -> u64 {
+    req.messages
+        .iter()
+        .map(|m| count_tokens(&m.text_content()) as u64 + 4)
+        .sum::<u64>()
+        + 3
+}
+
+fn same_dir(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => a == b,
+    }
+}
