@@ -31,6 +31,7 @@ mod env;
 mod error;
 mod game;
 mod params;
+pub mod reference;
 mod sample;
 mod step;
 pub mod success;
