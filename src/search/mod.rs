@@ -3,6 +3,7 @@
 //! and that add something the library does not already say; accept the best if ν > δ.
 //!
 //! - [`proposer`]: the interface proposers implement ([`Proposer`]); [`mutate`]: the offline proposer;
+//!   [`llm_proposer`]: the LLM proposer (prompts and answers through `llm/`);
 //! - [`islands`]: the program database (FunSearch islands, hill-climb, best-of-n);
 //! - [`evaluator`]: cheap checks (probe set, behaviour signatures) and Evaluate in the worker pool;
 //! - [`run`]: one label's search in rounds, checkpointed and resumable; [`discover`]: Algorithm 2;
@@ -17,6 +18,7 @@ pub mod discover;
 pub mod evaluator;
 pub mod islands;
 pub mod library_out;
+pub mod llm_proposer;
 pub mod mutate;
 pub mod proposer;
 pub mod run;
@@ -27,6 +29,7 @@ pub use self::candidate::{CandidateRecord, code_hash};
 pub use self::discover::{ConvergenceRow, Discovery, LabelResult};
 pub use self::evaluator::{EvalSettings, Evaluation, Evaluator};
 pub use self::islands::{Database, Program, Strategy, Temperatures};
+pub use self::llm_proposer::LlmProposer;
 pub use self::mutate::MutateProposer;
 pub use self::proposer::{Parent, Proposal, ProposalRequest, ProposeError, Proposer, count_lines};
 pub use self::run::{
