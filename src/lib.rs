@@ -19,6 +19,7 @@ pub mod envs;
 pub mod fitness;
 pub mod llm;
 pub mod pipeline;
+pub mod optimise;
 pub mod query;
 pub mod reward;
 pub mod search;

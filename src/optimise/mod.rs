@@ -1,0 +1,18 @@
+//! Optimising actions for reward programs: a seeded simulated annealer over a continuous action box
+//! ([`anneal`]) and the billiards experiment of the paper's section 5 ([`billiards`]): goals × scenes ×
+//! seeds × reward types (dense reward program vs sparse binary verification), best-so-far recorded
+//! at checkpoints, success judged by each goal's hand-written verification rule; the plot of success
+//! against budget ([`plot`]).
+//!
+//! **Owns:** the annealer, the lockstep batch of chains and its timing split, the plot.
+//! **Does not:** define rewards (`reward/`), run detectors itself (it calls `detect::WorkerPool`
+//! through `reward::annotate`), write tables (`pipeline/stages/optimise.rs`).
+
+pub mod anneal;
+pub mod billiards;
+pub mod plot;
+
+pub use anneal::{Annealer, Dim, Schedule};
+pub use billiards::{
+    Chain, CheckpointRow, GoalTask, RewardKind, Settings, ShotBounds, Timings, run_chains,
+};

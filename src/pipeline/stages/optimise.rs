@@ -1,0 +1,518 @@
+//! `optimise`: the reward-program experiment (paper section 5) — simulated annealing of billiards
+//! shots for each goal of a goal file on held-out scenes, with several seeds, driven by the goal's
+//! reward program (dense) and by its binary verification (sparse). Writes the `optimisation` table
+//! (one row per goal × scene × seed × reward type × checkpoint) and the success-versus-budget figure
+//! as `exports/<stage>/success_vs_budget.{svg,png}`.
+//!
+//! One shard per goal, so a killed run resumes at the first unfinished goal.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use arrow::array::{
+    Array, AsArray, BooleanArray, Float64Array, Int64Array, RecordBatch, StringArray,
+};
+use arrow::datatypes::{DataType, Field, Int64Type, Schema};
+use serde_json::{Value, json};
+
+use super::annotate::{DetectorSetup, SANDBOX_PARAMS, write};
+use crate::detect::Library;
+use crate::envs::Environment;
+use crate::envs::pool::PoolEnv;
+use crate::optimise::plot::{curves, png, svg};
+use crate::optimise::{Chain, GoalTask, RewardKind, Schedule, Settings, ShotBounds, run_chains};
+use crate::pipeline::params::{ParamSpec, ParamType};
+use crate::pipeline::registry::{BuildError, StageKind};
+use crate::pipeline::spec::{PipelineSpec, StageDef};
+use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
+use crate::reward::annotate::{detectors_for, probe_schema};
+use crate::reward::goals::GoalSet;
+use crate::reward::verify::Rule;
+use crate::reward::{compile, labels_used};
+use crate::store::write_atomic;
+use crate::trace::Env;
+
+const PARAMS: &[ParamSpec] = &[
+    ParamSpec::optional(
+        "goals",
+        ParamType::Str,
+        "\"data/goals/pooltool.toml\"",
+        "goal file (sentence, program, verification rule per goal), relative to the project folder",
+    ),
+    ParamSpec::maybe(
+        "goal_ids",
+        ParamType::StrList,
+        "only these goals (default: every goal of the file)",
+    ),
+    ParamSpec::optional(
+        "scenes",
+        ParamType::Count,
+        "10",
+        "held-out 9-ball scenes per goal",
+    ),
+    ParamSpec::optional(
+        "scene_seed",
+        ParamType::Count,
+        "1000",
+        "seed of the held-out scenes (pick one no training or library data used)",
+    ),
+    ParamSpec::optional(
+        "seeds",
+        ParamType::Count,
+        "2",
+        "annealing seeds per goal × scene",
+    ),
+    ParamSpec::optional(
+        "budget",
+        ParamType::Count,
+        "200",
+        "samples per annealing run (N_o)",
+    ),
+    ParamSpec::optional(
+        "checkpoint",
+        ParamType::Count,
+        "50",
+        "record the best-so-far every this many samples",
+    ),
+    ParamSpec::optional(
+        "rewards",
+        ParamType::StrList,
+        "[\"dense\", \"sparse\"]",
+        "reward types: dense (the reward program) and/or sparse (binary verification)",
+    ),
+    ParamSpec::optional(
+        "dt",
+        ParamType::Float,
+        "0.02",
+        "timestep of the simulated traces the detectors read (s)",
+    ),
+    ParamSpec::optional(
+        "v0_max",
+        ParamType::Float,
+        "6.0",
+        "largest cue speed searched (m/s)",
+    ),
+    ParamSpec::optional(
+        "theta_max",
+        ParamType::Float,
+        "45.0",
+        "largest cue elevation searched (deg)",
+    ),
+    ParamSpec::optional(
+        "title",
+        ParamType::Str,
+        "\"Reward programs vs binary rewards\"",
+        "title of the figure",
+    ),
+    ParamSpec::maybe(
+        "library",
+        ParamType::Str,
+        "detector library (default: the goal file's `library`)",
+    ),
+    SANDBOX_PARAMS[2],
+    SANDBOX_PARAMS[3],
+    SANDBOX_PARAMS[4],
+];
+
+/// The `optimise` stage kind.
+pub static KIND: StageKind = StageKind {
+    name: "optimise",
+    summary: "simulated annealing of billiards shots for natural-language goals (dense vs sparse reward)",
+    doc: "For each goal of a goal file (data/goals/pooltool.toml: the paper's 10 goals), each of `scenes` \
+          held-out 9-ball scenes and each of `seeds` seeds, runs simulated annealing over the shot (V0, phi, \
+          theta, a, b) for `budget` samples with each reward type: `dense` scores the goal's reward program \
+          on the trace annotated by the library's detectors (only those the program uses, batched over all \
+          chains per worker call), `sparse` scores 1 when the goal's verification rule holds. The best shot \
+          so far is recorded every `checkpoint` samples with whether it verifies. Writes the optimisation \
+          table and exports/<stage>/success_vs_budget.svg and .png.",
+    writes: "optimisation, exports/<stage>/success_vs_budget.{svg,png}",
+    params: PARAMS,
+    build,
+};
+
+/// The `optimise` stage.
+#[derive(Debug)]
+pub struct OptimiseStage {
+    goals: GoalSet,
+    goal_ids: Vec<String>,
+    library: Library,
+    setup: DetectorSetup,
+    scenes: usize,
+    scene_seed: u64,
+    seeds: u64,
+    budget: usize,
+    checkpoint: usize,
+    rewards: Vec<RewardKind>,
+    dt: f64,
+    bounds: ShotBounds,
+    title: String,
+    goals_text: String,
+}
+
+fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
+    let p = &def.params;
+    let goals_path = spec
+        .project_dir
+        .join(p["goals"].as_str().unwrap_or("data/goals/pooltool.toml"));
+    let goals = GoalSet::load(&goals_path, &spec.project_dir)
+        .map_err(|e| BuildError::param("goals", e.to_string()))?;
+    if goals.env != Env::Pooltool {
+        return Err(BuildError::param(
+            "goals",
+            format!(
+                "optimise drives the billiards simulator; {} is for {}",
+                goals_path.display(),
+                goals.env
+            ),
+        ));
+    }
+    let goals_text = std::fs::read_to_string(&goals_path)
+        .map_err(|e| BuildError::param("goals", e.to_string()))?;
+    let goal_ids: Vec<String> = match p.get("goal_ids").and_then(Value::as_array) {
+        Some(ids) => ids
+            .iter()
+            .filter_map(Value::as_str)
+            .map(str::to_string)
+            .collect(),
+        None => goals.goals.iter().map(|g| g.id.clone()).collect(),
+    };
+    if let Some(bad) = goal_ids.iter().find(|id| goals.get(id).is_none()) {
+        return Err(BuildError::param(
+            "goal_ids",
+            format!("no goal {bad:?} in {}", goals_path.display()),
+        ));
+    }
+    // The sandbox settings; the library is the goal file's unless one is given.
+    let mut def2 = def.clone();
+    if def2.params.get("library").is_none()
+        && let Some(l) = &goals.library
+    {
+        def2.params.insert(
+            "library".into(),
+            Value::from(l.to_string_lossy().into_owned()),
+        );
+    }
+    def2.params.insert("env".into(), Value::from("pooltool"));
+    let setup = DetectorSetup::from_params(&def2, spec)?;
+    let library = setup.library.clone();
+    let mut rewards = Vec::new();
+    for r in p["rewards"].as_array().into_iter().flatten() {
+        match r.as_str() {
+            Some("dense") => rewards.push(RewardKind::Dense),
+            Some("sparse") => rewards.push(RewardKind::Sparse),
+            other => {
+                return Err(BuildError::param(
+                    "rewards",
+                    format!("reward types are \"dense\" and \"sparse\", found {other:?}"),
+                ));
+            }
+        }
+    }
+    if rewards.is_empty() {
+        return Err(BuildError::param(
+            "rewards",
+            "give at least one reward type",
+        ));
+    }
+    let count = |k: &'static str, min: u64| -> Result<u64, BuildError> {
+        let v = p[k].as_u64().unwrap_or(0);
+        if v < min {
+            Err(BuildError::param(
+                k,
+                format!("`{k}` must be >= {min}, found {v}"),
+            ))
+        } else {
+            Ok(v)
+        }
+    };
+    let dt = p["dt"].as_f64().unwrap_or(0.02);
+    if !(dt > 0.0 && dt <= 1.0) {
+        return Err(BuildError::param(
+            "dt",
+            format!("dt must be in (0, 1] s, found {dt}"),
+        ));
+    }
+    let bounds = ShotBounds {
+        v0: (
+            0.2_f64.min(p["v0_max"].as_f64().unwrap_or(6.0) / 2.0),
+            p["v0_max"].as_f64().unwrap_or(6.0),
+        ),
+        theta: (0.0, p["theta_max"].as_f64().unwrap_or(45.0)),
+        ..ShotBounds::default()
+    };
+    bounds
+        .dims(&PoolEnv::default())
+        .map_err(|e| BuildError::param("v0_max", e))?;
+    Ok(Box::new(OptimiseStage {
+        scenes: count("scenes", 1)? as usize,
+        scene_seed: count("scene_seed", 0)?,
+        seeds: count("seeds", 1)?,
+        budget: count("budget", 1)? as usize,
+        checkpoint: count("checkpoint", 1)? as usize,
+        goals,
+        goal_ids,
+        library,
+        setup,
+        rewards,
+        dt,
+        bounds,
+        title: p["title"].as_str().unwrap_or_default().to_string(),
+        goals_text,
+    }))
+}
+
+fn schema() -> Arc<Schema> {
+    let f = |n: &str, t: DataType| Field::new(n, t, false);
+    Arc::new(Schema::new(vec![
+        f("goal", DataType::Utf8),
+        f("scene", DataType::Utf8),
+        f("seed", DataType::Int64),
+        f("reward_type", DataType::Utf8),
+        f("budget", DataType::Int64),
+        f("success", DataType::Boolean),
+        f("best_reward", DataType::Float64),
+        f("best_sample", DataType::Int64),
+        f("v0", DataType::Float64),
+        f("phi", DataType::Float64),
+        f("theta", DataType::Float64),
+        f("a", DataType::Float64),
+        f("b", DataType::Float64),
+    ]))
+}
+
+fn mix(mut x: u64) -> u64 {
+    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    x ^ (x >> 31)
+}
+
+impl Stage for OptimiseStage {
+    fn fingerprint_extra(&self) -> Result<Value, StageError> {
+        Ok(json!({
+            "goals": self.goals_text,
+            "library": self.library.fingerprint(),
+            "worker": crate::detect::worker_fingerprint(),
+        }))
+    }
+
+    fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
+        let mut env = PoolEnv::default();
+        env.trace.dt = self.dt;
+        let scenes = env
+            .scenes(self.scenes, self.scene_seed)
+            .map_err(|e| StageError::Input(e.to_string()))?;
+        let settings = Settings {
+            env,
+            bounds: self.bounds,
+            schedule: Schedule {
+                budget: self.budget,
+                ..Schedule::default()
+            },
+            checkpoint: self.checkpoint,
+        };
+        ctx.progress()
+            .set_total(ctx.stage_id(), (self.goal_ids.len() * self.budget) as u64);
+        let mut pool = None;
+        let mut schema = None;
+        let mut records = Vec::new();
+        for (gi, id) in self.goal_ids.iter().enumerate() {
+            let shard = format!("{gi:03}");
+            if let Some(r) = ctx.finished_shard(&shard)? {
+                records.push(r);
+                ctx.progress().advance(ctx.stage_id(), self.budget as u64);
+                continue;
+            }
+            let goal = self.goals.get(id).expect("checked at build");
+            if pool.is_none() {
+                pool = Some(self.setup.pool()?);
+            }
+            let pool_ref = pool.as_ref().expect("just started");
+            let schema = schema.get_or_insert_with(|| probe_schema(&self.library, pool_ref));
+            let program = compile(&goal.program, schema)
+                .map_err(|e| StageError::Input(format!("goal {id:?}: program: {e}")))?;
+            let rule = Rule::parse(&goal.verify)
+                .map_err(|e| StageError::Input(format!("goal {id:?}: verify: {e}")))?;
+            let task = GoalTask {
+                id: id.clone(),
+                detectors: detectors_for(&self.library, &labels_used(&program)),
+                program,
+                rule,
+            };
+            let mut chains = Vec::new();
+            for (si, scene) in scenes.iter().enumerate() {
+                for s in 0..self.seeds {
+                    let seed = mix(ctx.seed() ^ mix(gi as u64 + 1) ^ mix((si as u64) << 20 | s));
+                    for &kind in &self.rewards {
+                        chains.push(Chain {
+                            goal: 0,
+                            scene: scene.clone(),
+                            seed,
+                            kind,
+                        });
+                    }
+                }
+            }
+            let ordinal = ctx.shard_started();
+            let t0 = std::time::Instant::now();
+            let progress = ctx.progress();
+            let (rows, timings) = run_chains(
+                &settings,
+                std::slice::from_ref(&task),
+                &chains,
+                Some(pool_ref),
+                |_| progress.advance(ctx.stage_id(), 1),
+            )
+            .map_err(StageError::Input)?;
+            // Chain seeds are hashes; the table records the seed's index 0..seeds.
+            let seed_index: BTreeMap<u64, i64> = chains
+                .iter()
+                .enumerate()
+                .map(|(i, c)| {
+                    (
+                        c.seed,
+                        ((i / self.rewards.len()) as u64 % self.seeds) as i64,
+                    )
+                })
+                .collect();
+            let wall = t0.elapsed().as_secs_f64();
+            let batch = RecordBatch::try_new(
+                schema_ref(),
+                vec![
+                    Arc::new(StringArray::from_iter_values(
+                        rows.iter().map(|r| r.goal.as_str()),
+                    )),
+                    Arc::new(StringArray::from_iter_values(
+                        rows.iter().map(|r| r.scene.as_str()),
+                    )),
+                    Arc::new(Int64Array::from_iter_values(
+                        rows.iter()
+                            .map(|r| seed_index.get(&r.seed).copied().unwrap_or(0)),
+                    )),
+                    Arc::new(StringArray::from_iter_values(
+                        rows.iter().map(|r| r.kind.as_str()),
+                    )),
+                    Arc::new(Int64Array::from_iter_values(
+                        rows.iter().map(|r| r.budget as i64),
+                    )),
+                    Arc::new(BooleanArray::from(
+                        rows.iter().map(|r| r.success).collect::<Vec<_>>(),
+                    )),
+                    Arc::new(Float64Array::from_iter_values(
+                        rows.iter().map(|r| r.best_reward),
+                    )),
+                    Arc::new(Int64Array::from_iter_values(
+                        rows.iter().map(|r| r.best_sample as i64),
+                    )),
+                    Arc::new(Float64Array::from_iter_values(
+                        rows.iter().map(|r| r.shot.v0),
+                    )),
+                    Arc::new(Float64Array::from_iter_values(
+                        rows.iter().map(|r| r.shot.phi),
+                    )),
+                    Arc::new(Float64Array::from_iter_values(
+                        rows.iter().map(|r| r.shot.theta),
+                    )),
+                    Arc::new(Float64Array::from_iter_values(
+                        rows.iter().map(|r| r.shot.a),
+                    )),
+                    Arc::new(Float64Array::from_iter_values(
+                        rows.iter().map(|r| r.shot.b),
+                    )),
+                ],
+            )?;
+            ctx.checkpoint_mid_shard(ordinal)?;
+            let n = write(ctx, "optimisation", Env::Pooltool, &shard, &batch)?;
+            let record = json!({
+                "goal": id,
+                "rows": n,
+                "chains": chains.len(),
+                "wall_s": wall,
+                "timings": {
+                    "samples": timings.samples, "dense_samples": timings.dense_samples,
+                    "simulate_s": timings.simulate_s, "annotate_s": timings.annotate_s,
+                    "score_s": timings.score_s, "failed_simulations": timings.failed_simulations,
+                    "failed_calls": timings.failed_calls, "program_errors": timings.program_errors,
+                },
+            });
+            ctx.finish_shard(&shard, &record)?;
+            records.push(record);
+        }
+        // The figure, from every staged shard (this attempt's and an earlier one's).
+        let mut points: Vec<(String, u64, u64, bool)> = Vec::new();
+        for f in ctx.staging().table_files("optimisation")? {
+            for b in crate::store::read_file(&f)? {
+                let kind = b.column(3).as_string::<i32>().clone();
+                let seed = b.column(2).as_primitive::<Int64Type>().clone();
+                let budget = b.column(4).as_primitive::<Int64Type>().clone();
+                let success = b.column(5).as_boolean().clone();
+                for i in 0..b.num_rows() {
+                    points.push((
+                        kind.value(i).to_string(),
+                        budget.value(i) as u64,
+                        seed.value(i) as u64,
+                        success.value(i) && !success.is_null(i),
+                    ));
+                }
+            }
+        }
+        let cs = curves(points.iter().map(|(k, b, s, ok)| (k.as_str(), *b, *s, *ok)));
+        let dir = ctx.run().exports_dir().join(ctx.stage_id());
+        std::fs::create_dir_all(&dir)
+            .map_err(|e| StageError::Input(format!("{}: {e}", dir.display())))?;
+        let title = format!(
+            "{} ({} goals × {} scenes × {} seeds)",
+            self.title,
+            self.goal_ids.len(),
+            self.scenes,
+            self.seeds
+        );
+        let io =
+            |p: &PathBuf, e: std::io::Error| StageError::Input(format!("{}: {e}", p.display()));
+        let svg_path = dir.join("success_vs_budget.svg");
+        write_atomic(&svg_path, svg(&cs, &title).as_bytes()).map_err(|e| io(&svg_path, e))?;
+        let png_path = dir.join("success_vs_budget.png");
+        write_atomic(&png_path, &png(&cs).map_err(StageError::Internal)?)
+            .map_err(|e| io(&png_path, e))?;
+        let mut totals: BTreeMap<String, f64> = BTreeMap::new();
+        let mut rows_total = 0u64;
+        for r in &records {
+            rows_total += r["rows"].as_u64().unwrap_or(0);
+            for (k, v) in r["timings"].as_object().into_iter().flatten() {
+                *totals.entry(k.clone()).or_default() += v.as_f64().unwrap_or(0.0);
+            }
+        }
+        let last: BTreeMap<String, f64> = cs
+            .iter()
+            .filter_map(|c| c.points.last().map(|p| (c.name.clone(), p.mean)))
+            .collect();
+        let mut rows = BTreeMap::new();
+        rows.insert("optimisation".to_string(), rows_total);
+        Ok(StageOutput {
+            rows,
+            files: vec![svg_path, png_path],
+            summary: json!({
+                "goals": self.goal_ids, "goal_file": self.goals.path, "library": self.library.name,
+                "scenes": self.scenes, "scene_seed": self.scene_seed, "seeds": self.seeds,
+                "budget": self.budget, "checkpoint": self.checkpoint, "dt": self.dt,
+                "bounds": {"v0": self.bounds.v0, "theta": self.bounds.theta, "max_offset": self.bounds.max_offset},
+                "timings": totals, "final_success": last,
+            }),
+            line: format!(
+                "{} goal(s) × {} scene(s) × {} seed(s), budget {}: final success {}",
+                self.goal_ids.len(),
+                self.scenes,
+                self.seeds,
+                self.budget,
+                last.iter()
+                    .map(|(k, v)| format!("{k} {v:.3}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        })
+    }
+}
+
+fn schema_ref() -> Arc<Schema> {
+    schema()
+}
