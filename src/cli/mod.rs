@@ -5,7 +5,9 @@
 //! an unknown option value, an invalid pipeline); broken pipes exit quietly with 0.
 //!
 //! The environment is read here only: `ANNOTRACE_LOG` (log filter, e.g. `debug`) and `ANNOTRACE_FAULT`
-//! (a test switch that stops a run on purpose, see `docs/pipelines.md`).
+//! (a test switch that stops a run on purpose, see `docs/pipelines.md`); the LLM endpoint's
+//! `ANNOTRACE_LLM_BASE_URL`, `ANNOTRACE_LLM_MODEL`, `ANNOTRACE_LLM_API_KEY` and `ANNOTRACE_PROMPTS`
+//! are read in `suggest_labels.rs` ([`suggest_labels::LlmArgs`], see `docs/llm.md`).
 
 mod accuracy;
 mod annotate;
@@ -20,6 +22,7 @@ mod run;
 mod show;
 mod simulate;
 mod stages;
+mod suggest_labels;
 mod tables;
 
 use std::process::ExitCode;
@@ -92,6 +95,8 @@ enum Command {
     Show(show::Args),
     /// Reward programs: check one, evaluate it on a trace, or synthesise one from a goal sentence.
     Reward(reward::Args),
+    /// Ask the configured LLM for K new pattern labels given a library (ANNOTRACE_LLM_* endpoint).
+    SuggestLabels(suggest_labels::Args),
     /// Write one trace of a run back in the paper's JSON format.
     Export(export::Args),
     /// Run SQL over a run's tables.
@@ -115,6 +120,7 @@ pub fn main() -> ExitCode {
         Command::Evolve(a) => evolve::run(a, cli.quiet),
         Command::Show(a) => show::run(a),
         Command::Reward(a) => reward::run(a),
+        Command::SuggestLabels(a) => suggest_labels::run(a, cli.quiet),
         Command::Export(a) => export::run(a),
         Command::Query(a) => query::run(a),
         Command::Tables(a) => tables::run(a),

@@ -1,0 +1,283 @@
+//! `annotrace suggest-labels`: asks the configured LLM for K new pattern labels for an environment,
+//! given its trace layout and a library's current labels (`prompts/suggest_labels.j2`), and prints them.
+//!
+//! The endpoint comes from `ANNOTRACE_LLM_BASE_URL`, `ANNOTRACE_LLM_MODEL` and `ANNOTRACE_LLM_API_KEY`
+//! (flags override the first two); with `--run DIR` the call is recorded in `DIR/llm_calls`, and
+//! `--replay DIR` answers from a recorded run without the endpoint. Output: one numbered label per line
+//! with its description and reason, or JSON Lines (`{"label", "description", "reason"}`) with `--json`;
+//! a summary (model, tokens, labels dropped as already known) goes to stderr.
+//!
+//! [`LlmArgs`] holds the LLM flags every LLM-using command shares (`#[command(flatten)]`); this file is
+//! where the CLI reads the `ANNOTRACE_LLM_*` and `ANNOTRACE_PROMPTS` variables.
+
+use std::path::{Path, PathBuf};
+
+use annotrace::detect::Library;
+use annotrace::llm::{
+    LabelsContext, LabelsError, LibraryEntry, LlmClient, LlmConfig, LlmError, LlmSettings, Prompts,
+    SuggestParams, suggest_labels,
+};
+use annotrace::store::RunDir;
+use annotrace::trace::Env;
+use anyhow::anyhow;
+
+use super::{CliError, CliResult};
+
+/// The LLM flags shared by commands that call a model.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct LlmArgs {
+    /// Endpoint URL (overrides ANNOTRACE_LLM_BASE_URL), e.g. http://localhost:8080.
+    #[arg(long)]
+    pub llm_base_url: Option<String>,
+    /// Model name (overrides ANNOTRACE_LLM_MODEL).
+    #[arg(long)]
+    pub llm_model: Option<String>,
+    /// Whole-request timeout in seconds (default 300).
+    #[arg(long)]
+    pub llm_timeout: Option<f64>,
+    /// Retries on 408/429/5xx, timeouts and connection errors (default 4).
+    #[arg(long)]
+    pub llm_retries: Option<u32>,
+    /// Requests in flight at once: the endpoint's parallel slots (default 4).
+    #[arg(long)]
+    pub llm_parallel: Option<usize>,
+    /// Stop after this many LLM calls.
+    #[arg(long)]
+    pub llm_max_calls: Option<u64>,
+    /// Stop after this many tokens (prompt + completion).
+    #[arg(long)]
+    pub llm_max_tokens: Option<u64>,
+    /// Answer from this run's recorded llm_calls instead of the endpoint.
+    #[arg(long, value_name = "RUN")]
+    pub replay: Option<PathBuf>,
+    /// With --replay: send requests that have no recorded answer to the endpoint instead of failing.
+    #[arg(long, requires = "replay")]
+    pub replay_fallback: bool,
+    /// Folder of prompt templates overriding the built-in ones file by file (default: ANNOTRACE_PROMPTS,
+    /// else ./prompts when it exists).
+    #[arg(long, value_name = "DIR")]
+    pub prompts: Option<PathBuf>,
+}
+
+impl LlmArgs {
+    /// The settings these flags give.
+    pub fn settings(&self) -> LlmSettings {
+        LlmSettings {
+            base_url: self.llm_base_url.clone(),
+            model: self.llm_model.clone(),
+            timeout_s: self.llm_timeout,
+            max_retries: self.llm_retries,
+            parallel: self.llm_parallel,
+            max_calls: self.llm_max_calls,
+            max_tokens: self.llm_max_tokens,
+            replay: self.replay.clone(),
+            strict_replay: self.replay.as_ref().map(|_| !self.replay_fallback),
+            ..LlmSettings::default()
+        }
+    }
+
+    /// The resolved configuration: flags over `ANNOTRACE_LLM_*` (exit 2 when incomplete).
+    pub fn config(&self, seed: u64) -> Result<LlmConfig, CliError> {
+        let mut s = self.settings();
+        s.seed = Some(seed);
+        if let Some(r) = &self.replay
+            && !r.is_dir()
+        {
+            return Err(CliError::input(anyhow!(
+                "--replay {}: no such run folder",
+                r.display()
+            )));
+        }
+        LlmConfig::resolve(&s, &|k| std::env::var(k).ok()).map_err(CliError::input)
+    }
+
+    /// The prompt templates: `--prompts`, else `ANNOTRACE_PROMPTS`, else `./prompts` if it exists,
+    /// else the built-in ones.
+    pub fn prompts(&self) -> Result<Prompts, CliError> {
+        let dir = self
+            .prompts
+            .clone()
+            .or_else(|| std::env::var_os("ANNOTRACE_PROMPTS").map(PathBuf::from))
+            .or_else(|| Some(PathBuf::from("prompts")).filter(|p| p.is_dir()));
+        if let Some(d) = &dir
+            && !d.is_dir()
+        {
+            return Err(CliError::input(anyhow!(
+                "prompts folder {}: not found",
+                d.display()
+            )));
+        }
+        Prompts::load(dir.as_deref()).map_err(CliError::input)
+    }
+}
+
+/// Maps a client error to an exit code: configuration and replay misses are the user's (2), the
+/// endpoint's failures and the budget are run-time failures (1).
+pub fn llm_error(e: LlmError) -> CliError {
+    match e {
+        e @ (LlmError::Config(_) | LlmError::ReplayMiss { .. } | LlmError::Template { .. }) => {
+            CliError::input(e)
+        }
+        e => CliError::failed(e),
+    }
+}
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Library folder whose labels the suggestions must not repeat (default: data/libraries/<env>).
+    #[arg(long)]
+    library: Option<PathBuf>,
+    /// Environment (default: the library's).
+    #[arg(long, value_parser = ["pooltool", "phyre", "iphyre"])]
+    env: Option<String>,
+    /// How many labels to ask for.
+    #[arg(short, long, default_value_t = 5)]
+    k: usize,
+    /// Run folder to record the call in (its llm_calls table).
+    #[arg(long)]
+    run: Option<PathBuf>,
+    /// What the agent in these scenes tries to do (steers the suggestions).
+    #[arg(long)]
+    objective: Option<String>,
+    /// An extra instruction added to the prompt's rules.
+    #[arg(long)]
+    guidance: Option<String>,
+    /// Request seed (sent to the endpoint; part of the replay key).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Sampling temperature.
+    #[arg(long)]
+    temperature: Option<f64>,
+    /// Print the suggestions as JSON Lines.
+    #[arg(long)]
+    json: bool,
+    /// Print the prompt and stop (no call).
+    #[arg(long)]
+    dry_run: bool,
+    #[command(flatten)]
+    llm: LlmArgs,
+}
+
+fn load_library(args: &Args) -> Result<Library, CliError> {
+    let dir = match (&args.library, &args.env) {
+        (Some(d), _) => d.clone(),
+        (None, Some(env)) => Path::new("data/libraries").join(env),
+        (None, None) => {
+            return Err(CliError::input(anyhow!(
+                "give --library DIR or --env (whose default library is data/libraries/<env>)"
+            )));
+        }
+    };
+    let lib = Library::load(&dir).map_err(CliError::input)?;
+    if let Some(env) = &args.env
+        && env.parse::<Env>().ok() != Some(lib.env)
+    {
+        return Err(CliError::input(anyhow!(
+            "{}: the library is for {}, not --env {env}",
+            dir.display(),
+            lib.env
+        )));
+    }
+    Ok(lib)
+}
+
+pub fn run(args: Args, quiet: bool) -> CliResult {
+    if args.k == 0 || args.k > 100 {
+        return Err(CliError::input(anyhow!(
+            "-k must be between 1 and 100, got {}",
+            args.k
+        )));
+    }
+    let library = load_library(&args)?;
+    let prompts = args.llm.prompts()?;
+    if args.dry_run {
+        let text = prompts
+            .render(
+                "suggest_labels.j2",
+                LabelsContext {
+                    env: library.env,
+                    k: args.k,
+                    library: LibraryEntry::of(&library),
+                    objective: args.objective.clone(),
+                    guidance: args.guidance.clone(),
+                },
+            )
+            .map_err(CliError::input)?;
+        print!("{text}");
+        return Ok(0);
+    }
+    let config = args.llm.config(args.seed)?;
+    let record = args.run.as_ref().map(RunDir::new);
+    let client = LlmClient::new(config, record.as_ref()).map_err(llm_error)?;
+    let params = SuggestParams {
+        env: library.env,
+        k: args.k,
+        objective: args.objective.clone(),
+        guidance: args.guidance.clone(),
+        seed: args.seed,
+        temperature: args.temperature,
+    };
+    let result = suggest_labels(&client, &prompts, &library, &params);
+    // The call is recorded whether or not its answer parsed.
+    client.flush().map_err(CliError::failed)?;
+    let s = match result {
+        Ok(s) => s,
+        Err(LabelsError::Llm(e)) => return Err(llm_error(e)),
+        Err(e) => return Err(CliError::failed(e)),
+    };
+    for (i, l) in s.labels.iter().enumerate() {
+        if args.json {
+            println!(
+                "{}",
+                serde_json::to_string(l).map_err(|e| CliError::failed(anyhow!(e)))?
+            );
+        } else {
+            match l.description.is_empty() {
+                true => println!("{}. {}", i + 1, l.label),
+                false => println!("{}. {} — {}", i + 1, l.label, l.description),
+            }
+            if !l.reason.is_empty() {
+                println!("   why: {}", l.reason);
+            }
+        }
+    }
+    if !quiet {
+        let r = &s.reply;
+        let mut how = Vec::new();
+        if r.usage_estimated {
+            how.push("estimated");
+        }
+        if r.replayed {
+            how.push("replayed");
+        }
+        let how = if how.is_empty() {
+            String::new()
+        } else {
+            format!(", {}", how.join(", "))
+        };
+        eprintln!(
+            "# {} new label(s) from {} ({} + {} tokens{how}; call {})",
+            s.labels.len(),
+            client.model(),
+            r.tokens_in,
+            r.tokens_out,
+            r.call_id
+        );
+        if !s.duplicates.is_empty() {
+            eprintln!(
+                "# dropped as already in the library: {}",
+                s.duplicates.join(", ")
+            );
+        }
+        if let Some(run) = &args.run {
+            eprintln!("# recorded in {}", run.join("llm_calls").display());
+        }
+    }
+    if s.labels.is_empty() {
+        return Err(CliError::failed(anyhow!(
+            "the model proposed no new label (all {} were already in the library)",
+            s.duplicates.len()
+        )));
+    }
+    Ok(0)
+}
