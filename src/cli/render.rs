@@ -1,8 +1,14 @@
-//! `annotrace render`: draws a billiards trace of a run as a PNG (one instant, or a strip of frames).
+//! `annotrace render`: draws a trace of a run as a PNG (one instant, or a strip of frames): billiards
+//! traces on the table, I-PHYRE traces on their 600×600 screen (`--indices` numbers the eliminable
+//! blocks as DeepPHY shows them). `--env iphyre --game NAME` draws a game's initial scene without a run.
 
 use std::io::Write;
 use std::path::PathBuf;
 
+use annotrace::envs::iphyre::Games as IphyreGames;
+use annotrace::envs::iphyre::render::{
+    self as iphyre_render, RenderOptions as IphyreRenderOptions, render_scene_png,
+};
 use annotrace::envs::pool::PoolConfig;
 use annotrace::envs::pool::render::{RenderOptions, render_png, render_strip_png, strip_times};
 use annotrace::store::{AtomicFile, ReadTraceError, RunDir, read_trace};
@@ -14,11 +20,20 @@ use super::{CliError, CliResult};
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Run folder.
-    #[arg(long)]
-    run: PathBuf,
+    #[arg(long, required_unless_present = "game")]
+    run: Option<PathBuf>,
     /// Trace id.
+    #[arg(long, required_unless_present = "game")]
+    trace: Option<String>,
+    /// With --game: the environment whose game to draw (only iphyre has built-in games).
+    #[arg(long, value_parser = ["iphyre"], requires = "game")]
+    env: Option<String>,
+    /// I-PHYRE: draw this game's initial scene (no run needed), e.g. `support`.
+    #[arg(long, conflicts_with_all = ["run", "trace", "frames", "t"])]
+    game: Option<String>,
+    /// I-PHYRE: number the eliminable blocks 0…k−1 (the action indices DeepPHY shows a VLM).
     #[arg(long)]
-    trace: String,
+    indices: bool,
     /// Time to draw (s); the nearest timestep is shown. Default: 0 (the initial table).
     #[arg(long, conflicts_with = "frames")]
     t: Option<f64>,
@@ -55,15 +70,48 @@ pub fn run(args: Args) -> CliResult {
             "--t must be a finite number of seconds"
         )));
     }
+    if let Some(name) = &args.game {
+        let games = IphyreGames::default_games().map_err(CliError::failed)?;
+        let game = games.get(name).map_err(CliError::input)?;
+        let opts = IphyreRenderOptions {
+            size: args.size,
+            block_indices: args.indices,
+            time_label: false,
+        };
+        let png = render_scene_png(game, &opts).map_err(CliError::input)?;
+        return write_png(&args.out, &png);
+    }
+    let (Some(run_dir), Some(trace_id)) = (&args.run, &args.trace) else {
+        return Err(CliError::input(anyhow::anyhow!(
+            "--run and --trace are needed (or --env iphyre --game NAME for a game's initial scene)"
+        )));
+    };
     let config = match &args.table {
         Some(p) => PoolConfig::from_file(p).map_err(CliError::input)?,
         None => PoolConfig::default_7ft(),
     };
-    let run = RunDir::new(&args.run);
-    let trace = read_trace(&run, &args.trace).map_err(|e| match e {
+    let run = RunDir::new(run_dir);
+    let trace = read_trace(&run, trace_id).map_err(|e| match e {
         ReadTraceError::NotFound { .. } => CliError::input(e),
         other => CliError::failed(other),
     })?;
+    if trace.env == Env::Iphyre {
+        let games = IphyreGames::default_games().map_err(CliError::failed)?;
+        let game = games.get(&trace.task_id).ok();
+        let opts = IphyreRenderOptions {
+            size: args.size,
+            block_indices: args.indices,
+            time_label: true,
+        };
+        let png = match args.frames {
+            Some(k) => {
+                iphyre_render::render_strip_png(&trace, game, &strip_times(&trace, k), &opts)
+            }
+            None => iphyre_render::render_png(&trace, game, args.t.unwrap_or(0.0), &opts),
+        }
+        .map_err(CliError::input)?;
+        return write_png(&args.out, &png);
+    }
     if trace.env != Env::Pooltool {
         return Err(CliError::input(anyhow::anyhow!(
             "trace {} is a {} trace; only pooltool traces can be rendered so far",
@@ -77,14 +125,19 @@ pub fn run(args: Args) -> CliResult {
         None => render_png(&trace, &config, args.t.unwrap_or(0.0), &opts),
     }
     .map_err(CliError::input)?;
-    let mut f = AtomicFile::create(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))
+    write_png(&args.out, &png)
+}
+
+/// Writes `png` to `out` atomically.
+fn write_png(out: &std::path::Path, png: &[u8]) -> CliResult {
+    let mut f = AtomicFile::create(out)
+        .with_context(|| format!("creating {}", out.display()))
         .map_err(CliError::failed)?;
-    f.write_all(&png)
-        .with_context(|| format!("writing {}", args.out.display()))
+    f.write_all(png)
+        .with_context(|| format!("writing {}", out.display()))
         .map_err(CliError::failed)?;
     f.commit()
-        .with_context(|| format!("writing {}", args.out.display()))
+        .with_context(|| format!("writing {}", out.display()))
         .map_err(CliError::failed)?;
     Ok(0)
 }

@@ -89,6 +89,13 @@ impl Environment for IphyreEnv {
         let result = play(scene, action, &self.params)?;
         Ok(trace_of(&result, scene, &IphyreEnv::trace_id(scene)))
     }
+
+    /// The trace's timestep nearest to `t` at 512×512 in I-PHYRE's colours, with the time in the
+    /// corner (see [`render`](super::render) for block indices and strips).
+    fn render(&self, trace: &Trace, t: f64) -> Result<Vec<u8>, EnvError> {
+        let game = self.games.get(&trace.task_id).ok();
+        super::render::render_png(trace, game, t, &super::render::RenderOptions::default())
+    }
 }
 
 #[cfg(test)]
@@ -113,6 +120,8 @@ mod tests {
         env.validate(&scenes[0], &clicks).unwrap();
         let trace = env.simulate(&scenes[0], &clicks).unwrap();
         assert!(env.success(&trace));
+        let png = env.render(&trace, 0.0).unwrap();
+        assert_eq!(&png[1..4], b"PNG");
         assert_eq!(trace.trace_id, "support-clicks");
         let bad = vec![Click {
             x: 0.0,

@@ -32,6 +32,7 @@ mod error;
 mod game;
 mod params;
 pub mod reference;
+pub mod render;
 mod sample;
 mod step;
 pub mod success;
