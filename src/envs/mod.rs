@@ -2,7 +2,7 @@
 //!
 //! **Owns:** the [`Environment`] trait (scenes, action validation, simulate → [`Trace`], success,
 //! rendering) and its implementations: [`pool`] (billiards, pooltool 0.6.0 physics) and [`iphyre`]
-//! (I-PHYRE on rapier2d). PHYRE arrives later as `phyre/`.
+//! (I-PHYRE on rapier2d) and [`phyre`] (PHYRE's ball tier on rapier2d).
 //! **Does not:** write run folders or order stages (`pipeline/`), parse command lines (`cli/`). It uses
 //! only [`crate::trace`] below it.
 //!
@@ -17,6 +17,7 @@
 //! ```
 
 pub mod iphyre;
+pub mod phyre;
 pub mod pool;
 
 use crate::trace::{Env, Trace};
@@ -54,6 +55,9 @@ pub enum EnvError {
     /// An I-PHYRE game, click list or simulation failed.
     #[error(transparent)]
     Iphyre(#[from] iphyre::IphyreError),
+    /// A PHYRE task, action or simulation failed.
+    #[error(transparent)]
+    Phyre(#[from] phyre::PhyreError),
     /// Rendering failed.
     #[error("rendering: {0}")]
     Render(String),

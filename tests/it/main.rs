@@ -3,10 +3,14 @@
 mod common;
 
 mod annotate;
+mod evolve;
 mod export;
 mod import;
+mod optimise;
+mod phyre;
 mod query;
 mod render;
+mod reward;
 mod run;
 mod sandbox;
 mod simulate;

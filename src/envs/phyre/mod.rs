@@ -1,0 +1,48 @@
+//! PHYRE (Bakhtin et al., NeurIPS 2019), ball tier: 2,500 tasks in 25 templates where one red ball, placed
+//! by the agent, must make the green body touch the blue or purple one for 3 s. Re-implemented on
+//! rapier2d after PHYRE 0.2.2 (Box2D), following `shared/reference/phyre-iphyre.md` §3 and §5.
+//!
+//! **Owns:** the task set ([`TaskSet`], lazily indexed from the committed `data/tasks/phyre_ball_tasks.jsonl.gz`),
+//! the physics constants ([`PhysicsParams`]), actions and their validity ([`BallAction`], [`Placement`],
+//! DeepPHY's [`deepphy_action`]), the rapier2d world ([`World`]), the episode loop with PHYRE's success rule
+//! ([`episode::run`]), traces ([`trace_of`]), the evaluation folds ([`folds`]), seeded random actions
+//! ([`random_valid_action`]) and pictures ([`render`]).
+//! **Does not:** write Parquet or run stages (`pipeline/stages/simulate_phyre.rs`), read argv, or call
+//! Python. rapier handles never leave this module: the boundary speaks in PHYRE body indices.
+//!
+//! **Entry point:** [`PhyreEnv`] (the [`Environment`](super::Environment) implementation), or an episode:
+//!
+//! ```
+//! use annotrace::envs::phyre::{BallAction, PhysicsParams, RecordOptions, Status, TaskSet, episode};
+//! let tasks = TaskSet::default_tasks().unwrap();
+//! let task = tasks.get("00000:000").unwrap();
+//! // A ball dropped onto the green ball: valid, simulated for up to 1000 steps.
+//! let action = BallAction { x: 0.35, y: 0.6, r: 0.2 };
+//! let result = episode::run(&task, &action, &PhysicsParams::default(), &RecordOptions::default()).unwrap();
+//! assert_ne!(result.status, Status::InvalidInput);
+//! ```
+
+pub mod action;
+mod env;
+pub mod episode;
+mod error;
+pub mod folds;
+mod params;
+pub mod render;
+mod sample;
+mod task;
+mod tasks;
+pub mod to_trace;
+mod world;
+
+pub use action::{BallAction, MAX_RADIUS, MIN_RADIUS, Placement, UserBall, deepphy_action};
+pub use env::{PhyreEnv, dataset_tasks};
+pub use episode::{DEFAULT_STRIDE, EpisodeEvent, EpisodeResult, Frame, RecordOptions, Status};
+pub use error::{PhyreError, Result};
+pub use folds::{EvalSetup, Fold, fold};
+pub use params::{PIXELS_PER_METRE, PhysicsParams};
+pub use sample::{MAX_DRAWS, action_rng, random_valid_action};
+pub use task::{Body, Color, Shape, Task};
+pub use tasks::{DEFAULT_TASKS_GZ, TaskSet};
+pub use to_trace::trace_of;
+pub use world::{BodyState, ContactChange, World};

@@ -1,0 +1,140 @@
+//! [`PhysicsParams`]: PHYRE's physics constants and annotrace's tuning knobs for rapier2d (reference §3.5).
+
+use super::error::{PhyreError, Result};
+
+/// PHYRE's physics (Box2D 2.3 in PHYRE 0.2.2) as rapier2d settings. The world runs in metres with
+/// [`PIXELS_PER_METRE`] = 6, like PHYRE's Box2D world; everything the user sees (tasks, actions, traces)
+/// stays in scene pixels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PhysicsParams {
+    /// Gravity (m/s², downwards): 9.8.
+    pub gravity: f64,
+    /// Density of dynamic bodies (kg/m²): 0.25. Static bodies have none.
+    pub density: f64,
+    /// Friction of every shape: 0.5 (Box2D mixes √(f₁f₂), which is 0.5 again).
+    pub friction: f64,
+    /// Restitution of every shape: 0.2 (Box2D mixes max(e₁, e₂), 0.2 again).
+    pub restitution: f64,
+    /// Angular damping of every body (1/s): 0.01.
+    pub angular_damping: f64,
+    /// Linear damping (1/s): 0.
+    pub linear_damping: f64,
+    /// Steps per second: 60 (`dt` = 1/60 s).
+    pub fps: f64,
+    /// Most steps an episode runs: 1000 (16.7 s).
+    pub max_steps: usize,
+    /// Consecutive steps the goal relation must hold: 180 (3 s).
+    pub steps_for_solution: usize,
+    /// Ball–ball goal rule: touching when the centre distance < r₁ + r₂ + this (px): 0.1.
+    pub ball_touch_threshold_px: f64,
+    /// Contact distance (m) below which two shapes count as touching. Box2D keeps polygons a skin of
+    /// 0.01 m apart and reports them touching there; rapier keeps no skin, so contacts closer than this
+    /// count. Tuned against PHYRE (docs/fidelity.md).
+    pub touch_distance: f64,
+    /// rapier solver iterations per step (Box2D: 15 velocity + 20 position). Tuned (docs/fidelity.md).
+    pub solver_iterations: usize,
+    /// rapier internal stabilisation iterations per solver iteration.
+    pub stabilization_iterations: usize,
+    /// Whether resting bodies may sleep (Box2D's default world allows sleeping).
+    pub sleeping: bool,
+}
+
+/// PHYRE's `PIXELS_IN_METER`.
+pub const PIXELS_PER_METRE: f64 = 6.0;
+
+impl Default for PhysicsParams {
+    fn default() -> Self {
+        PhysicsParams {
+            gravity: 9.8,
+            density: 0.25,
+            friction: 0.5,
+            restitution: 0.2,
+            angular_damping: 0.01,
+            linear_damping: 0.0,
+            fps: 60.0,
+            max_steps: 1000,
+            steps_for_solution: 180,
+            ball_touch_threshold_px: 0.1,
+            touch_distance: 0.01,
+            solver_iterations: 4,
+            stabilization_iterations: 1,
+            sleeping: true,
+        }
+    }
+}
+
+impl PhysicsParams {
+    /// The time step `1 / fps` (s).
+    pub fn dt(&self) -> f64 {
+        1.0 / self.fps
+    }
+
+    /// Checks every value is finite and in range.
+    pub fn validate(&self) -> Result<()> {
+        let non_negative = [
+            ("gravity", self.gravity),
+            ("density", self.density),
+            ("friction", self.friction),
+            ("restitution", self.restitution),
+            ("angular_damping", self.angular_damping),
+            ("linear_damping", self.linear_damping),
+            ("ball_touch_threshold_px", self.ball_touch_threshold_px),
+            ("touch_distance", self.touch_distance),
+        ];
+        for (field, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(PhyreError::InvalidParams {
+                    field,
+                    message: format!("{v} is not a finite non-negative number"),
+                });
+            }
+        }
+        if !(self.fps.is_finite() && self.fps > 0.0) {
+            return Err(PhyreError::InvalidParams {
+                field: "fps",
+                message: format!("{} is not a positive number", self.fps),
+            });
+        }
+        for (field, v) in [
+            ("max_steps", self.max_steps),
+            ("steps_for_solution", self.steps_for_solution),
+            ("solver_iterations", self.solver_iterations),
+        ] {
+            if v == 0 {
+                return Err(PhyreError::InvalidParams {
+                    field,
+                    message: "must be at least 1".into(),
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_phyres_and_bad_values_are_named() {
+        let p = PhysicsParams::default();
+        p.validate().unwrap();
+        assert_eq!((p.max_steps, p.steps_for_solution), (1000, 180));
+        assert!((p.dt() - 1.0 / 60.0).abs() < 1e-15);
+        let bad = PhysicsParams {
+            fps: f64::NAN,
+            ..PhysicsParams::default()
+        };
+        assert!(bad.validate().unwrap_err().to_string().contains("fps"));
+        let bad = PhysicsParams {
+            solver_iterations: 0,
+            ..PhysicsParams::default()
+        };
+        assert!(
+            bad.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("solver_iterations")
+        );
+    }
+}

@@ -1,0 +1,239 @@
+//! Conversion of an [`EpisodeResult`] into an annotrace [`Trace`] in the paper's PHYRE layout
+//! (`object_index, shape, color, diameter, x, y, angle, vx, vy, angular_velocity, is_user_input`; scene
+//! pixels, y up). Every body is in every kept frame, the four walls included (shape `wall`), the red
+//! user ball last. `x, y` is the body origin as PHYRE stores it (for jars the base, not the centre of
+//! mass).
+//!
+//! Events, each with a payload whose `agents` lists the body ids involved (decimal body indices):
+//! `user_ball_placed` (`x`, `y`, `radius`, `action`), `invalid_input` (`reason`, `body`),
+//! `contact_begin` / `contact_end` (`objects`, `step`), `goal_relation_begin` / `goal_relation_end`
+//! (`step`, `held_steps`) and `success` (`step`).
+
+use serde_json::{Value, json};
+
+use super::episode::{EpisodeEvent, EpisodeResult, Status};
+use super::params::PIXELS_PER_METRE;
+use super::task::{Color, Task};
+use crate::trace::{Body, Env, Event, JsonMap, Object, Outcome, PhyreObject, Timestep, Trace};
+
+fn map(v: Value) -> JsonMap {
+    match v {
+        Value::Object(m) => m,
+        _ => JsonMap::new(),
+    }
+}
+
+fn event(kind: &str, t: f64, payload: Value) -> Event {
+    Event {
+        kind: kind.to_string(),
+        t: Some(t),
+        payload: Some(payload),
+        extra: JsonMap::new(),
+    }
+}
+
+/// The trace's shape name of a body: PHYRE's shape type, `wall` for the four walls.
+fn shape_name(task: &Task, index: usize) -> &str {
+    match task.bodies.get(index) {
+        Some(b) if b.is_wall => "wall",
+        Some(b) => &b.shape_type,
+        None => "ball",
+    }
+}
+
+/// The trace of `result`, played on `task`, named `trace_id`.
+pub fn trace_of(result: &EpisodeResult, task: &Task, trace_id: &str) -> Trace {
+    let n = task.bodies.len();
+    let user_diameter = result.placement.ball().map_or(0.0, |b| 2.0 * b.radius);
+    let statics: Vec<(String, &'static str, f64)> = (0..=n)
+        .map(|i| match task.bodies.get(i) {
+            Some(b) => (shape_name(task, i).to_string(), b.color.name(), b.diameter),
+            None => ("ball".to_string(), Color::Red.name(), user_diameter),
+        })
+        .collect();
+    let timesteps = result
+        .frames
+        .iter()
+        .map(|f| Timestep {
+            index: f.step as i64,
+            t: f.step as f64 * result.dt,
+            objects: f
+                .bodies
+                .iter()
+                .map(|s| {
+                    let (shape, color, diameter) = &statics[s.index.min(n)];
+                    Object {
+                        body: Body::Phyre(PhyreObject {
+                            object_index: s.index as i64,
+                            shape: shape.clone(),
+                            color: color.to_string(),
+                            diameter: *diameter,
+                            x: s.x,
+                            y: s.y,
+                            angle: s.angle,
+                            vx: s.vx,
+                            vy: s.vy,
+                            angular_velocity: s.angular_velocity,
+                            is_user_input: s.index == n,
+                        }),
+                        extra: JsonMap::new(),
+                    }
+                })
+                .collect(),
+            extra: JsonMap::new(),
+        })
+        .collect();
+    let t = |step: usize| step as f64 * result.dt;
+    let ids = |objects: &[usize]| objects.iter().map(|i| i.to_string()).collect::<Vec<_>>();
+    let goal = [task.body1, task.body2];
+    let a = result.action;
+    let events = result
+        .events
+        .iter()
+        .map(|e| match e {
+            EpisodeEvent::UserBallPlaced { index, ball } => event(
+                "user_ball_placed",
+                0.0,
+                json!({"agents": ids(&[*index]), "x": ball.x, "y": ball.y, "radius": ball.radius,
+                       "action": [a.x, a.y, a.r]}),
+            ),
+            EpisodeEvent::InvalidInput { reason, body } => event(
+                "invalid_input",
+                0.0,
+                json!({"agents": body.map(|b| ids(&[b])).unwrap_or_default(), "reason": reason,
+                       "body": body, "action": [a.x, a.y, a.r]}),
+            ),
+            EpisodeEvent::ContactBegin { step, objects } => event(
+                "contact_begin",
+                t(*step),
+                json!({"agents": ids(objects), "objects": objects, "step": step}),
+            ),
+            EpisodeEvent::ContactEnd { step, objects } => event(
+                "contact_end",
+                t(*step),
+                json!({"agents": ids(objects), "objects": objects, "step": step}),
+            ),
+            EpisodeEvent::GoalRelationBegin { step } => event(
+                "goal_relation_begin",
+                t(*step),
+                json!({"agents": ids(&goal), "objects": goal, "step": step}),
+            ),
+            EpisodeEvent::GoalRelationEnd { step, held_steps } => event(
+                "goal_relation_end",
+                t(*step),
+                json!({"agents": ids(&goal), "objects": goal, "step": step, "held_steps": held_steps}),
+            ),
+            EpisodeEvent::Success { step } => event(
+                "success",
+                t(*step),
+                json!({"agents": ids(&goal), "objects": goal, "step": step}),
+            ),
+        })
+        .collect();
+    let solved = result.status == Status::Solved;
+    let terminal = match result.status {
+        Status::Solved => "success",
+        Status::NotSolved => "timeout",
+        Status::InvalidInput => "INVALID_INPUT",
+    };
+    let ball = result
+        .placement
+        .ball()
+        .map(|b| json!({"x": b.x, "y": b.y, "radius": b.radius}));
+    let outcome = Outcome {
+        success: solved,
+        terminal_status: terminal.to_string(),
+        metrics: map(json!({
+            "status": result.status.name(),
+            "status_code": result.status.code(),
+            "steps_simulated": result.steps,
+            "sim_time_s": t(result.steps),
+            "success_time_s": solved.then(|| t(result.steps)),
+            "goal_first_step": result.goal_first_step,
+        })),
+        extra: JsonMap::new(),
+    };
+    Trace {
+        trace_id: trace_id.to_string(),
+        env: Env::Phyre,
+        task_id: task.task_id.clone(),
+        timesteps,
+        events,
+        outcome,
+        extra: map(json!({
+            "template_id": task.template_id,
+            "description": task.description,
+            "goal": {"body1": task.body1, "body2": task.body2, "relationships": task.relationships},
+            "action": {"x": a.x, "y": a.y, "r": a.r},
+            "user_ball": ball,
+            "simulator": {
+                "engine": "rapier2d", "fps": 1.0 / result.dt, "stride": result.stride,
+                "pixels_per_metre": PIXELS_PER_METRE, "scene": [task.width, task.height],
+                "coordinates": "pixels, origin bottom-left, y up",
+            },
+        })),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::envs::phyre::action::BallAction;
+    use crate::envs::phyre::episode::{RecordOptions, run};
+    use crate::envs::phyre::params::PhysicsParams;
+    use crate::envs::phyre::tasks::TaskSet;
+
+    #[test]
+    fn trace_has_the_phyre_layout_and_fills_the_tables() {
+        let task = TaskSet::default_tasks().unwrap().get("00002:007").unwrap();
+        let a = BallAction {
+            x: 0.2,
+            y: 0.9,
+            r: 0.3,
+        };
+        let r = run(
+            &task,
+            &a,
+            &PhysicsParams::default(),
+            &RecordOptions::default(),
+        )
+        .unwrap();
+        let tr = trace_of(&r, &task, "t");
+        assert_eq!((tr.env, tr.task_id.as_str()), (Env::Phyre, "00002:007"));
+        assert_eq!(tr.timesteps.len(), r.frames.len());
+        let first = &tr.timesteps[0].objects;
+        assert_eq!(first.len(), task.bodies.len() + 1);
+        let Body::Phyre(wall) = &first[0].body else {
+            panic!()
+        };
+        assert_eq!(
+            (wall.shape.as_str(), wall.color.as_str()),
+            ("wall", "black")
+        );
+        let Body::Phyre(user) = &first.last().unwrap().body else {
+            panic!()
+        };
+        assert!(user.is_user_input && user.color == "red" && user.shape == "ball");
+        assert_eq!((user.x, user.y, user.diameter), (51.0, 229.0, 22.0));
+        assert_eq!(tr.events[0].kind, "user_ball_placed");
+        assert_eq!(tr.outcome.metrics["steps_simulated"], json!(r.steps));
+        let mut builder = crate::trace::TraceBatchBuilder::new();
+        for ts in &tr.timesteps {
+            builder.push_timestep(ts);
+        }
+        let b = builder
+            .finish(&crate::trace::TraceMeta {
+                trace_id: &tr.trace_id,
+                scene_id: &tr.task_id,
+                task_id: &tr.task_id,
+                events: &tr.events,
+                outcome: &tr.outcome,
+                extra: &tr.extra,
+                source: "test",
+            })
+            .unwrap();
+        assert_eq!(b.frames.num_rows(), tr.frame_rows());
+        assert_eq!(b.events.num_rows(), tr.events.len());
+        assert_eq!(b.timesteps.num_rows(), tr.timesteps.len());
+    }
+}

@@ -1,0 +1,398 @@
+//! [`World`]: one PHYRE task plus the red user ball as rapier2d bodies, stepped at 60 Hz.
+//!
+//! **Owns:** the rapier sets, the mapping between rapier handles and PHYRE body indices (scene bodies
+//! `0..n`, the user ball `n`), contact begin/end per body pair from rapier's collision events, and PHYRE's
+//! "touching" test for the goal.
+//! **Does not:** decide validity (`action.rs`), run the episode loop (`episode.rs`) or build traces.
+//!
+//! Mapping (reference §3.5, §5): the world is in metres, 6 px per metre, gravity −9.8 m/s², like PHYRE's
+//! Box2D world. Each body keeps PHYRE's origin and angle; every polygon or circle becomes one collider on
+//! it (a jar is three convex colliders on one body). Dynamic shapes have density 0.25 kg/m², static ones
+//! none; every shape has friction 0.5 (rapier's `Average` rule gives Box2D's √(f₁f₂) = 0.5) and
+//! restitution 0.2 (`Max`, as Box2D). Bodies get angular damping 0.01 and may sleep with Box2D's
+//! thresholds (0.01 m/s, 2°/s, 0.5 s).
+
+use std::collections::HashMap;
+use std::sync::mpsc;
+
+use rapier2d::prelude::*;
+
+use super::action::UserBall;
+use super::error::{PhyreError, Result};
+use super::params::{PIXELS_PER_METRE, PhysicsParams};
+use super::task::{Shape, Task};
+
+/// Box2D's `b2_linearSleepTolerance` (m/s).
+const SLEEP_LINEAR: f32 = 0.01;
+/// Box2D's `b2_angularSleepTolerance` (2°/s in rad/s).
+const SLEEP_ANGULAR: f32 = 2.0 * std::f32::consts::PI / 180.0;
+/// Box2D's `b2_timeToSleep` (s).
+const SLEEP_TIME: f32 = 0.5;
+
+/// A contact change between two bodies during one step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ContactChange {
+    /// True when the two bodies started touching, false when they stopped.
+    pub began: bool,
+    /// The two body indices, smaller first.
+    pub objects: [usize; 2],
+}
+
+/// One body's state in scene units (px, px/s, rad, rad/s).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BodyState {
+    /// Body index (the user ball is the last).
+    pub index: usize,
+    /// Body origin x (px).
+    pub x: f64,
+    /// Body origin y (px, up).
+    pub y: f64,
+    /// Angle (rad, CCW).
+    pub angle: f64,
+    /// Velocity x (px/s).
+    pub vx: f64,
+    /// Velocity y (px/s).
+    pub vy: f64,
+    /// Angular velocity (rad/s).
+    pub angular_velocity: f64,
+}
+
+/// A task's bodies in rapier2d.
+pub struct World {
+    bodies_of: Vec<RigidBodyHandle>,
+    colliders_of: Vec<Vec<ColliderHandle>>,
+    dynamic: Vec<usize>,
+    /// The exact initial poses (f64, as given), reported for step 0.
+    initial: Vec<BodyState>,
+    goal: [usize; 2],
+    /// Goal radii in metres when both goal bodies are single circles (PHYRE's ball–ball rule).
+    two_ball: Option<(f32, f32)>,
+    ball_threshold: f32,
+    touch_distance: f32,
+    active_pairs: HashMap<[usize; 2], u32>,
+    gravity: Vector,
+    integration: IntegrationParameters,
+    pipeline: PhysicsPipeline,
+    islands: IslandManager,
+    broad_phase: BroadPhaseBvh,
+    narrow_phase: NarrowPhase,
+    bodies: RigidBodySet,
+    colliders: ColliderSet,
+    impulse_joints: ImpulseJointSet,
+    multibody_joints: MultibodyJointSet,
+    soft_bodies: SoftBodySet,
+    ccd: CCDSolver,
+    collision_rx: mpsc::Receiver<CollisionEvent>,
+    force_rx: mpsc::Receiver<ContactForceEvent>,
+    tear_rx: mpsc::Receiver<SoftBodyTearEvent>,
+    events: ChannelEventCollector,
+}
+
+impl std::fmt::Debug for World {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("World")
+            .field("bodies", &self.bodies_of.len())
+            .field("goal", &self.goal)
+            .finish_non_exhaustive()
+    }
+}
+
+fn m(px: f64) -> f32 {
+    (px / PIXELS_PER_METRE) as f32
+}
+
+impl World {
+    /// Builds `task`'s bodies and, when given, the red user ball (body index `task.bodies.len()`).
+    pub fn new(task: &Task, user: Option<&UserBall>, params: &PhysicsParams) -> Result<World> {
+        params.validate()?;
+        let integration = IntegrationParameters {
+            dt: params.dt() as f32,
+            num_solver_iterations: params.solver_iterations,
+            num_internal_stabilization_iterations: params.stabilization_iterations,
+            length_unit: 1.0,
+            ..IntegrationParameters::default()
+        };
+        let mut bodies = RigidBodySet::new();
+        let mut colliders = ColliderSet::new();
+        let n = task.bodies.len() + usize::from(user.is_some());
+        let mut bodies_of = Vec::with_capacity(n);
+        let mut colliders_of = Vec::with_capacity(n);
+        let mut dynamic = Vec::new();
+        let mut initial = Vec::with_capacity(n);
+        let user_shapes;
+        let mut specs: Vec<(usize, bool, [f64; 2], f64, &[Shape])> = task
+            .bodies
+            .iter()
+            .map(|b| (b.id, b.dynamic, b.position, b.angle, b.shapes.as_slice()))
+            .collect();
+        if let Some(u) = user {
+            user_shapes = [Shape::Circle { radius: u.radius }];
+            specs.push((task.bodies.len(), true, [u.x, u.y], 0.0, &user_shapes));
+        }
+        for (index, is_dynamic, position, angle, shapes) in specs {
+            initial.push(BodyState {
+                index,
+                x: position[0],
+                y: position[1],
+                angle,
+                vx: 0.0,
+                vy: 0.0,
+                angular_velocity: 0.0,
+            });
+            let builder = if is_dynamic {
+                dynamic.push(index);
+                RigidBodyBuilder::dynamic()
+            } else {
+                RigidBodyBuilder::fixed()
+            };
+            let mut body = builder
+                .translation(Vector::new(m(position[0]), m(position[1])))
+                .rotation(angle as f32)
+                .angular_damping(params.angular_damping as f32)
+                .linear_damping(params.linear_damping as f32)
+                .can_sleep(params.sleeping)
+                .user_data(index as u128)
+                .build();
+            let a = body.activation_mut();
+            a.normalized_linear_threshold = SLEEP_LINEAR;
+            a.angular_threshold = SLEEP_ANGULAR;
+            a.time_until_sleep = SLEEP_TIME;
+            let handle = bodies.insert(body);
+            let mut mine = Vec::with_capacity(shapes.len());
+            for (k, shape) in shapes.iter().enumerate() {
+                let builder = match shape {
+                    Shape::Circle { radius } => ColliderBuilder::ball(m(*radius)),
+                    Shape::Polygon(vs) => {
+                        let pts: Vec<Vector> =
+                            vs.iter().map(|v| Vector::new(m(v[0]), m(v[1]))).collect();
+                        ColliderBuilder::convex_polyline(pts.clone())
+                            .or_else(|| ColliderBuilder::convex_hull(&pts))
+                            .ok_or_else(|| PhyreError::InvalidTask {
+                                field: format!("{} bodies[{index}].shapes[{k}]", task.task_id),
+                                message: "degenerate polygon".into(),
+                            })?
+                    }
+                };
+                let collider = builder
+                    .density(if is_dynamic {
+                        params.density as f32
+                    } else {
+                        0.0
+                    })
+                    .friction(params.friction as f32)
+                    .restitution(params.restitution as f32)
+                    .friction_combine_rule(CoefficientCombineRule::Average)
+                    .restitution_combine_rule(CoefficientCombineRule::Max)
+                    .active_events(ActiveEvents::COLLISION_EVENTS)
+                    .user_data(index as u128)
+                    .build();
+                mine.push(colliders.insert_with_parent(collider, handle, &mut bodies));
+            }
+            bodies_of.push(handle);
+            colliders_of.push(mine);
+        }
+        let two_ball = task.two_ball_goal().then(|| {
+            let r = |i: usize| match task.bodies[i].shapes[0] {
+                Shape::Circle { radius } => m(radius),
+                Shape::Polygon(_) => 0.0,
+            };
+            (r(task.body1), r(task.body2))
+        });
+        let (collision_tx, collision_rx) = mpsc::channel();
+        let (force_tx, force_rx) = mpsc::channel();
+        let (tear_tx, tear_rx) = mpsc::channel();
+        Ok(World {
+            bodies_of,
+            colliders_of,
+            dynamic,
+            initial,
+            goal: [task.body1, task.body2],
+            two_ball,
+            ball_threshold: m(params.ball_touch_threshold_px),
+            touch_distance: params.touch_distance as f32,
+            active_pairs: HashMap::new(),
+            gravity: Vector::new(0.0, -params.gravity as f32),
+            integration,
+            pipeline: PhysicsPipeline::new(),
+            islands: IslandManager::new(),
+            broad_phase: BroadPhaseBvh::new(),
+            narrow_phase: NarrowPhase::new(),
+            bodies,
+            colliders,
+            impulse_joints: ImpulseJointSet::new(),
+            multibody_joints: MultibodyJointSet::new(),
+            soft_bodies: SoftBodySet::new(),
+            ccd: CCDSolver::new(),
+            collision_rx,
+            force_rx,
+            tear_rx,
+            events: ChannelEventCollector::new(collision_tx, force_tx, tear_tx),
+        })
+    }
+
+    /// Number of bodies (the user ball included).
+    pub fn len(&self) -> usize {
+        self.bodies_of.len()
+    }
+
+    /// True when the world has no bodies.
+    pub fn is_empty(&self) -> bool {
+        self.bodies_of.is_empty()
+    }
+
+    /// Advances one step and appends the body-pair contact changes of that step to `out`. A jar touching
+    /// a ball with two of its parts is one contact: it begins with the first part and ends with the last.
+    pub fn step(&mut self, out: &mut Vec<ContactChange>) {
+        self.pipeline.step(
+            self.gravity,
+            &self.integration,
+            &mut self.islands,
+            &mut self.broad_phase,
+            &mut self.narrow_phase,
+            &mut self.bodies,
+            &mut self.colliders,
+            &mut self.impulse_joints,
+            &mut self.multibody_joints,
+            &mut self.soft_bodies,
+            &mut self.ccd,
+            &(),
+            &self.events,
+        );
+        while self.force_rx.try_recv().is_ok() {}
+        while self.tear_rx.try_recv().is_ok() {}
+        while let Ok(event) = self.collision_rx.try_recv() {
+            let index = |h: ColliderHandle| self.colliders.get(h).map(|c| c.user_data as usize);
+            let (Some(a), Some(b)) = (index(event.collider1()), index(event.collider2())) else {
+                continue;
+            };
+            if a == b {
+                continue;
+            }
+            let key = [a.min(b), a.max(b)];
+            let count = self.active_pairs.entry(key).or_insert(0);
+            if event.started() {
+                *count += 1;
+                if *count == 1 {
+                    out.push(ContactChange {
+                        began: true,
+                        objects: key,
+                    });
+                }
+            } else if *count > 0 {
+                *count -= 1;
+                if *count == 0 {
+                    out.push(ContactChange {
+                        began: false,
+                        objects: key,
+                    });
+                }
+            }
+        }
+    }
+
+    /// PHYRE's goal test: the two goal balls' centres closer than r₁ + r₂ + 0.1 px, or else a contact
+    /// between the goal bodies closer than `touch_distance`.
+    pub fn goal_holds(&self) -> bool {
+        let [g1, g2] = self.goal;
+        if let Some((r1, r2)) = self.two_ball {
+            let p1 = self.bodies[self.bodies_of[g1]].translation();
+            let p2 = self.bodies[self.bodies_of[g2]].translation();
+            return (p1 - p2).length() < r1 + r2 + self.ball_threshold;
+        }
+        self.touching(g1, g2)
+    }
+
+    /// Whether bodies `a` and `b` touch: some contact point between their colliders is closer than
+    /// `touch_distance` (negative distances are penetrations).
+    pub fn touching(&self, a: usize, b: usize) -> bool {
+        let (Some(ca), Some(cb)) = (self.colliders_of.get(a), self.colliders_of.get(b)) else {
+            return false;
+        };
+        ca.iter().any(|&h1| {
+            cb.iter().any(|&h2| {
+                self.narrow_phase.contact_pair(h1, h2).is_some_and(|pair| {
+                    pair.manifolds()
+                        .iter()
+                        .any(|mf| mf.points.iter().any(|p| p.dist <= self.touch_distance))
+                })
+            })
+        })
+    }
+
+    /// Whether every dynamic body sleeps (then nothing moves until the episode ends).
+    pub fn all_asleep(&self) -> bool {
+        self.dynamic
+            .iter()
+            .all(|&i| self.bodies[self.bodies_of[i]].is_sleeping())
+    }
+
+    /// The indices of the dynamic bodies.
+    pub fn dynamic_bodies(&self) -> &[usize] {
+        &self.dynamic
+    }
+
+    /// The state of body `index` in scene units.
+    pub fn state(&self, index: usize) -> Option<BodyState> {
+        let body = self.bodies.get(*self.bodies_of.get(index)?)?;
+        let t = body.translation();
+        let v = body.linvel();
+        let k = PIXELS_PER_METRE;
+        Some(BodyState {
+            index,
+            x: t.x as f64 * k,
+            y: t.y as f64 * k,
+            angle: body.rotation().angle() as f64,
+            vx: v.x as f64 * k,
+            vy: v.y as f64 * k,
+            angular_velocity: body.angvel() as f64,
+        })
+    }
+
+    /// The bodies' exact initial states (as given to [`World::new`]).
+    pub fn initial_states(&self) -> &[BodyState] {
+        &self.initial
+    }
+
+    /// Appends the state of every body in index order to `out`.
+    pub fn states_into(&self, out: &mut Vec<BodyState>) {
+        out.extend((0..self.bodies_of.len()).filter_map(|i| self.state(i)));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::envs::phyre::tasks::TaskSet;
+
+    #[test]
+    fn a_ball_falls_at_g_and_comes_to_rest_on_the_floor() {
+        let task = TaskSet::default_tasks().unwrap().get("00000:000").unwrap();
+        let params = PhysicsParams::default();
+        let user = UserBall {
+            x: 40.0,
+            y: 200.0,
+            radius: 10.0,
+        };
+        let mut world = World::new(&task, Some(&user), &params).unwrap();
+        let u = task.bodies.len();
+        let mut changes = Vec::new();
+        for _ in 0..30 {
+            world.step(&mut changes);
+        }
+        // After 0.5 s of free fall: v = -g·t = -4.9 m/s = -29.4 px/s.
+        let s = world.state(u).unwrap();
+        assert!((s.vy + 29.4).abs() < 0.1, "{s:?}");
+        for _ in 0..300 {
+            world.step(&mut changes);
+        }
+        let s = world.state(u).unwrap();
+        assert!((s.y - 10.0).abs() < 0.3, "resting centre {s:?}");
+        // The floor is wall 0.
+        assert!(
+            changes.iter().any(|c| c.began && c.objects == [0, u]),
+            "{changes:?}"
+        );
+        assert!(world.touching(0, u));
+        assert!(!world.goal_holds());
+    }
+}
