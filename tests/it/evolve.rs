@@ -1,0 +1,279 @@
+//! `annotrace evolve` and the `evolve` stage: fitness goes up on a seeded run, the grown library loads
+//! and annotates, a killed search resumes to exactly the uninterrupted result, D_x is reused, the
+//! baselines run on the same budget, and the paper's statistics come out of the SQL files.
+
+use std::collections::BTreeMap;
+
+use annotrace::detect::Library;
+
+use crate::common::{TestRun, repo};
+
+/// A simulate stage and an evolve stage with reproducible scores (no time penalty).
+fn pipeline(extra: &str) -> String {
+    format!(
+        r#"[pipeline]
+name = "evt"
+seed = 5
+
+[[stage]]
+id = "sim"
+kind = "simulate"
+env = "pooltool"
+scenes = 14
+shots = 1
+seed = 3
+dt = 0.1
+
+[[stage]]
+id = "evo"
+kind = "evolve"
+inputs = ["sim"]
+env = "pooltool"
+library = "{lib}"
+labels = ["ball slowing", "cushion rebound"]
+budget = 8
+parallel = 4
+max_traces = 12
+time_penalty = false
+timeout = 3.0
+workers = 2
+{extra}
+"#,
+        lib = repo().join("data/libraries/pooltool").display()
+    )
+}
+
+/// (label, step, code hash, status, ν rounded) of every candidate, in order.
+fn candidates(t: &TestRun) -> Vec<String> {
+    t.csv(
+        "runs/evt",
+        "SELECT label, step, island, code_hash, status, round(nu, 9) AS nu, parents FROM candidates \
+         ORDER BY label_index, step",
+    )
+    .lines()
+    .map(str::to_string)
+    .collect()
+}
+
+fn by_label(t: &TestRun) -> BTreeMap<String, (f64, f64, bool)> {
+    let csv = t.csv(
+        "runs/evt",
+        "SELECT label, seed_nu, best_nu, accepted FROM evolution_labels ORDER BY label_index",
+    );
+    csv.lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (
+                f[0].to_string(),
+                (f[1].parse().unwrap(), f[2].parse().unwrap(), f[3] == "true"),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn a_seeded_search_raises_fitness_and_its_library_annotates() {
+    let t = TestRun::new();
+    t.write("p.toml", &pipeline(""));
+    t.run(&["run", "p.toml"]).ok();
+    let labels = by_label(&t);
+    let (seed, best, accepted) = labels["ball slowing"];
+    assert!(best > seed, "ball slowing: {seed} -> {best}");
+    assert!(accepted);
+    // The best never falls below the seed program.
+    let (seed2, best2, _) = labels["cushion rebound"];
+    assert!(best2 >= seed2);
+    // Every candidate is recorded: seeds plus the budget per label, with every term of scored ones.
+    let rows = candidates(&t);
+    assert_eq!(rows.len() - 1, 2 * (8 + 1), "{rows:#?}");
+    let terms = t.csv(
+        "runs/evt",
+        "SELECT count(*) AS n FROM candidates WHERE status IN ('ok', 'seed') AND \
+         (rho IS NULL OR eta IS NULL OR lambda IS NULL OR psi IS NULL OR nu IS NULL OR \
+         abs(nu - (rho + eta - lambda - psi)) > 1e-9 OR activation_rate IS NULL OR mean_time_s IS NULL)",
+    );
+    assert_eq!(terms.lines().nth(1), Some("0"), "{terms}");
+    // The grown library loads, holds the improved detector, and annotate uses it directly.
+    let dir = t.path("runs/evt/exports/evo/library");
+    let lib = Library::load(&dir).unwrap();
+    assert_eq!(lib.detectors.len(), 12);
+    let slowing = lib
+        .detectors
+        .iter()
+        .find(|d| d.label == "ball slowing")
+        .unwrap();
+    let original = Library::load(&repo().join("data/libraries/pooltool")).unwrap();
+    let before = original
+        .detectors
+        .iter()
+        .find(|d| d.label == "ball slowing")
+        .unwrap();
+    assert_ne!(
+        slowing.code, before.code,
+        "the improved program replaced the original"
+    );
+    t.run(&[
+        "annotate",
+        "--run",
+        "runs/evt",
+        "--library",
+        dir.to_str().unwrap(),
+        "--workers",
+        "2",
+    ])
+    .ok();
+    let n = t.csv(
+        "runs/evt",
+        &format!(
+            "SELECT count(*) AS n FROM annotations WHERE detector_id = '{}'",
+            slowing.id
+        ),
+    );
+    assert_ne!(n.lines().nth(1), Some("0"), "{n}");
+}
+
+#[test]
+fn a_killed_search_resumes_and_equals_an_uninterrupted_one() {
+    let whole = TestRun::new();
+    whole.write("p.toml", &pipeline(""));
+    whole.run(&["run", "p.toml"]).ok();
+    let expected = candidates(&whole);
+
+    let t = TestRun::new();
+    t.write("p.toml", &pipeline(""));
+    // Shards: dx, then label 0's rounds 0 (seed), 1, 2: stop (abort, as kill -9) after round 1.
+    let r = t.run_env(
+        &["run", "p.toml"],
+        &[("ANNOTRACE_FAULT", "evo:after-shards=3")],
+    );
+    assert_ne!(r.code, Some(0), "the fault should stop the run");
+    let r = t.run(&["run", "p.toml"]);
+    r.ok().stderr_has("resuming");
+    assert_eq!(candidates(&t), expected);
+    assert_eq!(
+        std::fs::read_to_string(t.path("runs/evt/exports/evo/library/ball_slowing.py")).unwrap(),
+        std::fs::read_to_string(whole.path("runs/evt/exports/evo/library/ball_slowing.py"))
+            .unwrap()
+    );
+}
+
+#[test]
+fn baselines_run_on_the_same_budget_and_the_distance_matrix_is_reused() {
+    let t = TestRun::new();
+    let extra = r#"
+[[stage]]
+id = "hill"
+kind = "evolve"
+inputs = ["sim"]
+env = "pooltool"
+labels = ["ball slowing"]
+strategy = "hill-climb"
+budget = 8
+parallel = 4
+max_traces = 12
+time_penalty = false
+timeout = 3.0
+workers = 2
+convergence_per_bin = 0
+
+[[stage]]
+id = "bon"
+kind = "evolve"
+inputs = ["sim"]
+env = "pooltool"
+labels = ["ball slowing"]
+strategy = "best-of-n"
+budget = 8
+parallel = 4
+max_traces = 12
+time_penalty = false
+timeout = 3.0
+workers = 2
+convergence_per_bin = 0
+
+[[stage]]
+id = "stats"
+kind = "sql"
+inputs = ["evo", "hill", "bon"]
+query = "evolution_learning_stats.sql"
+
+[[stage]]
+id = "stats_tex"
+kind = "export"
+inputs = ["stats"]
+table = "stats"
+format = "latex"
+
+[[stage]]
+id = "conv"
+kind = "sql"
+inputs = ["evo"]
+query = "evolution_convergence.sql"
+
+[[stage]]
+id = "progress"
+kind = "sql"
+inputs = ["evo", "hill", "bon"]
+query = "evolution_progress.sql"
+"#;
+    t.write("p.toml", &pipeline(extra));
+    std::fs::create_dir_all(t.path("sql")).unwrap();
+    for f in [
+        "evolution_learning_stats.sql",
+        "evolution_convergence.sql",
+        "evolution_progress.sql",
+    ] {
+        std::fs::copy(repo().join("sql").join(f), t.path("sql").join(f)).unwrap();
+    }
+    t.run(&["run", "p.toml"]).ok();
+    let per_stage = t.csv(
+        "runs/evt",
+        "SELECT run_stage, strategy, count(*) AS n FROM candidates WHERE step >= 0 \
+         GROUP BY run_stage, strategy ORDER BY run_stage",
+    );
+    assert!(per_stage.contains("bon,best-of-n,8"), "{per_stage}");
+    assert!(per_stage.contains("hill,hill-climb,8"), "{per_stage}");
+    // best-of-n always mutates the seed program.
+    let parents = t.csv(
+        "runs/evt",
+        "SELECT count(DISTINCT parents) AS n FROM candidates WHERE run_stage = 'bon' AND step >= 0",
+    );
+    assert_eq!(parents.lines().nth(1), Some("1"), "{parents}");
+    // One D_x matrix for the three searches over the same training set (11 of the 14 traces after
+    // the held-out split): 11·10/2 pairs, written once.
+    let dx = t.csv(
+        "runs/evt",
+        "SELECT count(*) AS n, count(DISTINCT set_id) AS sets FROM trace_distances",
+    );
+    assert_eq!(dx.lines().nth(1), Some("55,1"), "{dx}");
+    // Appendix A's table, the convergence bins and the progress curve.
+    let stats = t.csv("runs/evt", "SELECT * FROM stats");
+    assert!(
+        stats.starts_with("env,candidates,executable_pct,best_fitness"),
+        "{stats}"
+    );
+    assert!(stats.contains("pooltool,32,"), "{stats}");
+    let tex = std::fs::read_to_string(t.path("runs/evt/exports/stats.tex")).unwrap();
+    assert!(tex.contains("tabular"), "{tex}");
+    let conv = t.csv("runs/evt", "SELECT * FROM conv");
+    assert!(conv.starts_with("env,bin,"), "{conv}");
+    let progress = t.csv(
+        "runs/evt",
+        "SELECT min(best_so_far_nu - seed_nu) AS d FROM progress",
+    );
+    let d: f64 = progress.lines().nth(1).unwrap().parse().unwrap();
+    assert!(d >= 0.0, "{progress}");
+}
+
+#[test]
+fn bad_input_is_refused_with_exit_2() {
+    let t = TestRun::new();
+    std::fs::create_dir_all(t.path("empty")).unwrap();
+    t.run(&["evolve", "--run", "empty", "--labels", "rolling ball"])
+        .code(2)
+        .stderr_has("at least 3 pooltool traces");
+    t.run(&["evolve", "--run", "nowhere"]).code(2);
+    t.write("p.toml", &pipeline("").replace("budget = 8", "budget = 0"));
+    t.run(&["run", "p.toml"]).code(2).stderr_has("budget");
+}
