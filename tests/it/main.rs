@@ -6,6 +6,7 @@ mod annotate;
 mod evolve;
 mod export;
 mod import;
+mod llm;
 mod optimise;
 mod phyre;
 mod query;

@@ -152,9 +152,15 @@ pub struct OptimiseStage {
 
 fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
     let p = &def.params;
-    let goals_path = spec
-        .project_dir
-        .join(p["goals"].as_str().unwrap_or("data/goals/pooltool.toml"));
+    let rel = p["goals"].as_str().unwrap_or("data/goals/pooltool.toml");
+    // The project's file, else the crate's own copy (pipelines run from another folder).
+    let goals_path = [
+        spec.project_dir.join(rel),
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(rel),
+    ]
+    .into_iter()
+    .find(|p| p.is_file())
+    .unwrap_or_else(|| spec.project_dir.join(rel));
     let goals = GoalSet::load(&goals_path, &spec.project_dir)
         .map_err(|e| BuildError::param("goals", e.to_string()))?;
     if goals.env != Env::Pooltool {
