@@ -7,6 +7,7 @@ mod evolve;
 mod export;
 mod import;
 mod llm;
+mod llm;
 mod optimise;
 mod phyre;
 mod query;
