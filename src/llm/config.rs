@@ -212,15 +212,31 @@ impl LlmConfig {
                 .map(|v| v.trim().to_string())
                 .filter(|v| !v.is_empty())
         };
-        let mut c = LlmConfig::default();
-        c.base_url = settings.base_url.clone().or_else(|| var(ENV_BASE_URL));
-        c.model = settings
-            .model
-            .clone()
-            .or_else(|| var(ENV_MODEL))
-            .unwrap_or_default();
         let key_var = settings.api_key_env.as_deref().unwrap_or(ENV_API_KEY);
-        c.api_key = var(key_var).map(ApiKey::new);
+        let d = LlmConfig::default();
+        let mut c = LlmConfig {
+            base_url: settings.base_url.clone().or_else(|| var(ENV_BASE_URL)),
+            model: settings
+                .model
+                .clone()
+                .or_else(|| var(ENV_MODEL))
+                .unwrap_or_default(),
+            api_key: var(key_var).map(ApiKey::new),
+            max_retries: settings.max_retries.unwrap_or(d.max_retries),
+            parallel: settings.parallel.unwrap_or(d.parallel),
+            budget: Budget {
+                max_calls: settings.max_calls,
+                max_tokens: settings.max_tokens,
+            },
+            temperature: settings.temperature,
+            max_output_tokens: settings.max_output_tokens,
+            seed: settings.seed.unwrap_or(0),
+            replay: settings.replay.clone().map(|run| ReplayConfig {
+                run,
+                strict: settings.strict_replay.unwrap_or(true),
+            }),
+            ..d
+        };
         if let Some(v) = settings.timeout_s {
             c.timeout = secs("timeout_s", v)?;
         }
@@ -233,23 +249,6 @@ impl LlmConfig {
         if let Some(v) = settings.backoff_max_s {
             c.backoff_max = secs("backoff_max_s", v)?;
         }
-        if let Some(v) = settings.max_retries {
-            c.max_retries = v;
-        }
-        if let Some(v) = settings.parallel {
-            c.parallel = v;
-        }
-        c.budget = Budget {
-            max_calls: settings.max_calls,
-            max_tokens: settings.max_tokens,
-        };
-        c.temperature = settings.temperature;
-        c.max_output_tokens = settings.max_output_tokens;
-        c.seed = settings.seed.unwrap_or(0);
-        c.replay = settings.replay.clone().map(|run| ReplayConfig {
-            run,
-            strict: settings.strict_replay.unwrap_or(true),
-        });
         c.validate()?;
         Ok(c)
     }
@@ -411,6 +410,20 @@ mod tests {
         assert_eq!(c.budget.max_calls, Some(5));
         assert_eq!(c.api_key.as_ref().unwrap().expose(), "sk-secret");
         assert!(!format!("{c:?}").contains("sk-secret"));
+    }
+
+    #[test]
+    fn settings_read_from_a_toml_table_and_reject_unknown_keys() {
+        let s: LlmSettings = toml::from_str(
+            "base_url = \"http://localhost:8080\"\nmodel = \"m\"\nparallel = 2\ntimeout_s = 60\nmax_calls = 10",
+        )
+        .unwrap();
+        assert_eq!(s.parallel, Some(2));
+        assert_eq!(s.max_calls, Some(10));
+        let c = LlmConfig::resolve(&s, &|_| None).unwrap();
+        assert_eq!(c.timeout, Duration::from_secs(60));
+        let e = toml::from_str::<LlmSettings>("api_key = \"sk-x\"").unwrap_err();
+        assert!(e.to_string().contains("unknown field"), "{e}");
     }
 
     #[test]

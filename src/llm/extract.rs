@@ -167,7 +167,7 @@ fn excerpt(text: &str) -> String {
 }
 
 fn looks_like_python(body: &str) -> bool {
-    body.lines().any(|l| is_code_start(l))
+    body.lines().any(is_code_start)
 }
 
 /// A line at column 0 that starts Python code (not prose).

@@ -188,10 +188,19 @@ pub fn read_calls(run: &RunDir) -> Result<Vec<CallRecord>, LlmError> {
             rows_of(&b, &file.path, &mut out)?;
         }
     }
-    out.sort_by(|a, b| {
-        (a.started_at_ms, &a.call_id, a.attempt).cmp(&(b.started_at_ms, &b.call_id, b.attempt))
-    });
+    out.sort_by(|a, b| order_key(a).cmp(&order_key(b)));
     Ok(out)
+}
+
+/// Start time, then session and the call's number within it (numerically: `s-10` after `s-9`), then
+/// attempt.
+fn order_key(r: &CallRecord) -> (i64, &str, u64, i32) {
+    let n = r
+        .call_id
+        .rsplit_once('-')
+        .and_then(|(_, n)| n.parse().ok())
+        .unwrap_or(0);
+    (r.started_at_ms, r.session.as_str(), n, r.attempt)
 }
 
 fn rows_of(
@@ -371,6 +380,15 @@ mod tests {
             replayed: false,
             started_at_ms: 1_000 + i,
         }
+    }
+
+    #[test]
+    fn rows_order_by_time_then_call_number() {
+        let mut a = row(0);
+        let mut b = row(1);
+        (a.call_id, a.started_at_ms) = ("s-10".into(), 5);
+        (b.call_id, b.started_at_ms) = ("s-9".into(), 5);
+        assert!(order_key(&b) < order_key(&a));
     }
 
     #[test]
