@@ -4,6 +4,8 @@
 use std::path::{Path, PathBuf};
 
 use annotrace::detect::{Annotation, Library, SandboxLimits, WorkerPool};
+use annotrace::envs::Environment;
+use annotrace::envs::pool::{PoolEnv, Scene, Shot};
 use annotrace::pipeline::stages::annotate::read_annotations;
 use annotrace::reward::annotate::{annotate, detectors_for, probe_schema};
 use annotrace::reward::{AnnotatedTrace, RewardError, Schema, compile, evaluate, labels_used};
@@ -24,6 +26,47 @@ enum Command {
     Check(CheckArgs),
     /// Evaluate a program on one trace of a run: each clause's value, success and the dense score.
     Eval(EvalArgs),
+    /// Ask the configured LLM for a program for a goal sentence, repairing it on parse, check or
+    /// execution errors (calls recorded in --run DIR's llm_calls).
+    Synthesise(SynthArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct SynthArgs {
+    /// The goal in natural language.
+    goal: String,
+    /// Environment (only billiards has a scene simulator for the execution check here).
+    #[arg(long, default_value = "pooltool", value_parser = ["pooltool", "phyre", "iphyre"])]
+    env: String,
+    /// Billiards scene: a scene JSON file, or SEED:INDEX for a generated 9-ball rack.
+    #[arg(long, default_value = "1000:0")]
+    scene: String,
+    /// Library folder; default: data/libraries/<env>.
+    #[arg(long)]
+    library: Option<PathBuf>,
+    /// Repair rounds after the first answer.
+    #[arg(long, default_value_t = 3)]
+    max_repairs: usize,
+    /// Request seed (sent to the endpoint; part of the replay key).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Sampling temperature.
+    #[arg(long)]
+    temperature: Option<f64>,
+    /// Attach the scene's initial image (PNG) for a vision model.
+    #[arg(long)]
+    image: bool,
+    /// Run folder to record the calls in (its llm_calls table).
+    #[arg(long)]
+    run: Option<PathBuf>,
+    /// Write the accepted program to this file.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Print the first prompt and stop (no call).
+    #[arg(long)]
+    dry_run: bool,
+    #[command(flatten)]
+    llm: super::suggest_labels::LlmArgs,
 }
 
 #[derive(clap::Args, Debug)]
@@ -57,6 +100,7 @@ pub fn run(args: Args) -> CliResult {
     match args.command {
         Command::Check(a) => check(a),
         Command::Eval(a) => eval(a),
+        Command::Synthesise(a) => synthesise(a),
     }
 }
 
@@ -190,4 +234,153 @@ fn eval(a: EvalArgs) -> CliResult {
     println!("success: {}", result.success);
     println!("score: {:.4}", result.score);
     Ok(0)
+}
+
+/// A billiards scene from a JSON file or `SEED:INDEX`.
+fn pool_scene(spec: &str, env: &PoolEnv) -> Result<Scene, CliError> {
+    if let Some((seed, index)) = spec.split_once(':')
+        && let (Ok(seed), Ok(index)) = (seed.parse::<u64>(), index.parse::<usize>())
+    {
+        return env
+            .scenes(index + 1, seed)
+            .map_err(|e| CliError::input(anyhow::anyhow!("--scene {spec}: {e}")))
+            .map(|mut v| v.remove(index));
+    }
+    let text = std::fs::read_to_string(spec).map_err(|e| {
+        CliError::input(anyhow::anyhow!(
+            "--scene {spec}: {e} (give a scene JSON file or SEED:INDEX)"
+        ))
+    })?;
+    Scene::from_json_str(&text, &env.config)
+        .map_err(|e| CliError::input(anyhow::anyhow!("--scene {spec}: {e}")))
+}
+
+/// The scene in words: table, pockets, balls.
+fn scene_summary(scene: &Scene, env: &PoolEnv) -> String {
+    let t = &env.config.table;
+    let pockets: Vec<String> = t
+        .pockets
+        .iter()
+        .map(|p| format!("{} ({:.2}, {:.2})", p.id, p.center[0], p.center[1]))
+        .collect();
+    let balls: Vec<String> = scene
+        .balls
+        .iter()
+        .map(|b| format!("{} ({:.3}, {:.3})", b.id, b.x, b.y))
+        .collect();
+    format!(
+        "Billiards table {:.3} m wide (x) by {:.3} m long (y), origin at the bottom-left corner. Pockets: {}.\n\
+         The cue strikes ball {:?}. Balls at rest (id, x, y in metres): {}.\n\
+         The action is one shot: speed V0 (m/s), aim angle phi (degrees from +x), elevation theta, tip offsets a, b.",
+        t.w,
+        t.l,
+        pockets.join(", "),
+        scene.cue_ball,
+        balls.join(", ")
+    )
+}
+
+fn synthesise(a: SynthArgs) -> CliResult {
+    use super::suggest_labels::llm_error;
+    use annotrace::llm::LlmClient;
+    use annotrace::reward::synth::{SynthRequest, prompt, synthesise as run_synthesis};
+
+    let env: Env = a.env.parse().map_err(CliError::input)?;
+    let lib = load_library(&library_dir(a.library.as_deref(), env))?;
+    if lib.env != env {
+        return Err(CliError::input(anyhow::anyhow!(
+            "library {} is for {}, not {env}",
+            lib.name,
+            lib.env
+        )));
+    }
+    let pool_env = PoolEnv::default();
+    let mut probe_trace = None;
+    let mut annotations = Vec::new();
+    let mut image = None;
+    let (schema, scene_text) = if env == Env::Pooltool {
+        let scene = pool_scene(&a.scene, &pool_env)?;
+        let workers = pool()?;
+        let mut schema = probe_schema(&lib, &workers);
+        // A probe shot of the scene: programs must run on it (OBJECT_ID, NEARBY_AT objects exist).
+        let shot = Shot {
+            v0: 2.0,
+            phi: 90.0,
+            theta: 0.0,
+            a: 0.0,
+            b: 0.0,
+        };
+        let trace = pool_env
+            .simulate(&scene, &shot)
+            .map_err(|e| CliError::failed(anyhow::anyhow!("simulating the probe shot: {e}")))?;
+        let (anns, _) = annotate(&workers, &lib.detectors, std::slice::from_ref(&trace));
+        schema.learn_keys(&anns);
+        if a.image {
+            image = Some(
+                pool_env
+                    .render(&trace, 0.0)
+                    .map_err(|e| CliError::failed(anyhow::anyhow!("rendering the scene: {e}")))?,
+            );
+        }
+        annotations = anns;
+        let text = scene_summary(&scene, &pool_env);
+        probe_trace = Some(trace);
+        (schema, text)
+    } else {
+        (
+            Schema::from_library(&lib),
+            format!(
+                "{env} task {} (no scene summary: annotrace simulates only billiards scenes here)",
+                a.scene
+            ),
+        )
+    };
+    let req = SynthRequest {
+        goal: &a.goal,
+        schema: &schema,
+        scene_summary: scene_text,
+        image,
+        probe: probe_trace.as_ref().map(|t| (t, annotations.as_slice())),
+        max_repairs: a.max_repairs,
+        seed: a.seed,
+        temperature: a.temperature,
+    };
+    if a.dry_run {
+        println!("{}", prompt(&req));
+        return Ok(0);
+    }
+    let config = a.llm.config(a.seed)?;
+    let record = a.run.as_ref().map(RunDir::new);
+    let client = LlmClient::new(config, record.as_ref()).map_err(llm_error)?;
+    let result = run_synthesis(&client, &req);
+    client.flush().map_err(CliError::failed)?;
+    let result = result.map_err(llm_error)?;
+    for (i, at) in result.attempts.iter().enumerate() {
+        eprintln!(
+            "attempt {} ({}, call {}): {}",
+            i + 1,
+            at.purpose,
+            at.call_id,
+            at.error.as_deref().unwrap_or("accepted")
+        );
+    }
+    match result.program {
+        Some(p) => {
+            if let Some(out) = &a.out {
+                annotrace::store::write_atomic(out, format!("{}\n", p.source.trim()).as_bytes())
+                    .map_err(|e| CliError::failed(anyhow::anyhow!("{}: {e}", out.display())))?;
+            }
+            println!("{}", p.source.trim());
+            Ok(0)
+        }
+        None => Err(CliError::failed(anyhow::anyhow!(
+            "no valid program after {} attempt(s); the last error: {}",
+            result.attempts.len(),
+            result
+                .attempts
+                .last()
+                .and_then(|x| x.error.clone())
+                .unwrap_or_default()
+        ))),
+    }
 }

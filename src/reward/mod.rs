@@ -11,7 +11,7 @@
 //! DSL reference's reading: "a occurs after b"); see `docs/reward.md`.
 //!
 //! **Owns:** the DSL, its checker and interpreter, goal files and verification rules ([`goals`],
-//! [`verify`]). **Does not:** run detectors (`detect/`), simulate (`envs/`), optimise (`optimise/`).
+//! [`verify`]), synthesis from goal sentences with repair ([`synth`], through `llm::LlmClient`). **Does not:** run detectors (`detect/`), simulate (`envs/`), optimise (`optimise/`).
 
 pub mod annotate;
 pub mod check;
@@ -23,6 +23,7 @@ pub mod lexer;
 pub mod parser;
 pub mod program;
 pub mod schema;
+pub mod synth;
 pub mod verify;
 
 pub use check::compile;

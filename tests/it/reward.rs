@@ -860,3 +860,168 @@ fn cli_eval_prints_clauses_and_score() {
         .stdout_has("success: false")
         .stdout_has("score: 0.");
 }
+
+mod synthesis {
+    use annotrace::llm::{LlmClient, LlmConfig, read_calls};
+    use annotrace::reward::synth::{SynthRequest, synthesise};
+    use annotrace::store::RunDir;
+
+    use super::*;
+    use crate::common::chat_server::{ChatServer, Reply};
+
+    fn dsl(p: &str) -> String {
+        format!("<think>Plan the steps.</think>\n```dsl\n{p}\n```")
+    }
+
+    #[test]
+    fn repairs_parse_check_and_execution_errors_with_the_interpreter_message() {
+        let server = ChatServer::start(vec![
+            Reply::chat(&dsl(r#"AND(PATTERN("cue strike"), CUE_HIT("8")"#)),
+            Reply::chat(&dsl(r#"AND(PATTERN("jump shot"), CUE_HIT("8"))"#)),
+            Reply::chat(&dsl(
+                r#"AND(PATTERN("cue strike"), CUE_HIT(OBJECT_ID("pink", "ball")))"#,
+            )),
+            Reply::chat(&dsl(r#"AND(PATTERN("cue strike"), CUE_HIT("8"))"#)),
+        ]);
+        let client = LlmClient::new(LlmConfig::new(server.url(), "m"), None).unwrap();
+        let (tr, anns) = basic();
+        let sch = schema();
+        let req = SynthRequest {
+            goal: "Hit the eight ball first.",
+            schema: &sch,
+            scene_summary: "nine balls".into(),
+            image: None,
+            probe: Some((&tr, &anns)),
+            max_repairs: 3,
+            seed: 5,
+            temperature: None,
+        };
+        let out = synthesise(&client, &req).unwrap();
+        let p = out.program.expect("the fourth answer is valid");
+        assert_eq!(p.source, r#"AND(PATTERN("cue strike"), CUE_HIT("8"))"#);
+        let purposes: Vec<&str> = out.attempts.iter().map(|a| a.purpose.as_str()).collect();
+        assert_eq!(
+            purposes,
+            [
+                "reward_synthesis",
+                "reward_repair",
+                "reward_repair",
+                "reward_repair"
+            ]
+        );
+        let seen = server.seen();
+        assert_eq!(seen.len(), 4);
+        let first = seen[0].last_message();
+        assert!(first.contains("Goal: Hit the eight ball first."));
+        assert!(first.contains("\"high angle collision\"") && first.contains("AFTER(Y, X)"));
+        assert!(
+            seen[1].last_message().contains("syntax error"),
+            "{}",
+            seen[1].last_message()
+        );
+        assert!(seen[2].last_message().contains("unknown_label error"));
+        assert!(seen[3].last_message().contains("runtime error: OBJECT_ID"));
+        // The conversation grows: the model sees its own earlier answer before each repair request.
+        assert_eq!(
+            seen[3].body["messages"].as_array().unwrap().len(),
+            2 + 2 * 3
+        );
+    }
+
+    #[test]
+    fn gives_up_after_the_retry_limit() {
+        let server = ChatServer::start(vec![
+            Reply::chat("I would rather not."),
+            Reply::chat(&dsl("PATTERN(\"nope\")")),
+        ]);
+        let client = LlmClient::new(LlmConfig::new(server.url(), "m"), None).unwrap();
+        let sch = schema();
+        let req = SynthRequest {
+            goal: "g",
+            schema: &sch,
+            scene_summary: String::new(),
+            image: None,
+            probe: None,
+            max_repairs: 1,
+            seed: 0,
+            temperature: Some(0.2),
+        };
+        let out = synthesise(&client, &req).unwrap();
+        assert!(out.program.is_none());
+        assert_eq!(out.attempts.len(), 2);
+        assert!(
+            out.attempts[0]
+                .error
+                .as_deref()
+                .unwrap()
+                .contains("no program")
+        );
+        assert!(
+            out.attempts[1]
+                .error
+                .as_deref()
+                .unwrap()
+                .contains("unknown_label")
+        );
+        assert_eq!(server.remaining(), 0);
+    }
+
+    #[test]
+    fn cli_synthesise_records_every_call() {
+        let server = ChatServer::start(vec![
+            Reply::chat(&dsl(
+                r#"AND(PATTERN("cushion rebound", ball="cue"), AFTER(CUE_HIT("8"), "cushion rebound"), PATTERN("ball pocketed", ball="8", hole="rt"))"#,
+            )),
+            Reply::chat(&dsl(
+                r#"AND(PATTERN("cushion rebound", ball="cue"), AFTER(CUE_HIT("8"), "cushion rebound"), PATTERN("ball pocketed", ball="8", pocket="rt"))"#,
+            )),
+        ]);
+        let t = TestRun::new();
+        let mut c = t.cmd();
+        for k in [
+            "ANNOTRACE_LLM_BASE_URL",
+            "ANNOTRACE_LLM_MODEL",
+            "ANNOTRACE_LLM_API_KEY",
+            "ANNOTRACE_PROMPTS",
+        ] {
+            c.env_remove(k);
+        }
+        let out = c
+            .env("ANNOTRACE_LLM_BASE_URL", server.url())
+            .env("ANNOTRACE_LLM_MODEL", "m")
+            .args([
+                "reward",
+                "synthesise",
+                "Bounce the cue ball off a cushion, then pot the eight ball in the top-right pocket.",
+                "--scene",
+                "1000:3",
+                "--run",
+                "run",
+                "--out",
+                "prog.dsl",
+                "--image",
+            ])
+            .output()
+            .unwrap();
+        let ran: crate::common::Ran = out.into();
+        ran.ok()
+            .stdout_has("pocket=\"rt\"")
+            .stderr_has("unknown_parameter");
+        assert!(
+            std::fs::read_to_string(t.path("prog.dsl"))
+                .unwrap()
+                .contains("pocket=\"rt\"")
+        );
+        let calls = read_calls(&RunDir::new(t.path("run"))).unwrap();
+        let purposes: Vec<&str> = calls.iter().map(|c| c.purpose.as_str()).collect();
+        assert_eq!(purposes, ["reward_synthesis", "reward_repair"]);
+        let first = &server.seen()[0];
+        let text = first.body["messages"][1].to_string();
+        assert!(
+            text.contains("image_url"),
+            "the scene image is attached: {}",
+            &text[..200.min(text.len())]
+        );
+        assert!(text.contains("Balls at rest") && text.contains("top-right pocket"));
+    }
+}
