@@ -6,6 +6,7 @@ mod annotate;
 mod evolve;
 mod export;
 mod import;
+mod iphyre;
 mod llm;
 mod llm;
 mod optimise;
