@@ -379,6 +379,11 @@ impl WorkerPool {
                 pending.retain(|&d| out[d].status == CandidateStatus::Ok);
                 continue;
             }
+            if ready.is_empty() {
+                // Every pending detector failed to compile: no run request (the worker would send no
+                // reply to an empty one, and waiting for it killed the worker at the deadline).
+                break;
+            }
             let Some(worker) = slot.as_mut() else { break };
             let ids: Vec<&str> = ready.iter().map(|&d| detectors[d].id.as_str()).collect();
             let mut started = Instant::now();
@@ -584,5 +589,41 @@ fn error_of(e: &Value, limits: &SandboxLimits) -> DetectorError {
         other => DetectorError::Crashed {
             message: format!("worker error {other}: {}", s("message")),
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testutil::synthetic_trace;
+    use crate::trace::Env;
+
+    #[test]
+    fn a_batch_whose_only_detector_fails_to_compile_leaves_the_worker_usable() {
+        let pool = WorkerPool::new(SandboxLimits {
+            workers: 1,
+            call_timeout: std::time::Duration::from_secs(5),
+            ..SandboxLimits::default()
+        })
+        .unwrap();
+        let traces = vec![synthetic_trace(Env::Pooltool, 0, 5, 2)];
+        let bad = Detector::new(Env::Pooltool, "x", "def find_pattern(trace:\n", "t");
+        let good = Detector::new(
+            Env::Pooltool,
+            "x",
+            "def find_pattern(trace):\n    return []\n",
+            "t",
+        );
+        let r = pool.run(std::slice::from_ref(&bad), &traces);
+        assert_eq!(r.results[0].status.as_str(), "syntax");
+        let r = pool.run(std::slice::from_ref(&good), &traces);
+        assert_eq!(
+            r.results[0].status,
+            CandidateStatus::Ok,
+            "{:?}",
+            r.results[0]
+        );
+        // The worker was not killed waiting for a reply to an empty run request.
+        assert_eq!(r.stats.restarts, 0);
     }
 }
