@@ -567,3 +567,157 @@ impl LabelSearch<'_> {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::detect::{SandboxLimits, WorkerPool};
+    use crate::fitness::{DistanceMatrix, LibraryView};
+    use crate::search::evaluator::EvalSettings;
+    use crate::search::skeleton::skeleton;
+    use crate::testutil::synthetic_trace;
+    use crate::trace::{Env, Trace};
+
+    /// Proposes a broken child first, then repairs it into a working one; counts its calls.
+    struct Scripted {
+        good: String,
+        calls: Mutex<Vec<String>>,
+    }
+
+    impl Proposer for Scripted {
+        fn name(&self) -> &str {
+            "scripted"
+        }
+        fn propose(&self, req: &ProposalRequest) -> Result<Proposal, ProposeError> {
+            self.calls
+                .lock()
+                .unwrap()
+                .push(format!("propose {}", req.step));
+            Ok(Proposal {
+                code: "def find_pattern(trace:\n    return []\n".into(),
+                tokens_in: 10,
+                tokens_out: 5,
+                calls: 1,
+            })
+        }
+        fn repair(
+            &self,
+            _req: &ProposalRequest,
+            _code: &str,
+            error: &DetectorError,
+            attempt: u32,
+        ) -> Result<Option<Proposal>, ProposeError> {
+            self.calls
+                .lock()
+                .unwrap()
+                .push(format!("repair {attempt} {}", error.category()));
+            Ok(Some(Proposal {
+                code: self.good.clone(),
+                tokens_in: 3,
+                tokens_out: 2,
+                calls: 1,
+            }))
+        }
+    }
+
+    fn traces() -> Vec<Trace> {
+        // Synthetic traces whose balls drift at 1 m/s, trace i moving 0.2·i m further after step 15.
+        (0..5)
+            .map(|i| {
+                let mut t = synthetic_trace(Env::Pooltool, i, 30, 2);
+                for (s, ts) in t.timesteps.iter_mut().enumerate() {
+                    for o in &mut ts.objects {
+                        if let crate::trace::Body::Pool(b) = &mut o.body {
+                            b.position[0] += (i as f64) * 0.2 * (s as f64) / 30.0
+                                * if s > 15 { 1.0 } else { 0.0 };
+                        }
+                    }
+                }
+                t
+            })
+            .collect()
+    }
+
+    #[test]
+    fn failed_children_are_repaired_and_rounds_replay_from_a_checkpoint() {
+        let traces = traces();
+        let pool = WorkerPool::new(SandboxLimits {
+            workers: 1,
+            ..SandboxLimits::default()
+        })
+        .unwrap();
+        let dx = DistanceMatrix::compute(&traces, 16);
+        let library = LibraryView::default();
+        let evaluator = Evaluator {
+            pool: &pool,
+            env: Env::Pooltool,
+            label: "moving".into(),
+            traces: &traces,
+            dx: &dx,
+            library: &library,
+            settings: EvalSettings {
+                probe: 2,
+                time_penalty: false,
+                ..EvalSettings::default()
+            },
+        };
+        let seed = skeleton(Env::Pooltool, "moving");
+        let good = seed.replace("THRESHOLD = 0.05", "THRESHOLD = 0.5");
+        let proposer = Scripted {
+            good: good.clone(),
+            calls: Mutex::new(Vec::new()),
+        };
+        let config = SearchConfig {
+            budget: 2,
+            parallel: 1,
+            ..SearchConfig::default()
+        };
+        let checkpoint = MemoryCheckpoint::default();
+        let search = LabelSearch {
+            config: &config,
+            label_index: 0,
+            evaluator: &evaluator,
+            proposer: &proposer,
+            seeds: vec![seed],
+            library_labels: Vec::new(),
+            checkpoint: &checkpoint,
+        };
+        let out = search.run().unwrap();
+        assert_eq!(out.records.len(), 3);
+        let first = &out.records[1];
+        assert_eq!(first.repairs, 1, "{first:?}");
+        assert_eq!(first.code, good);
+        assert!(
+            matches!(
+                first.status.as_str(),
+                "ok" | "degenerate" | "same_behaviour"
+            ),
+            "{first:?}"
+        );
+        assert_eq!((first.tokens_in, first.tokens_out, first.calls), (13, 7, 2));
+        // The second child repairs to the same code: a duplicate, not evaluated again.
+        assert_eq!(out.records[2].status, "duplicate");
+        assert_eq!(
+            *proposer.calls.lock().unwrap(),
+            vec![
+                "propose 0",
+                "repair 1 syntax",
+                "propose 1",
+                "repair 1 syntax"
+            ]
+        );
+        assert_eq!(out.best_by_step.len(), 2);
+        // A second run over the same checkpoint replays every round: the proposer is not asked again.
+        let again = Scripted {
+            good,
+            calls: Mutex::new(Vec::new()),
+        };
+        let search = LabelSearch {
+            proposer: &again,
+            ..search
+        };
+        let replay = search.run().unwrap();
+        assert_eq!(replay.records, out.records);
+        assert!(again.calls.lock().unwrap().is_empty());
+    }
+}
