@@ -301,12 +301,14 @@ fn a_recorded_run_replays_without_the_server_and_a_strict_miss_is_an_error() {
         let c = ask(&client, "question one", 1).unwrap();
         (a, b, c)
     }; // the server is gone from here on
-    let mut c = LlmConfig::default();
-    c.model = "test-model".into();
-    c.replay = Some(ReplayConfig {
-        run: recorded.root().to_path_buf(),
-        strict: true,
-    });
+    let mut c = LlmConfig {
+        model: "test-model".into(),
+        replay: Some(ReplayConfig {
+            run: recorded.root().to_path_buf(),
+            strict: true,
+        }),
+        ..LlmConfig::default()
+    };
     let replayed_into = RunDir::new(t.path("replayed"));
     let client = LlmClient::new(c.clone(), Some(&replayed_into)).unwrap();
     let a = ask(&client, "question one", 1).unwrap();
