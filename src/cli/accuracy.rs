@@ -14,8 +14,8 @@ pub struct Args {
     /// Library folder; default: data/libraries/<env>.
     #[arg(long)]
     library: Option<PathBuf>,
-    /// Environment (only pooltool has a simulator so far).
-    #[arg(long, default_value = "pooltool", value_parser = ["pooltool"])]
+    /// Environment of the run's traces to score.
+    #[arg(long, default_value = "pooltool", value_parser = ["pooltool", "iphyre", "phyre"])]
     env: String,
     /// Time tolerance (s) around a detection's span.
     #[arg(long, default_value_t = 0.05)]

@@ -8,6 +8,18 @@
 //! `physics_sliding_rolling` (a rolling episode starts and a sliding one ends there); `spinning ball` ↔
 //! `physics_rolling_spinning`.
 //!
+//! For I-PHYRE ([`iphyre_truth`]): `collision` ↔ `contact_begin`, a pair's contact that begins again within
+//! `merge_s` of its last `contact_end` being the same collision (rapier reports a ball skidding over a
+//! block's joint, or resting on two blocks, as a chatter of end/begin pairs); `object removal` ↔
+//! `action_applied` with `effective: true` (the click removed `eliminated_object`).
+//!
+//! For PHYRE ([`phyre_truth`]): `moving object hits stationary object` ↔ `contact_begin` (merged the
+//! same way) of a pair of which, in the last frame before the contact, one body moves and the other is
+//! at rest (speeds from the frames' recorded velocities: moving ≥ [`PHYRE_MOVING`], at rest ≤
+//! [`PHYRE_AT_REST`] px/s, or a static body such as a wall). Both bodies are named.
+//!
+//! [`truth`] and [`grounded`] pick the mapping of an environment.
+//!
 //! A detection matches a truth event when it has the same label and trace, names every ball the event
 //! involves among its objects, and its time span `[t_start − tolerance, t_end + tolerance]` holds the
 //! event's time. Matching is one-to-one, greedy in time order, each event taking the matching detection
@@ -20,7 +32,7 @@ use serde::Serialize;
 
 use super::annotation::Annotation;
 use super::detector::normalise_label;
-use crate::trace::Trace;
+use crate::trace::{Env, Trace};
 
 /// One ground-truth occurrence of a label.
 #[derive(Clone, Debug, PartialEq)]
@@ -98,6 +110,139 @@ pub const POOLTOOL_GROUNDED: &[&str] = &[
     "sliding ball",
     "spinning ball",
 ];
+
+/// The event-grounded I-PHYRE labels.
+pub const IPHYRE_GROUNDED: &[&str] = &["collision", "object removal"];
+
+/// The event-grounded PHYRE labels.
+pub const PHYRE_GROUNDED: &[&str] = &["moving object hits stationary object"];
+
+/// PHYRE: a body at least this fast (px/s) in the frame before a contact is moving.
+pub const PHYRE_MOVING: f64 = 20.0;
+
+/// PHYRE: a body at most this fast (px/s) in the frame before a contact is at rest.
+pub const PHYRE_AT_REST: f64 = 5.0;
+
+/// The event-grounded labels of `env`, in the paper's order.
+pub fn grounded(env: Env) -> &'static [&'static str] {
+    match env {
+        Env::Pooltool => POOLTOOL_GROUNDED,
+        Env::Iphyre => IPHYRE_GROUNDED,
+        Env::Phyre => PHYRE_GROUNDED,
+    }
+}
+
+/// The ground truth of a trace of `env`, from its event log (and, for PHYRE, the frame before each
+/// contact).
+pub fn truth(env: Env, trace: &Trace, merge_s: f64) -> Vec<TruthEvent> {
+    match env {
+        Env::Pooltool => pooltool_truth(trace, merge_s),
+        Env::Iphyre => iphyre_truth(trace, merge_s),
+        Env::Phyre => phyre_truth(trace, merge_s),
+    }
+}
+
+/// The merged contacts of a trace: `(t, pair)` of each `contact_begin` that does not follow the same
+/// pair's last `contact_end` (or, without one, its last `contact_begin`) within `merge_s`.
+fn merged_contacts(trace: &Trace, merge_s: f64) -> Vec<(f64, Vec<String>)> {
+    let mut events: Vec<_> = trace
+        .events
+        .iter()
+        .filter(|e| e.t.is_some() && (e.kind == "contact_begin" || e.kind == "contact_end"))
+        .collect();
+    // Stable: events of one time keep their order (an end before the begin that follows it).
+    events.sort_by(|a, b| a.t.partial_cmp(&b.t).unwrap_or(std::cmp::Ordering::Equal));
+    let mut last: BTreeMap<Vec<String>, f64> = BTreeMap::new();
+    let mut out = Vec::new();
+    for e in events {
+        let t = e.t.unwrap_or(0.0);
+        let Some(p) = pair(e.payload.as_ref()) else {
+            continue;
+        };
+        if e.kind == "contact_end" {
+            last.insert(p, t);
+            continue;
+        }
+        let chatter = last.get(&p).is_some_and(|&l| t - l <= merge_s);
+        last.insert(p.clone(), t);
+        if !chatter {
+            out.push((t, p));
+        }
+    }
+    out
+}
+
+/// The ground truth of an I-PHYRE trace: merged `contact_begin` events (collision) and effective
+/// `action_applied` events (object removal).
+pub fn iphyre_truth(trace: &Trace, merge_s: f64) -> Vec<TruthEvent> {
+    let mut out: Vec<TruthEvent> = merged_contacts(trace, merge_s)
+        .into_iter()
+        .map(|(t, balls)| TruthEvent {
+            label: "collision",
+            t,
+            balls,
+        })
+        .collect();
+    for e in &trace.events {
+        let (Some(t), Some(p)) = (e.t, e.payload.as_ref()) else {
+            continue;
+        };
+        if e.kind != "action_applied" || p.get("effective") != Some(&serde_json::Value::Bool(true))
+        {
+            continue;
+        }
+        let Some(obj) = p.get("eliminated_object") else {
+            continue;
+        };
+        let id = obj
+            .as_str()
+            .map(str::to_string)
+            .unwrap_or_else(|| obj.to_string());
+        out.push(TruthEvent {
+            label: "object removal",
+            t,
+            balls: vec![id],
+        });
+    }
+    out.sort_by(|a, b| a.t.partial_cmp(&b.t).unwrap_or(std::cmp::Ordering::Equal));
+    out
+}
+
+/// Speeds (px/s) of the PHYRE bodies in the last frame at or before `t`, by id.
+fn phyre_speeds(trace: &Trace, t: f64) -> BTreeMap<String, f64> {
+    let k = trace.timesteps.partition_point(|s| s.t <= t);
+    let mut out = BTreeMap::new();
+    if let Some(step) = trace.timesteps.get(k.saturating_sub(1)) {
+        for o in &step.objects {
+            if let crate::trace::Body::Phyre(p) = &o.body {
+                out.insert(p.object_index.to_string(), p.vx.hypot(p.vy));
+            }
+        }
+    }
+    out
+}
+
+/// The ground truth of a PHYRE trace: merged `contact_begin` events where one body moves and the other
+/// is at rest in the frame before the contact.
+pub fn phyre_truth(trace: &Trace, merge_s: f64) -> Vec<TruthEvent> {
+    merged_contacts(trace, merge_s)
+        .into_iter()
+        .filter_map(|(t, balls)| {
+            // The frame strictly before the contact step (the contact frame already shows the impact).
+            let speeds = phyre_speeds(trace, t - 1e-9);
+            let v: Vec<f64> = balls
+                .iter()
+                .map(|b| speeds.get(b).copied().unwrap_or(0.0))
+                .collect();
+            let (lo, hi) = (v[0].min(v[1]), v[0].max(v[1]));
+            (hi >= PHYRE_MOVING && lo <= PHYRE_AT_REST).then_some(TruthEvent {
+                label: "moving object hits stationary object",
+                t,
+                balls,
+            })
+        })
+        .collect()
+}
 
 fn payload_ball(p: Option<&serde_json::Value>) -> Option<String> {
     p.and_then(|p| p.get("ball")).map(|b| match b {
@@ -289,7 +434,7 @@ mod tests {
 
     use super::*;
     use crate::detect::DetectorId;
-    use crate::trace::{Env, Event, JsonMap};
+    use crate::trace::{Event, JsonMap};
 
     fn ev(kind: &str, t: f64, payload: serde_json::Value) -> Event {
         Event {

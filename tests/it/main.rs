@@ -7,7 +7,7 @@ mod evolve;
 mod export;
 mod import;
 mod iphyre;
-mod llm;
+mod libraries;
 mod llm;
 mod optimise;
 mod phyre;

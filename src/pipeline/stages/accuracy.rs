@@ -1,9 +1,7 @@
 //! `accuracy`: runs a detector library over the run's traces and scores its event-grounded labels
 //! against the simulator's events (precision, recall, F1 per label; `detect::accuracy` defines the
 //! matching), writing the `accuracy` table.
-//!
-//! Billiards only for now: PHYRE and I-PHYRE have no simulator in annotrace yet, so their contact
-//! events cannot be produced and the stage refuses those environments.
+//! Every environment: billiards (pooltool events), I-PHYRE and PHYRE (contact and action events).
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -16,9 +14,7 @@ use super::annotate::{
     DetectorSetup, SANDBOX_PARAMS, annotations_of, read_annotations, status_counts, write,
 };
 use super::trace_files::{read_traces, trace_file_sets};
-use crate::detect::accuracy::{
-    LabelScore, POOLTOOL_GROUNDED, markdown, pooltool_truth, score_trace,
-};
+use crate::detect::accuracy::{LabelScore, grounded, markdown, score_trace, truth};
 use crate::detect::{Annotation, WorkerPool};
 use crate::pipeline::params::{ParamSpec, ParamType};
 use crate::pipeline::registry::{BuildError, StageKind};
@@ -42,7 +38,8 @@ const PARAMS: &[ParamSpec] = &[
         "merge",
         ParamType::Float,
         "0.05",
-        "contacts of the same pair (or ball and cushion) closer than this (s) are one event",
+        "contacts of the same pair (or ball and cushion) closer than this (s) are one event (PHYRE, \
+         I-PHYRE: a contact that begins again within this long after it ended)",
     ),
     ParamSpec::optional(
         "hide_events",
@@ -65,11 +62,13 @@ pub static KIND: StageKind = StageKind {
     name: "accuracy",
     summary: "score a library's event-grounded labels against simulator events (P/R/F1)",
     doc: "Runs a detector library over every trace of `env` in the run (like annotate, without writing \
-          annotations) and scores the event-grounded labels against the simulator's event log: cue strike, \
+          annotations) and scores the event-grounded labels against the simulator's event log. Pooltool: cue strike, \
           ball collision (same-pair contacts closer than `merge` merged), cushion rebound, ball pocketed, \
-          rolling/sliding ball (sliding-to-rolling transitions) and spinning ball. A detection matches an \
-          event of its label whose balls it all names and falls in its time span ± `tolerance`. \
-          Writes the accuracy table (one row per label). Billiards only until PHYRE/I-PHYRE simulators exist.",
+          rolling/sliding ball (sliding-to-rolling transitions) and spinning ball; I-PHYRE: collision \
+          (contact_begin, chatter merged) and object removal (effective action_applied); PHYRE: moving \
+          object hits stationary object (contact_begin of a moving and a resting body). A detection \
+          matches an event of its label whose objects it all names and falls in its time span ± \
+          `tolerance`. Writes the accuracy table (one row per label).",
     writes: "accuracy",
     params: PARAMS,
     build,
@@ -87,15 +86,6 @@ pub struct AccuracyStage {
 
 fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
     let setup = DetectorSetup::from_params(def, spec)?;
-    if setup.env != Env::Pooltool {
-        return Err(BuildError::param(
-            "env",
-            format!(
-                "accuracy needs simulator events; only pooltool has a simulator so far, not {}",
-                setup.env
-            ),
-        ));
-    }
     let num = |k: &'static str| -> Result<f64, BuildError> {
         let v = def.params[k].as_f64().unwrap_or(0.05);
         if v >= 0.0 && v.is_finite() {
@@ -213,9 +203,9 @@ impl Stage for AccuracyStage {
                     .iter()
                     .filter(|a| a.trace_id == trace.trace_id)
                     .collect();
-                let truth = pooltool_truth(trace, self.merge);
+                let truth = truth(self.setup.env, trace, self.merge);
                 score_trace(
-                    POOLTOOL_GROUNDED,
+                    grounded(self.setup.env),
                     &truth,
                     &mine,
                     self.tolerance,
@@ -225,7 +215,7 @@ impl Stage for AccuracyStage {
             n_traces += traces.len();
             ctx.progress().advance(ctx.stage_id(), 1);
         }
-        let ordered: Vec<LabelScore> = POOLTOOL_GROUNDED
+        let ordered: Vec<LabelScore> = grounded(self.setup.env)
             .iter()
             .filter_map(|l| scores.get(*l).cloned())
             .collect();

@@ -1,0 +1,62 @@
+"""chain movement: motion passes along a chain of objects, each set moving by the one before.
+
+A transfer is a collision (contact begin, chatter merged) in which a striker moving at least MOVING_V
+px/s hits a dynamic object at rest (at most REST_V px/s in the frame before) that moves at least
+MOVING_V within START_S after. Transfers link into a chain when the object set moving by one strikes
+the next within GAP_S. A chain of at least two transfers (three objects) is one pattern, from the first
+contact to the last; roles name each object's place in the chain.
+"""
+
+MOVING_V = 15.0
+REST_V = 2.0
+START_S = 0.2
+GAP_S = 2.0
+
+
+def find_pattern(trace):
+    if not trace.get("timesteps"):
+        return []
+    idx, ts = _clock(trace)
+    kin = _kin(trace)
+    transfers = []
+    for g in _contacts(trace):
+        c = _at(ts, g["t0"])
+        pre = max(c - 1, 0)
+        for hitter, hit in (g["pair"], g["pair"][::-1]):
+            if hitter not in kin or hit not in kin or not kin[hit]["o"][0].get("dynamic"):
+                continue
+            if _speed_at(kin, hitter, pre) < MOVING_V or _speed_at(kin, hit, pre) > REST_V:
+                continue
+            k, moved = c, False
+            while k < len(ts) and ts[k] <= ts[c] + START_S:
+                if _speed_at(kin, hit, k) >= MOVING_V:
+                    moved = True
+                    break
+                k += 1
+            if moved:
+                transfers.append((g["t0"], hitter, hit))
+    transfers.sort()
+    used = set()
+    out = []
+    for i, first in enumerate(transfers):
+        if i in used:
+            continue
+        chain = [first]
+        used.add(i)
+        for j in range(i + 1, len(transfers)):
+            t, hitter, hit = transfers[j]
+            if j not in used and hitter == chain[-1][2] and 0.0 < t - chain[-1][0] <= GAP_S \
+                    and hit not in [c[1] for c in chain]:
+                chain.append(transfers[j])
+                used.add(j)
+        if len(chain) < 2:
+            continue
+        s, e, a, b = _span(idx, ts, chain[0][0], chain[-1][0])
+        det = {chain[0][1]: _detail(trace, a, b, chain[0][1], "initiator", order=0)}
+        for n, (_, _, hit) in enumerate(chain):
+            role = "last moved" if n == len(chain) - 1 else "link"
+            det[hit] = _detail(trace, a, b, hit, role, order=n + 1)
+        out.append({"label": "chain movement", "start_timestep": s, "end_timestep": e,
+                    "parameters": {"object_details": det, "links": len(chain),
+                                   "times": [round(c[0], 4) for c in chain]}})
+    return out
