@@ -1,6 +1,8 @@
 //! `annotrace render`: draws a trace of a run as a PNG (one instant, or a strip of frames): billiards
 //! traces on the table, I-PHYRE traces on their 600×600 screen (`--indices` numbers the eliminable
-//! blocks as DeepPHY shows them). `--env iphyre --game NAME` draws a game's initial scene without a run.
+//! blocks as DeepPHY shows them), PHYRE traces on their 256×256 scene in PHYRE's palette (`--grid` adds
+//! DeepPHY's numbered 8×8 grid). `--env iphyre --game NAME` and `--task ID` (PHYRE) draw a game's or a
+//! task's initial scene without a run.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -9,6 +11,8 @@ use annotrace::envs::iphyre::Games as IphyreGames;
 use annotrace::envs::iphyre::render::{
     self as iphyre_render, RenderOptions as IphyreRenderOptions, render_scene_png,
 };
+use annotrace::envs::phyre::TaskSet as PhyreTasks;
+use annotrace::envs::phyre::render::{self as phyre_render, RenderOptions as PhyreRenderOptions};
 use annotrace::envs::pool::PoolConfig;
 use annotrace::envs::pool::render::{RenderOptions, render_png, render_strip_png, strip_times};
 use annotrace::store::{AtomicFile, ReadTraceError, RunDir, read_trace};
@@ -20,10 +24,10 @@ use super::{CliError, CliResult};
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Run folder.
-    #[arg(long, required_unless_present = "game")]
+    #[arg(long, required_unless_present_any = ["game", "task"])]
     run: Option<PathBuf>,
     /// Trace id.
-    #[arg(long, required_unless_present = "game")]
+    #[arg(long, required_unless_present_any = ["game", "task"])]
     trace: Option<String>,
     /// With --game: the environment whose game to draw (only iphyre has built-in games).
     #[arg(long, value_parser = ["iphyre"], requires = "game")]
@@ -34,6 +38,12 @@ pub struct Args {
     /// I-PHYRE: number the eliminable blocks 0…k−1 (the action indices DeepPHY shows a VLM).
     #[arg(long)]
     indices: bool,
+    /// PHYRE: draw this task's initial scene (no run needed), e.g. `00004:012`.
+    #[arg(long, conflicts_with_all = ["run", "trace", "frames", "t", "game"])]
+    task: Option<String>,
+    /// PHYRE: draw DeepPHY's 8×8 grid with cells numbered 1–64 from the top-left.
+    #[arg(long)]
+    grid: bool,
     /// Time to draw (s); the nearest timestep is shown. Default: 0 (the initial table).
     #[arg(long, conflicts_with = "frames")]
     t: Option<f64>,
@@ -81,6 +91,16 @@ pub fn run(args: Args) -> CliResult {
         let png = render_scene_png(game, &opts).map_err(CliError::input)?;
         return write_png(&args.out, &png);
     }
+    let phyre_opts = PhyreRenderOptions {
+        size: args.size,
+        grid: args.grid,
+    };
+    if let Some(id) = &args.task {
+        let tasks = PhyreTasks::default_tasks().map_err(CliError::failed)?;
+        let task = tasks.get(id).map_err(CliError::input)?;
+        let png = phyre_render::render_task_png(&task, &phyre_opts).map_err(CliError::input)?;
+        return write_png(&args.out, &png);
+    }
     let (Some(run_dir), Some(trace_id)) = (&args.run, &args.trace) else {
         return Err(CliError::input(anyhow::anyhow!(
             "--run and --trace are needed (or --env iphyre --game NAME for a game's initial scene)"
@@ -108,6 +128,23 @@ pub fn run(args: Args) -> CliResult {
                 iphyre_render::render_strip_png(&trace, game, &strip_times(&trace, k), &opts)
             }
             None => iphyre_render::render_png(&trace, game, args.t.unwrap_or(0.0), &opts),
+        }
+        .map_err(CliError::input)?;
+        return write_png(&args.out, &png);
+    }
+    if trace.env == Env::Phyre {
+        let tasks = PhyreTasks::default_tasks().map_err(CliError::failed)?;
+        let task = tasks.get(&trace.task_id).map_err(|e| {
+            CliError::input(anyhow::anyhow!(
+                "trace {}: cannot draw its scene: {e}",
+                trace.trace_id
+            ))
+        })?;
+        let png = match args.frames {
+            Some(k) => {
+                phyre_render::render_strip_png(&trace, &task, &strip_times(&trace, k), &phyre_opts)
+            }
+            None => phyre_render::render_png(&trace, &task, args.t.unwrap_or(0.0), &phyre_opts),
         }
         .map_err(CliError::input)?;
         return write_png(&args.out, &png);

@@ -21,7 +21,7 @@ use super::{CliError, CliResult, fault_from_env, run_error};
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Environment to simulate.
-    #[arg(long, default_value = "pooltool", value_parser = ["pooltool", "iphyre"])]
+    #[arg(long, default_value = "pooltool", value_parser = ["pooltool", "iphyre", "phyre"])]
     env: String,
     /// Run folder to write into (created if needed).
     #[arg(long)]
@@ -69,6 +69,21 @@ pub struct Args {
     /// iphyre replay mode: clicks `x,y,t;…` (px, s) or `k@t;…` (remove eliminable block k at t s).
     #[arg(long, requires = "game")]
     clicks: Option<String>,
+    /// phyre dataset mode: comma-separated template ids (00003), task ids (00003:012), fold splits
+    /// (ball_cross_template/0/test) or all; --scenes tasks round-robin over templates, --shots random
+    /// valid actions per task.
+    #[arg(long, default_value = "all", conflicts_with = "task")]
+    tasks: String,
+    /// phyre replay mode: the task id, e.g. 00004:012.
+    #[arg(long, requires = "action")]
+    task: Option<String>,
+    /// phyre replay mode: the action, `[x, y, r]` in [0, 1] (or '{"x": …, "y": …, "r": …}', or DeepPHY's
+    /// '{"cell": 1-64, "radius": 1-8}').
+    #[arg(long, requires = "task", allow_hyphen_values = true)]
+    action: Option<String>,
+    /// phyre: keep a frame every this many 60 Hz steps (6 = 10 frames/s; events keep every step).
+    #[arg(long, default_value_t = 6)]
+    stride: u64,
 }
 
 #[derive(Serialize)]
@@ -106,6 +121,14 @@ struct SimulateStage {
     game: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     clicks: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    tasks: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    task: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    action: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    stride: Option<u64>,
 }
 
 fn absolute(p: &Path, what: &str) -> Result<String, CliError> {
@@ -124,6 +147,14 @@ fn absolute(p: &Path, what: &str) -> Result<String, CliError> {
 pub fn run(args: Args, quiet: bool) -> CliResult {
     if args.env == "iphyre" {
         return run_iphyre(args, quiet);
+    }
+    if args.env == "phyre" {
+        return run_phyre(args, quiet);
+    }
+    if args.task.is_some() {
+        return Err(CliError::input(anyhow::anyhow!(
+            "--task and --action are for --env phyre"
+        )));
     }
     if args.game.is_some() {
         return Err(CliError::input(anyhow::anyhow!(
@@ -157,6 +188,10 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
         fps: None,
         game: None,
         clicks: None,
+        tasks: None,
+        task: None,
+        action: None,
+        stride: None,
     };
     run_stage(stage, &args, quiet)
 }
@@ -187,6 +222,44 @@ fn run_iphyre(args: Args, quiet: bool) -> CliResult {
         fps: Some(if args.fps == "10" { 10.0 } else { 60.0 }),
         game: args.game.clone(),
         clicks: args.clicks.clone(),
+        tasks: None,
+        task: None,
+        action: None,
+        stride: None,
+    };
+    run_stage(stage, &args, quiet)
+}
+
+/// `--env phyre`: random valid actions on the chosen tasks, or one replayed action.
+fn run_phyre(args: Args, quiet: bool) -> CliResult {
+    if args.scene.is_some() || args.table.is_some() || args.game.is_some() {
+        return Err(CliError::input(anyhow::anyhow!(
+            "--scene, --shot, --table, --game and --clicks are for other environments; PHYRE replays take --task and --action"
+        )));
+    }
+    let replay = args.task.is_some();
+    let stage = SimulateStage {
+        id: String::new(),
+        kind: "simulate",
+        env: args.env.clone(),
+        scenes: (!replay).then_some(args.scenes),
+        shots: (!replay).then_some(args.shots),
+        seed: (!replay).then_some(args.seed),
+        scene_file: None,
+        shot: None,
+        table: None,
+        dt: args.dt,
+        max_events: args.max_events,
+        max_time: None,
+        scenes_per_shard: args.scenes_per_shard.max(1),
+        games: None,
+        fps: None,
+        game: None,
+        clicks: None,
+        tasks: (!replay).then(|| args.tasks.clone()),
+        task: args.task.clone(),
+        action: args.action.clone(),
+        stride: Some(args.stride),
     };
     run_stage(stage, &args, quiet)
 }
@@ -212,7 +285,9 @@ fn run_stage(mut stage: SimulateStage, args: &Args, quiet: bool) -> CliResult {
         ))
     })?;
     let s = &stage.summary;
-    let detail = if args.env == "iphyre" {
+    let detail = if args.env == "phyre" {
+        format!("{} invalid input", s["invalid"].as_u64().unwrap_or(0))
+    } else if args.env == "iphyre" {
         format!(
             "mean reward {:.1}",
             s["mean_reward"].as_f64().unwrap_or(0.0)

@@ -148,3 +148,26 @@ fn reference_solving_actions_replay_as_valid_balls() {
         );
     }
 }
+
+/// Where the time goes: computed vs replayed steps on the reference set (debug build; figures for
+/// tuning only, speed is measured in benches/phyre.rs).
+#[test]
+#[ignore]
+fn phyre_step_profile() {
+    let set = TaskSet::default_tasks().unwrap();
+    let rows = reference();
+    for (sleep_linear, sleep_time) in [(0.01, 0.5), (0.05, 0.5), (0.1, 0.5), (0.1, 0.25)] {
+        let params = PhysicsParams { sleep_linear, sleep_time, ..PhysicsParams::default() };
+        let t0 = std::time::Instant::now();
+        let (mut steps, mut computed, mut n, mut same) = (0, 0, 0, 0);
+        for r in rows.iter().filter(|r| r.status != 0) {
+            let task = set.get(&r.task_id).unwrap();
+            let res = episode::run(&task, &r.action, &params, &annotrace::envs::phyre::RecordOptions { stride: 0, record: false }).unwrap();
+            steps += res.steps;
+            computed += res.computed_steps;
+            n += 1;
+            same += usize::from((res.status == Status::Solved) == (r.status == 1));
+        }
+        eprintln!("sleep {sleep_linear} m/s after {sleep_time} s: {n} episodes, {steps} steps, {computed} computed, agreement {:.4}, {:.1} ms/episode", same as f64 / n as f64, t0.elapsed().as_secs_f64() * 1e3 / n as f64);
+    }
+}

@@ -38,14 +38,11 @@ impl PhyreEnv {
 /// `i / T` of template `i mod T`, T the number of templates), so even a few dozen tasks cover every
 /// template. `only` restricts to the given template ids (`00003`) and task ids (`00003:012`).
 pub fn dataset_tasks(set: &TaskSet, n: usize, only: &[String]) -> Vec<String> {
+    let wanted: std::collections::HashSet<&str> = only.iter().map(String::as_str).collect();
     let keep = |id: &str| {
-        only.is_empty()
-            || only.iter().any(|o| {
-                o == id
-                    || (o.len() == 5
-                        && id.starts_with(o.as_str())
-                        && id.as_bytes().get(5) == Some(&b':'))
-            })
+        wanted.is_empty()
+            || wanted.contains(id)
+            || id.split(':').next().is_some_and(|t| wanted.contains(t))
     };
     let per_template: Vec<Vec<&str>> = set
         .templates()

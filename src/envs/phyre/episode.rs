@@ -135,6 +135,8 @@ pub struct EpisodeResult {
     pub status: Status,
     /// Physics steps done (0 for `INVALID_INPUT`).
     pub steps: usize,
+    /// Of those, the steps rapier actually computed (the rest replayed a state where everything slept).
+    pub computed_steps: usize,
     /// The step at which the goal relation started its final (winning) run, when solved.
     pub goal_first_step: Option<usize>,
     /// Frames (empty when not recording).
@@ -181,6 +183,7 @@ pub fn run(
         placement,
         status: Status::InvalidInput,
         steps: 0,
+        computed_steps: 0,
         goal_first_step: None,
         frames: Vec::new(),
         events: Vec::new(),
@@ -231,6 +234,7 @@ pub fn run(
         } else {
             changes.clear();
             world.step(&mut changes);
+            result.computed_steps += 1;
             if opts.record {
                 for c in &changes {
                     result.events.push(if c.began {

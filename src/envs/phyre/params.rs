@@ -37,6 +37,11 @@ pub struct PhysicsParams {
     pub stabilization_iterations: usize,
     /// Whether resting bodies may sleep (Box2D's default world allows sleeping).
     pub sleeping: bool,
+    /// A body may sleep once its furthest point has moved slower than this (m/s) for `sleep_time`
+    /// (Box2D's `b2_linearSleepTolerance` is 0.01 m/s). Tuned (docs/fidelity.md).
+    pub sleep_linear: f64,
+    /// Seconds of rest before a body sleeps (Box2D's `b2_timeToSleep`: 0.5).
+    pub sleep_time: f64,
 }
 
 /// PHYRE's `PIXELS_IN_METER`.
@@ -59,6 +64,8 @@ impl Default for PhysicsParams {
             solver_iterations: 4,
             stabilization_iterations: 1,
             sleeping: true,
+            sleep_linear: 0.01,
+            sleep_time: 0.5,
         }
     }
 }
@@ -80,6 +87,8 @@ impl PhysicsParams {
             ("linear_damping", self.linear_damping),
             ("ball_touch_threshold_px", self.ball_touch_threshold_px),
             ("touch_distance", self.touch_distance),
+            ("sleep_linear", self.sleep_linear),
+            ("sleep_time", self.sleep_time),
         ];
         for (field, v) in non_negative {
             if !(v.is_finite() && v >= 0.0) {

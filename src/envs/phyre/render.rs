@@ -79,7 +79,7 @@ fn glyph(c: char) -> Vec<[(f32, f32); 2]> {
     const G: [(f32, f32); 2] = [(0., 3.), (4., 3.)];
     match c {
         '0' => vec![A, B, C, D, E, F],
-        '1' => vec![B, C],
+        '1' => vec![[(2., 0.), (2., 6.)]],
         '2' => vec![A, B, G, E, D],
         '3' => vec![A, B, G, C, D],
         '4' => vec![F, G, B, C],

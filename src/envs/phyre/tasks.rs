@@ -111,7 +111,8 @@ impl TaskSet {
         self.position(id).is_some()
     }
 
-    fn position(&self, id: &str) -> Option<usize> {
+    /// The sorted position of task `id` (stable for a given task file; seeds datasets).
+    pub fn position(&self, id: &str) -> Option<usize> {
         self.index
             .binary_search_by(|(k, _)| k.as_str().cmp(id))
             .ok()

@@ -10,7 +10,7 @@
 //! it (a jar is three convex colliders on one body). Dynamic shapes have density 0.25 kg/m², static ones
 //! none; every shape has friction 0.5 (rapier's `Average` rule gives Box2D's √(f₁f₂) = 0.5) and
 //! restitution 0.2 (`Max`, as Box2D). Bodies get angular damping 0.01 and may sleep with Box2D's
-//! thresholds (0.01 m/s, 2°/s, 0.5 s).
+//! thresholds (0.01 m/s, 0.5 s by default).
 
 use std::collections::HashMap;
 use std::sync::mpsc;
@@ -22,12 +22,8 @@ use super::error::{PhyreError, Result};
 use super::params::{PIXELS_PER_METRE, PhysicsParams};
 use super::task::{Shape, Task};
 
-/// Box2D's `b2_linearSleepTolerance` (m/s).
-const SLEEP_LINEAR: f32 = 0.01;
 /// Box2D's `b2_angularSleepTolerance` (2°/s in rad/s).
 const SLEEP_ANGULAR: f32 = 2.0 * std::f32::consts::PI / 180.0;
-/// Box2D's `b2_timeToSleep` (s).
-const SLEEP_TIME: f32 = 0.5;
 
 /// A contact change between two bodies during one step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -154,9 +150,9 @@ impl World {
                 .user_data(index as u128)
                 .build();
             let a = body.activation_mut();
-            a.normalized_linear_threshold = SLEEP_LINEAR;
+            a.normalized_linear_threshold = params.sleep_linear as f32;
             a.angular_threshold = SLEEP_ANGULAR;
-            a.time_until_sleep = SLEEP_TIME;
+            a.time_until_sleep = params.sleep_time as f32;
             let handle = bodies.insert(body);
             let mut mine = Vec::with_capacity(shapes.len());
             for (k, shape) in shapes.iter().enumerate() {

@@ -11,6 +11,7 @@ pub mod import;
 pub mod optimise;
 pub mod simulate;
 pub mod simulate_iphyre;
+pub mod simulate_phyre;
 pub mod sql;
 mod trace_files;
 

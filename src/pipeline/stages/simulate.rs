@@ -45,7 +45,7 @@ pub static KIND: StageKind = StageKind {
     params: &[
         ParamSpec::optional(
             "env",
-            ParamType::Choice(&["pooltool", "iphyre"]),
+            ParamType::Choice(&["pooltool", "iphyre", "phyre"]),
             "\"pooltool\"",
             "environment to simulate",
         ),
@@ -114,6 +114,22 @@ pub static KIND: StageKind = StageKind {
             ParamType::Str,
             "iphyre replay mode: `x,y,t;…` clicks (px, s) or `k@t;…` (remove eliminable block k at t)",
         ),
+        ParamSpec::maybe(
+            "tasks",
+            ParamType::Str,
+            "phyre dataset mode: comma-separated template ids (00003), task ids (00003:012), fold splits (ball_cross_template/0/test) or all (default); `scenes` tasks round-robin over templates, `shots` random valid actions each",
+        ),
+        ParamSpec::maybe("task", ParamType::Str, "phyre replay mode: the task id (00004:012)"),
+        ParamSpec::maybe(
+            "action",
+            ParamType::Str,
+            "phyre replay mode: `[x, y, r]` in [0, 1], `{\"x\", \"y\", \"r\"}`, or DeepPHY's `{\"cell\": 1-64, \"radius\": 1-8}`",
+        ),
+        ParamSpec::maybe(
+            "stride",
+            ParamType::Count,
+            "phyre: keep a frame every this many 60 Hz steps (default 6, i.e. 10 frames/s; events keep every step)",
+        ),
         ParamSpec::optional(
             "scenes_per_shard",
             ParamType::Count,
@@ -149,6 +165,9 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     let p = &def.params;
     if p.get("env").and_then(Value::as_str) == Some("iphyre") {
         return super::simulate_iphyre::build(def, spec);
+    }
+    if p.get("env").and_then(Value::as_str) == Some("phyre") {
+        return super::simulate_phyre::build(def, spec);
     }
     let (config, table_text) = match p.get("table").and_then(Value::as_str) {
         None => (PoolConfig::default_7ft(), None),

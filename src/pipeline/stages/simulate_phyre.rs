@@ -1,0 +1,428 @@
+//! The `simulate` stage with `env = "phyre"`: PHYRE ball-tier episodes (rapier2d, `envs::phyre`) into the
+//! trace tables, sharded and resumable like the other environments.
+//!
+//! **Owns:** the PHYRE half of the `simulate` stage: reading its parameters, choosing the (task, action)
+//! work list, scene and trace ids, and writing one shard's tables.
+//! **Does not:** declare the stage kind or its parameter list (`simulate.rs`, which routes here), or
+//! simulate anything itself (`envs::phyre`).
+//!
+//! Two modes. **Dataset**: `scenes` tasks taken round-robin over templates from the `tasks` selection
+//! (default all 2,500; items are `all`, template ids `00003`, task ids `00003:012`, and fold splits
+//! `ball_within_template/0/test`), with `shots` seeded random valid actions each (uniform draws from
+//! [0, 1]³ until the ball fits, from (`seed`, task, sample) alone, so the tables do not depend on sharding
+//! or thread count). Every `scenes_per_shard` traces make one shard. **Replay**: `task` and `action`
+//! (`[x, y, r]`, `{"x", "y", "r"}` or DeepPHY's `{"cell": 1-64, "radius": 1-8}`) give one trace, which
+//! may end `INVALID_INPUT`. Bad input (an unknown task, template or fold, an action out of [0, 1] or not
+//! finite, a stride outside 1..=1000) fails when the stage is built, before anything is written.
+//!
+//! Ids: scenes are `phyre-<template>-<variant>` (one row per task, written with its first trace); dataset
+//! traces are `phyre-<seed>-<template>-<variant>-<sample:03>`, a replay `phyre-<template>-<variant>-<8 hex
+//! digits of the action's hash>`.
+
+use std::collections::BTreeMap;
+
+use rayon::prelude::*;
+use serde_json::{Value, json};
+use sha2::{Digest, Sha256};
+
+use super::simulate::ShardSinks;
+use crate::envs::phyre::{
+    BallAction, DEFAULT_STRIDE, DEFAULT_TASKS_GZ, EvalSetup, PhyreEnv, PhysicsParams,
+    RecordOptions, Status, Task, TaskSet, action_rng, dataset_tasks, episode, fold,
+    random_valid_action, trace_of,
+};
+use crate::pipeline::registry::BuildError;
+use crate::pipeline::spec::{PipelineSpec, StageDef, hex};
+use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
+use crate::trace::batch::scene_batch;
+use crate::trace::{Env, TraceBatchBuilder};
+
+/// What to simulate.
+#[derive(Debug)]
+enum Work {
+    /// `samples` random valid actions on each task.
+    Dataset {
+        tasks: Vec<String>,
+        samples: u64,
+        seed: u64,
+    },
+    /// One task, one action.
+    Replay { task: String, action: BallAction },
+}
+
+/// The `simulate` stage for PHYRE.
+#[derive(Debug)]
+pub struct PhyreSimulateStage {
+    params: PhysicsParams,
+    record: RecordOptions,
+    work: Work,
+    per_shard: u64,
+}
+
+/// Builds the PHYRE `simulate` stage from the stage's resolved parameters.
+pub(super) fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
+    let p = &def.params;
+    let set = TaskSet::default_tasks().map_err(|e| BuildError::param("tasks", e.to_string()))?;
+    let stride = p
+        .get("stride")
+        .and_then(Value::as_u64)
+        .unwrap_or(DEFAULT_STRIDE as u64);
+    let stride = usize::try_from(stride).unwrap_or(usize::MAX);
+    episode::validate_stride(stride)
+        .map_err(|e| BuildError::param("stride", format!("`stride`: {e}")))?;
+    let work = match (
+        p.get("task").and_then(Value::as_str),
+        p.get("action").and_then(Value::as_str),
+    ) {
+        (Some(id), Some(text)) => {
+            if !set.contains(id) {
+                return Err(BuildError::param(
+                    "task",
+                    format!(
+                        "`task`: {}",
+                        crate::envs::phyre::PhyreError::UnknownTask { id: id.to_string() }
+                    ),
+                ));
+            }
+            let action = BallAction::from_json_str(text)
+                .map_err(|e| BuildError::param("action", format!("`action`: {e}")))?;
+            Work::Replay {
+                task: id.to_string(),
+                action,
+            }
+        }
+        (Some(_), None) => {
+            return Err(BuildError::param(
+                "action",
+                "replay mode needs `action` with `task`",
+            ));
+        }
+        (None, Some(_)) => {
+            return Err(BuildError::param(
+                "task",
+                "replay mode needs `task` with `action`",
+            ));
+        }
+        (None, None) => {
+            let only = select_tasks(set, p.get("tasks").and_then(Value::as_str).unwrap_or("all"))
+                .map_err(|m| BuildError::param("tasks", format!("`tasks`: {m}")))?;
+            let n = p.get("scenes").and_then(Value::as_u64).unwrap_or(10);
+            Work::Dataset {
+                tasks: dataset_tasks(set, usize::try_from(n).unwrap_or(usize::MAX), &only),
+                samples: p.get("shots").and_then(Value::as_u64).unwrap_or(1),
+                seed: p.get("seed").and_then(Value::as_u64).unwrap_or(spec.seed),
+            }
+        }
+    };
+    Ok(Box::new(PhyreSimulateStage {
+        params: PhysicsParams::default(),
+        record: RecordOptions {
+            stride,
+            record: true,
+        },
+        work,
+        per_shard: p
+            .get("scenes_per_shard")
+            .and_then(Value::as_u64)
+            .unwrap_or(100)
+            .max(1),
+    }))
+}
+
+/// The task ids a `tasks` list selects: comma-separated `all`, template ids (`00003`), task ids
+/// (`00003:012`) and fold splits (`ball_cross_template/0/test`: setup, seed, `train`/`dev`/`test`). An
+/// empty result means every task.
+pub fn select_tasks(set: &TaskSet, list: &str) -> Result<Vec<String>, String> {
+    let mut out = Vec::new();
+    for item in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        if item == "all" {
+            return Ok(Vec::new());
+        }
+        if let Some((setup, rest)) = item.split_once('/') {
+            let setup: EvalSetup = setup.parse().map_err(|e| format!("{item:?}: {e}"))?;
+            let (seed, split) = rest.split_once('/').ok_or_else(|| {
+                format!("{item:?}: a fold split is <setup>/<seed>/<train|dev|test>")
+            })?;
+            let seed: u64 = seed
+                .parse()
+                .map_err(|_| format!("{item:?}: fold seed {seed:?} is not a whole number"))?;
+            let f = fold(set, setup, seed);
+            let ids = match split {
+                "train" => f.train,
+                "dev" => f.dev,
+                "test" => f.test,
+                other => {
+                    return Err(format!(
+                        "{item:?}: split {other:?} is not train, dev or test"
+                    ));
+                }
+            };
+            out.extend(ids);
+        } else if set.contains(item) || !set.template_tasks(item).is_empty() {
+            out.push(item.to_string());
+        } else {
+            return Err(format!(
+                "{item:?} is neither a PHYRE ball-tier task id (00004:012), a template id (00000-00024), a fold split (ball_within_template/0/test) nor all"
+            ));
+        }
+    }
+    if out.is_empty() {
+        return Err(format!("{list:?} selects no task"));
+    }
+    Ok(out)
+}
+
+impl PhyreSimulateStage {
+    /// Number of traces.
+    fn total(&self) -> u64 {
+        match &self.work {
+            Work::Dataset { tasks, samples, .. } => tasks.len() as u64 * samples,
+            Work::Replay { .. } => 1,
+        }
+    }
+
+    /// Work item `i` (task-major): the task id, the sample number and the trace id.
+    fn item(&self, i: u64) -> (&str, u64, String) {
+        match &self.work {
+            Work::Dataset {
+                tasks,
+                samples,
+                seed,
+            } => {
+                let task = &tasks[(i / samples) as usize];
+                let sample = i % samples;
+                (
+                    task,
+                    sample,
+                    PhyreEnv::dataset_trace_id(*seed, task, sample),
+                )
+            }
+            Work::Replay { task, action } => (task, 0, PhyreEnv::trace_id(task, action)),
+        }
+    }
+
+    /// The action of item `i` on `task`.
+    fn action(&self, task: &Task, sample: u64, set: &TaskSet) -> Result<BallAction, StageError> {
+        match &self.work {
+            Work::Replay { action, .. } => Ok(*action),
+            Work::Dataset { seed, .. } => {
+                let index = set.position(&task.task_id).unwrap_or(0) as u64;
+                random_valid_action(task, &mut action_rng(*seed, index, sample))
+                    .map_err(|e| StageError::Input(format!("task {}: {e}", task.task_id)))?
+                    .ok_or_else(|| {
+                        StageError::Input(format!(
+                            "task {}: no valid action found in {} draws",
+                            task.task_id,
+                            crate::envs::phyre::MAX_DRAWS
+                        ))
+                    })
+            }
+        }
+    }
+
+    /// Fails when a trace id this stage would write was written by another stage of the run.
+    fn check_ids_are_new(&self, ctx: &StageContext<'_>) -> Result<(), StageError> {
+        let existing: std::collections::HashSet<String> = crate::store::trace_ids(ctx.run())?
+            .into_iter()
+            .filter(|(env, _)| *env == Env::Phyre)
+            .map(|(_, id)| id)
+            .collect();
+        if existing.is_empty() {
+            return Ok(());
+        }
+        for i in 0..self.total() {
+            let (_, _, id) = self.item(i);
+            if existing.contains(&id) {
+                return Err(StageError::Input(format!(
+                    "trace id {id:?} is already in the run {} (written by another stage); use another seed or run folder",
+                    ctx.run().root().display()
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    fn run_shard(
+        &self,
+        ctx: &StageContext<'_>,
+        shard: usize,
+        lo: u64,
+        hi: u64,
+    ) -> Result<Value, StageError> {
+        let name = format!("{shard:05}");
+        if let Some(record) = ctx.finished_shard(&name)? {
+            ctx.progress().advance(ctx.stage_id(), hi - lo);
+            return Ok(record);
+        }
+        let set = TaskSet::default_tasks().map_err(|e| StageError::Input(e.to_string()))?;
+        let ordinal = ctx.shard_started();
+        let mut sinks = ShardSinks::new(ctx, Env::Phyre, name.clone());
+        let (mut traces, mut successes, mut invalid, mut steps) = (0u64, 0u64, 0u64, 0u64);
+        let source = format!("simulate:{}", ctx.stage_id());
+        let mut builder = TraceBatchBuilder::new();
+        let mut task: Option<Task> = None;
+        for i in lo..hi {
+            let (task_id, sample, trace_id) = self.item(i);
+            if task.as_ref().is_none_or(|t| t.task_id != task_id) {
+                task = Some(
+                    set.get(task_id)
+                        .map_err(|e| StageError::Input(e.to_string()))?,
+                );
+            }
+            let Some(task) = task.as_ref() else { continue };
+            let scene_id = format!("phyre-{}", task_id.replace(':', "-"));
+            if sample == 0 {
+                let spec = json!({
+                    "task_id": task.task_id,
+                    "template_id": task.template_id,
+                    "description": task.description,
+                    "goal": {"body1": task.body1, "body2": task.body2, "relationships": task.relationships},
+                    "bodies": task.bodies.len(),
+                });
+                let batch = scene_batch(&scene_id, task_id, &source, task.bodies.len(), &spec)?;
+                sinks.write("scenes", &batch)?;
+            }
+            let action = self.action(task, sample, set)?;
+            let result = episode::run(task, &action, &self.params, &self.record)
+                .map_err(|e| StageError::Input(format!("trace {trace_id}: {e}")))?;
+            let trace = trace_of(&result, task, &trace_id);
+            traces += 1;
+            successes += u64::from(result.status == Status::Solved);
+            invalid += u64::from(result.status == Status::InvalidInput);
+            steps += result.steps as u64;
+            for ts in &trace.timesteps {
+                builder.push_timestep(ts);
+            }
+            let b = builder.finish(&crate::trace::TraceMeta {
+                trace_id: &trace.trace_id,
+                scene_id: &scene_id,
+                task_id: &trace.task_id,
+                events: &trace.events,
+                outcome: &trace.outcome,
+                extra: &trace.extra,
+                source: &source,
+            })?;
+            sinks.write("traces", &b.traces)?;
+            sinks.write("timesteps", &b.timesteps)?;
+            sinks.write("frames", &b.frames)?;
+            if i == lo {
+                // The mid-shard fault fires with some of the shard's files half written.
+                ctx.checkpoint_mid_shard(ordinal)?;
+            }
+            sinks.write("events", &b.events)?;
+            ctx.progress().advance(ctx.stage_id(), 1);
+        }
+        let rows = sinks.commit()?;
+        let record = json!({
+            "traces": traces,
+            "successes": successes,
+            "invalid": invalid,
+            "steps": steps,
+            "rows": rows,
+        });
+        ctx.finish_shard(&name, &record)?;
+        Ok(record)
+    }
+}
+
+impl Stage for PhyreSimulateStage {
+    /// The resolved seed, the tasks, the stride and the task data: a changed pipeline seed reruns.
+    fn fingerprint_extra(&self) -> Result<Value, StageError> {
+        let work = match &self.work {
+            Work::Dataset {
+                tasks,
+                samples,
+                seed,
+            } => json!({
+                "seed": seed,
+                "samples": samples,
+                "tasks": hex(&Sha256::digest(tasks.join(",").as_bytes())),
+                "n_tasks": tasks.len(),
+            }),
+            Work::Replay { task, action } => {
+                json!({"task": task, "action": [action.x, action.y, action.r]})
+            }
+        };
+        let data = hex(&Sha256::digest(DEFAULT_TASKS_GZ));
+        Ok(
+            json!({"env": "phyre", "stride": self.record.stride, "tasks_data": &data[..16], "work": work}),
+        )
+    }
+
+    fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
+        let total = self.total();
+        let shards: Vec<(u64, u64)> = (0..total.div_ceil(self.per_shard))
+            .map(|s| (s * self.per_shard, ((s + 1) * self.per_shard).min(total)))
+            .collect();
+        self.check_ids_are_new(ctx)?;
+        ctx.progress().set_total(ctx.stage_id(), total);
+        let records: Vec<Value> = shards
+            .par_iter()
+            .enumerate()
+            .map(|(i, &(lo, hi))| self.run_shard(ctx, i, lo, hi))
+            .collect::<Result<_, _>>()?;
+        let mut rows: BTreeMap<String, u64> = BTreeMap::new();
+        let (mut traces, mut successes, mut invalid, mut steps) = (0u64, 0u64, 0u64, 0u64);
+        for r in &records {
+            traces += r["traces"].as_u64().unwrap_or(0);
+            successes += r["successes"].as_u64().unwrap_or(0);
+            invalid += r["invalid"].as_u64().unwrap_or(0);
+            steps += r["steps"].as_u64().unwrap_or(0);
+            for (t, n) in r["rows"].as_object().into_iter().flatten() {
+                *rows.entry(t.clone()).or_default() += n.as_u64().unwrap_or(0);
+            }
+        }
+        let frames = rows.get("frames").copied().unwrap_or(0);
+        let line = format!(
+            "{traces} phyre trace(s), {successes} solved, {invalid} invalid input; {steps} physics steps, {frames} frame rows (stride {})",
+            self.record.stride
+        );
+        Ok(StageOutput {
+            rows,
+            files: Vec::new(),
+            summary: json!({
+                "env": Env::Phyre.as_str(),
+                "traces": traces,
+                "successes": successes,
+                "capped": 0,
+                "invalid": invalid,
+                "steps": steps,
+                "stride": self.record.stride,
+            }),
+            line,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn task_selections_and_their_errors() {
+        let set = TaskSet::default_tasks().unwrap();
+        assert!(select_tasks(set, "all").unwrap().is_empty());
+        assert_eq!(
+            select_tasks(set, "00003, 00004:012").unwrap(),
+            ["00003", "00004:012"]
+        );
+        assert_eq!(
+            select_tasks(set, "ball_cross_template/0/test")
+                .unwrap()
+                .len(),
+            500
+        );
+        assert!(select_tasks(set, "00099").unwrap_err().contains("00099"));
+        assert!(
+            select_tasks(set, "ball_cross_template/x/test")
+                .unwrap_err()
+                .contains("seed")
+        );
+        assert!(
+            select_tasks(set, "ball_cross_template/0/val")
+                .unwrap_err()
+                .contains("val")
+        );
+        assert!(select_tasks(set, "nope/0/test").is_err());
+    }
+}
