@@ -32,8 +32,9 @@ pub struct Args {
     /// Search strategy.
     #[arg(long, default_value = "island", value_parser = ["island", "hill-climb", "best-of-n"])]
     strategy: String,
-    /// Where children come from.
-    #[arg(long, default_value = "mutate", value_parser = ["mutate", "llm"])]
+    /// Where children come from: syntax-tree edits (mutate) or an LLM; auto = llm when an endpoint
+    /// (--llm-base-url, ANNOTRACE_LLM_BASE_URL) or --replay is given, else mutate.
+    #[arg(long, default_value = "auto", value_parser = ["auto", "mutate", "llm"])]
     proposer: String,
     /// Proposals per label.
     #[arg(long, default_value_t = 200)]
@@ -98,6 +99,48 @@ pub struct Args {
     /// Start over instead of resuming or reusing an earlier identical search.
     #[arg(long)]
     force: bool,
+    #[command(flatten)]
+    llm: super::suggest_labels::LlmArgs,
+}
+
+/// The LLM flags as the stage's `llm` table (only those given), and `--prompts`.
+fn llm_table(a: &super::suggest_labels::LlmArgs) -> Result<toml::Table, CliError> {
+    let s = a.settings();
+    let mut t = toml::Table::new();
+    if let Some(v) = s.base_url {
+        t.insert("base_url".into(), v.into());
+    }
+    if let Some(v) = s.model {
+        t.insert("model".into(), v.into());
+    }
+    if let Some(v) = s.timeout_s {
+        t.insert("timeout_s".into(), toml::Value::Float(v));
+    }
+    if let Some(v) = s.max_retries {
+        t.insert("max_retries".into(), toml::Value::Integer(i64::from(v)));
+    }
+    if let Some(v) = s.parallel {
+        t.insert("parallel".into(), toml::Value::Integer(v as i64));
+    }
+    if let Some(v) = s.max_calls {
+        t.insert(
+            "max_calls".into(),
+            toml::Value::Integer(v.min(i64::MAX as u64) as i64),
+        );
+    }
+    if let Some(v) = s.max_tokens {
+        t.insert(
+            "max_tokens".into(),
+            toml::Value::Integer(v.min(i64::MAX as u64) as i64),
+        );
+    }
+    if let Some(v) = &s.replay {
+        t.insert("replay".into(), abs(v)?.into());
+    }
+    if let Some(v) = s.strict_replay {
+        t.insert("strict_replay".into(), toml::Value::Boolean(v));
+    }
+    Ok(t)
 }
 
 fn abs(p: &Path) -> Result<String, CliError> {
@@ -162,6 +205,13 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
     );
     if let Some(o) = &a.output {
         stage.insert("output".into(), abs(o)?.into());
+    }
+    let llm = llm_table(&a.llm)?;
+    if !llm.is_empty() {
+        stage.insert("llm".into(), toml::Value::Table(llm));
+    }
+    if let Some(p) = &a.llm.prompts {
+        stage.insert("prompts".into(), abs(p)?.into());
     }
     let key = toml::to_string(&stage).unwrap_or_default();
     let id = format!("evolve-{}", &hex(&Sha256::digest(key.as_bytes()))[..10]);

@@ -378,6 +378,68 @@ impl LabelSearch<'_> {
         }
     }
 
+    /// The record of one step: the proposal's child checked and scored, repaired while it fails with a
+    /// repairable error and the proposer offers repairs.
+    fn settle(
+        &self,
+        (step, island, parents, seed): (u64, usize, Vec<Program>, u64),
+        proposal: Result<Proposal, ProposeError>,
+        took: f64,
+        state: &State,
+        propose_s: &mut f64,
+    ) -> Result<CandidateRecord, SearchError> {
+        let cfg = self.config;
+        let unavailable = |m: String| SearchError::Proposer {
+            label: self.evaluator.label.clone(),
+            source: ProposeError::Unavailable(m),
+        };
+        let mut rec = self.base_record(island as i64, step as i64);
+        rec.parents = parents.iter().map(|p| p.hash.clone()).collect();
+        rec.propose_s = took;
+        let p = match proposal {
+            Err(ProposeError::Unavailable(m)) => return Err(unavailable(m)),
+            Err(e) => {
+                rec.status = if matches!(e, ProposeError::BudgetExhausted(_)) {
+                    "budget_exhausted".into()
+                } else {
+                    "proposer".into()
+                };
+                rec.error = Some(e.to_string());
+                return Ok(rec);
+            }
+            Ok(p) => p,
+        };
+        rec.tokens_in = p.tokens_in;
+        rec.tokens_out = p.tokens_out;
+        rec.calls = p.calls;
+        let mut failure = self.score_into(&mut rec, p.code, state);
+        let req = self.request(island, &parents, seed, step);
+        while rec.repairs < cfg.repair_attempts {
+            let Some(err) = failure.take() else { break };
+            if !repairable(&err) {
+                break;
+            }
+            let t = Instant::now();
+            let fixed = self.proposer.repair(&req, &rec.code, &err, rec.repairs + 1);
+            let dt = t.elapsed().as_secs_f64();
+            rec.propose_s += dt;
+            *propose_s += dt;
+            match fixed {
+                Ok(Some(p)) => {
+                    rec.repairs += 1;
+                    rec.tokens_in += p.tokens_in;
+                    rec.tokens_out += p.tokens_out;
+                    rec.calls += p.calls;
+                    failure = self.score_into(&mut rec, p.code, state);
+                }
+                Ok(None) => break,
+                Err(ProposeError::Unavailable(m)) => return Err(unavailable(m)),
+                Err(_) => break,
+            }
+        }
+        Ok(rec)
+    }
+
     /// Runs (or resumes) the search.
     pub fn run(&self) -> Result<LabelOutcome, SearchError> {
         let cfg = self.config;
@@ -455,102 +517,37 @@ impl LabelSearch<'_> {
                     (step, island, parents, rng.next_u64())
                 })
                 .collect();
-            let t0 = Instant::now();
-            let proposals: Vec<(Result<Proposal, ProposeError>, f64)> = if plans.len() == 1 {
-                let (step, island, parents, seed) = &plans[0];
-                let req = self.request(*island, parents, *seed, *step);
-                let t = Instant::now();
-                vec![(self.proposer.propose(&req), t.elapsed().as_secs_f64())]
-            } else {
-                std::thread::scope(|sc| {
-                    let handles: Vec<_> = plans
-                        .iter()
-                        .map(|(step, island, parents, seed)| {
-                            let req = self.request(*island, parents, *seed, *step);
-                            let proposer = self.proposer;
-                            sc.spawn(move || {
-                                let t = Instant::now();
-                                (proposer.propose(&req), t.elapsed().as_secs_f64())
-                            })
-                        })
-                        .collect();
-                    handles
-                        .into_iter()
-                        .map(|h| {
-                            h.join().unwrap_or_else(|_| {
-                                (
-                                    Err(ProposeError::Other("the proposer panicked".into())),
-                                    0.0,
-                                )
-                            })
-                        })
-                        .collect()
-                })
-            };
-            propose_s += t0.elapsed().as_secs_f64();
+            // Every proposal of the round is requested at once; each child is scored as soon as its
+            // proposal is back (in step order), while later proposals are still in flight.
+            let proposer = self.proposer;
             let mut records = Vec::new();
-            for ((step, island, parents, seed), (proposal, took)) in
-                plans.into_iter().zip(proposals)
-            {
-                let mut rec = self.base_record(island as i64, step as i64);
-                rec.parents = parents.iter().map(|p| p.hash.clone()).collect();
-                rec.propose_s = took;
-                match proposal {
-                    Err(ProposeError::Unavailable(m)) => {
-                        return Err(SearchError::Proposer {
-                            label,
-                            source: ProposeError::Unavailable(m),
-                        });
-                    }
-                    Err(e) => {
-                        rec.status = if matches!(e, ProposeError::BudgetExhausted(_)) {
-                            exhausted = true;
-                            "budget_exhausted".into()
-                        } else {
-                            "proposer".into()
-                        };
-                        rec.error = Some(e.to_string());
-                    }
-                    Ok(p) => {
-                        rec.tokens_in = p.tokens_in;
-                        rec.tokens_out = p.tokens_out;
-                        rec.calls = p.calls;
-                        let mut failure = self.score_into(&mut rec, p.code, &state);
-                        let req = self.request(island, &parents, seed, step);
-                        while rec.repairs < cfg.repair_attempts {
-                            let Some(err) = failure.take() else { break };
-                            if !repairable(&err) {
-                                break;
-                            }
+            std::thread::scope(|sc| -> Result<(), SearchError> {
+                let handles: Vec<_> = plans
+                    .iter()
+                    .map(|(step, island, parents, seed)| {
+                        let req = self.request(*island, parents, *seed, *step);
+                        sc.spawn(move || {
                             let t = Instant::now();
-                            let fixed =
-                                self.proposer.repair(&req, &rec.code, &err, rec.repairs + 1);
-                            let dt = t.elapsed().as_secs_f64();
-                            rec.propose_s += dt;
-                            propose_s += dt;
-                            match fixed {
-                                Ok(Some(p)) => {
-                                    rec.repairs += 1;
-                                    rec.tokens_in += p.tokens_in;
-                                    rec.tokens_out += p.tokens_out;
-                                    rec.calls += p.calls;
-                                    failure = self.score_into(&mut rec, p.code, &state);
-                                }
-                                Ok(None) => break,
-                                Err(ProposeError::Unavailable(m)) => {
-                                    return Err(SearchError::Proposer {
-                                        label,
-                                        source: ProposeError::Unavailable(m),
-                                    });
-                                }
-                                Err(_) => break,
-                            }
-                        }
-                    }
+                            (proposer.propose(&req), t.elapsed().as_secs_f64())
+                        })
+                    })
+                    .collect();
+                for (plan, handle) in plans.into_iter().zip(handles) {
+                    let waited = Instant::now();
+                    let (proposal, took) = handle.join().unwrap_or_else(|_| {
+                        (
+                            Err(ProposeError::Other("the proposer panicked".into())),
+                            0.0,
+                        )
+                    });
+                    propose_s += waited.elapsed().as_secs_f64();
+                    let rec = self.settle(plan, proposal, took, &state, &mut propose_s)?;
+                    exhausted |= rec.status == "budget_exhausted";
+                    state.apply(&rec, cfg, self.label_index);
+                    records.push(rec);
                 }
-                state.apply(&rec, cfg, self.label_index);
-                records.push(rec);
-            }
+                Ok(())
+            })?;
             self.checkpoint.save(self.label_index, round, &records)?;
             all.extend(records);
         }

@@ -277,3 +277,60 @@ fn bad_input_is_refused_with_exit_2() {
     t.write("p.toml", &pipeline("").replace("budget = 8", "budget = 0"));
     t.run(&["run", "p.toml"]).code(2).stderr_has("budget");
 }
+
+#[test]
+fn the_llm_proposer_drives_a_search_with_repairs_through_a_chat_server() {
+    use crate::common::chat_server::{ChatServer, Reply};
+    use annotrace::search::skeleton::skeleton;
+    use annotrace::trace::Env;
+
+    let good =
+        skeleton(Env::Pooltool, "moving ball").replace("THRESHOLD = 0.05", "THRESHOLD = 0.3");
+    let answer = format!("Here is a better detector:\n\n```python\n{good}```\n");
+    let server = ChatServer::responder(move |seen| {
+        if seen.last_message().contains("syntax") {
+            Reply::chat(&answer)
+        } else {
+            Reply::chat("```python\ndef find_pattern(trace:\n    return []\n```")
+        }
+    });
+    let t = TestRun::new();
+    t.run(&[
+        "simulate", "--run", "r", "--scenes", "8", "--seed", "4", "--dt", "0.1", "-q",
+    ])
+    .ok();
+    let r = t.run(&[
+        "evolve",
+        "--run",
+        "r",
+        "--labels",
+        "moving ball",
+        "--budget",
+        "2",
+        "--parallel",
+        "2",
+        "--no-time-penalty",
+        "--workers",
+        "2",
+        "--llm-base-url",
+        &server.url(),
+        "--llm-model",
+        "scripted",
+    ]);
+    r.ok()
+        .stdout_has("llm:scripted proposer")
+        .stdout_has("outside the proposer");
+    let rows = t.csv(
+        "r",
+        "SELECT step, proposer, status, repairs, calls, tokens_in > 0 AS paid FROM candidates \
+         WHERE step >= 0 ORDER BY step",
+    );
+    assert!(rows.contains("0,llm:scripted,"), "{rows}");
+    for line in rows.lines().skip(1) {
+        // Each child came back broken, was repaired once and then ran (or repeated the repaired one).
+        assert!(line.ends_with(",1,2,true"), "{rows}");
+        assert!(!line.contains(",syntax,"), "{rows}");
+    }
+    let calls = t.csv("r", "SELECT count(*) AS n FROM llm_calls");
+    assert_eq!(calls.lines().nth(1), Some("4"), "{calls}");
+}

@@ -9,6 +9,7 @@
 
 use std::cell::RefCell;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
@@ -17,6 +18,7 @@ use super::annotate::{DetectorSetup, write};
 use super::trace_files::{read_traces, trace_file_sets};
 use crate::fitness::DistanceMatrix;
 use crate::fitness::table::{distances_batch, matrix_from_batches, set_id};
+use crate::llm::{LlmClient, LlmConfig, Prompts};
 use crate::pipeline::params::{ParamSpec, ParamType};
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
@@ -26,8 +28,8 @@ use crate::search::library_out::write_library;
 use crate::search::run::Checkpoint;
 use crate::search::tables::{convergence_batch, labels_batch};
 use crate::search::{
-    CandidateRecord, Discovery, EvalSettings, MutateProposer, Proposer, SearchConfig, SearchError,
-    Strategy, Temperatures,
+    CandidateRecord, Discovery, EvalSettings, LlmProposer, MutateProposer, Proposer, SearchConfig,
+    SearchError, Strategy, Temperatures,
 };
 use crate::trace::{Env, Trace};
 
@@ -71,9 +73,21 @@ const PARAMS: &[ParamSpec] = &[
     ),
     ParamSpec::optional(
         "proposer",
-        ParamType::Choice(&["mutate", "llm"]),
-        "\"mutate\"",
-        "where children come from: syntax-tree edits or an LLM",
+        ParamType::Choice(&["auto", "mutate", "llm"]),
+        "\"auto\"",
+        "where children come from: syntax-tree edits (mutate) or an LLM; auto = llm when an endpoint \
+         (llm.base_url or ANNOTRACE_LLM_BASE_URL) or a replay run is configured, else mutate",
+    ),
+    ParamSpec::maybe(
+        "llm",
+        ParamType::Table,
+        "LLM settings (base_url, model, parallel, timeout_s, max_retries, max_calls, max_tokens, \
+         temperature, replay, …; docs/llm.md), over the ANNOTRACE_LLM_* variables",
+    ),
+    ParamSpec::maybe(
+        "prompts",
+        ParamType::Str,
+        "prompt template folder, relative to the project (default: <project>/prompts if present, else built-in)",
     ),
     ParamSpec::optional("budget", ParamType::Count, "200", "proposals per label"),
     ParamSpec::optional("islands", ParamType::Count, "4", "islands I"),
@@ -194,6 +208,9 @@ pub struct EvolveStage {
     seed: Option<u64>,
     eval: EvalSettings,
     proposer: String,
+    llm: crate::llm::LlmSettings,
+    prompts: Option<PathBuf>,
+    project: PathBuf,
     max_traces: usize,
     holdout: f64,
     samples: usize,
@@ -250,12 +267,14 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     if budget == 0 {
         return Err(BuildError::param("budget", "budget must be at least 1"));
     }
-    let proposer = p["proposer"].as_str().unwrap_or("mutate").to_string();
-    if proposer == "llm" {
-        return Err(BuildError::param(
-            "proposer",
-            "the llm proposer is not available in this build of the evolve stage yet; use \"mutate\"",
-        ));
+    let proposer = p["proposer"].as_str().unwrap_or("auto").to_string();
+    let mut llm: crate::llm::LlmSettings = match p.get("llm") {
+        Some(v) => serde_json::from_value(v.clone())
+            .map_err(|e| BuildError::param("llm", format!("bad LLM settings: {e}")))?,
+        None => crate::llm::LlmSettings::default(),
+    };
+    if let Some(r) = &llm.replay {
+        llm.replay = Some(spec.project_dir.join(r));
     }
     let seed = match p.get("seed") {
         Some(v) => Some(
@@ -292,6 +311,12 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         samples: count(p, "samples", 64).max(2) as usize,
         convergence_per_bin: count(p, "convergence_per_bin", 3) as usize,
         max_edits: count(p, "max_edits", 2).max(1) as u32,
+        llm,
+        prompts: p
+            .get("prompts")
+            .and_then(Value::as_str)
+            .map(|d| spec.project_dir.join(d)),
+        project: spec.project_dir.clone(),
         output: p
             .get("output")
             .and_then(Value::as_str)
@@ -375,6 +400,43 @@ impl Checkpoint for StagingCheckpoint<'_, '_> {
 }
 
 impl EvolveStage {
+    /// The proposer this stage uses (see the `proposer` parameter), and the LLM client behind it.
+    fn proposer(
+        &self,
+        ctx: &StageContext<'_>,
+        seed: u64,
+    ) -> Result<(Box<dyn Proposer>, Option<Arc<LlmClient>>), StageError> {
+        let env_url = std::env::var(crate::llm::ENV_BASE_URL)
+            .ok()
+            .filter(|v| !v.trim().is_empty());
+        let use_llm = match self.proposer.as_str() {
+            "llm" => true,
+            "mutate" => false,
+            _ => self.llm.base_url.is_some() || self.llm.replay.is_some() || env_url.is_some(),
+        };
+        if !use_llm {
+            let m = MutateProposer::new(None, self.max_edits)
+                .map_err(|e| StageError::Input(e.to_string()))?;
+            return Ok((Box::new(m), None));
+        }
+        let mut settings = self.llm.clone();
+        settings.seed = Some(settings.seed.unwrap_or(seed));
+        let config = LlmConfig::resolve(&settings, &|k| std::env::var(k).ok())
+            .map_err(|e| StageError::Input(format!("llm: {e}")))?;
+        let dir = self
+            .prompts
+            .clone()
+            .or_else(|| Some(self.project.join("prompts")).filter(|d| d.is_dir()));
+        let prompts = Prompts::load(dir.as_deref())
+            .map_err(|e| StageError::Input(format!("prompts: {e}")))?;
+        let client = Arc::new(
+            LlmClient::new(config, Some(ctx.run()))
+                .map_err(|e| StageError::Input(format!("llm: {e}")))?,
+        );
+        let proposer = LlmProposer::new(client.clone(), Arc::new(prompts));
+        Ok((Box::new(proposer), Some(client)))
+    }
+
     fn training_distances(
         &self,
         ctx: &StageContext<'_>,
@@ -448,17 +510,7 @@ impl Stage for EvolveStage {
         limits.trace_cache = limits.trace_cache.max(train.len() + holdout.len() + 4);
         let pool =
             crate::detect::WorkerPool::new(limits).map_err(|e| StageError::Input(e.to_string()))?;
-        let proposer: Box<dyn Proposer> = match self.proposer.as_str() {
-            "mutate" => Box::new(
-                MutateProposer::new(None, self.max_edits)
-                    .map_err(|e| StageError::Input(e.to_string()))?,
-            ),
-            other => {
-                return Err(StageError::Input(format!(
-                    "proposer {other:?} is not available in the evolve stage"
-                )));
-            }
-        };
+        let (proposer, llm_client) = self.proposer(ctx, config.seed)?;
         let checkpoint = StagingCheckpoint {
             ctx,
             failure: RefCell::new(None),
@@ -532,6 +584,10 @@ impl Stage for EvolveStage {
         };
         let base = self.setup.library.detectors.clone();
         let result = discovery.run(base, &self.labels, &mut after);
+        if let Some(c) = &llm_client {
+            c.flush()
+                .map_err(|e| StageError::Input(format!("llm_calls: {e}")))?;
+        }
         let (library, results) = match result {
             Ok(x) => x,
             Err(e) => {
