@@ -415,6 +415,50 @@ mod tests {
         assert!(text.contains("make every ball leave the scene"), "{text}");
     }
 
+    /// The rendered prompts as a person reads them: a change to a template is a reviewed diff.
+    #[test]
+    fn rendered_prompts_snapshot() {
+        let p = Prompts::builtin();
+        insta::assert_snapshot!(
+            "evolve_pooltool",
+            p.render("evolve.j2", evolve_ctx(Env::Pooltool, true, 2))
+                .unwrap()
+        );
+        insta::assert_snapshot!(
+            "repair_iphyre",
+            p.render(
+                "repair.j2",
+                RepairContext {
+                    env: Env::Iphyre,
+                    label: "ball rolls off block".into(),
+                    code:
+                        "def find_pattern(trace):\n    return [x for x in trace[\"timesteps\"]]\n"
+                            .into(),
+                    error_category: "invalid_output".into(),
+                    error_message: "at $[0]: the pattern has no `label`".into(),
+                    error_line: None,
+                    error_column: None,
+                    attempt: 2,
+                },
+            )
+            .unwrap()
+        );
+        insta::assert_snapshot!(
+            "suggest_labels_phyre",
+            p.render(
+                "suggest_labels.j2",
+                LabelsContext {
+                    env: Env::Phyre,
+                    k: 5,
+                    library: vec![],
+                    objective: None,
+                    guidance: Some("Prefer patterns about the green object.".into()),
+                },
+            )
+            .unwrap()
+        );
+    }
+
     #[test]
     fn a_missing_variable_is_an_error_and_files_override_built_ins() {
         let p = Prompts::builtin();

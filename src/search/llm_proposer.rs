@@ -9,14 +9,16 @@
 //! **Owns:** turning a [`ProposalRequest`] into prompts and answers into [`Proposal`]s, and mapping the
 //! client's errors onto [`ProposeError`]. **Does not:** talk HTTP (`llm/`), validate or score code.
 
+use std::path::Path;
 use std::sync::Arc;
 
 use super::proposer::{Proposal, ProposalRequest, ProposeError, Proposer};
 use crate::detect::DetectorError;
 use crate::llm::{
-    ChatReply, ChatRequest, EvolveContext, LlmClient, LlmError, ParentView, Prompts, RepairContext,
-    extract_code,
+    ChatReply, ChatRequest, EvolveContext, LlmClient, LlmConfig, LlmError, LlmSettings, ParentView,
+    Prompts, RepairContext, extract_code,
 };
+use crate::store::RunDir;
 
 /// Purpose tags of this proposer's calls in `llm_calls`.
 pub const PURPOSE_EVOLVE: &str = "evolve";
@@ -42,6 +44,24 @@ impl LlmProposer {
             name,
             temperature: None,
         }
+    }
+
+    /// A proposer from settings (a pipeline's `[llm]` table or command-line flags) over the
+    /// `ANNOTRACE_LLM_*` variables read through `env`, recording into `run`'s `llm_calls`, with the
+    /// templates of `prompts_dir` (built-in ones where it has none). The client is shared: take it back
+    /// with [`LlmProposer::client`] for usage figures.
+    pub fn from_settings(
+        settings: &LlmSettings,
+        env: &dyn Fn(&str) -> Option<String>,
+        run: Option<&RunDir>,
+        prompts_dir: Option<&Path>,
+    ) -> Result<Self, LlmError> {
+        let config = LlmConfig::resolve(settings, env)?;
+        let client = LlmClient::new(config, run)?;
+        let prompts = Prompts::load(prompts_dir)?;
+        let mut p = LlmProposer::new(Arc::new(client), Arc::new(prompts));
+        p.temperature = settings.temperature;
+        Ok(p)
     }
 
     /// Sets the sampling temperature of proposals (repairs use the same); the client's default

@@ -702,3 +702,27 @@ fn suggest_labels_reports_bad_configuration_and_unusable_answers() {
     .ok()
     .stdout_has("1. Jump shot — the cue ball leaves the cloth\n2. Stop shot\n");
 }
+
+#[test]
+fn a_proposer_built_from_settings_records_into_the_run_and_uses_the_prompts_folder() {
+    let server = ChatServer::start(vec![Reply::chat(&format!("```python\n{GOOD}```"))]);
+    let t = TestRun::new();
+    let run = RunDir::new(t.path("run"));
+    let prompts = t.path("prompts");
+    t.write("prompts/system.j2", "You are a terse detector author.\n");
+    let settings: annotrace::llm::LlmSettings =
+        toml::from_str("model = \"m-from-file\"\ntemperature = 0.7\nparallel = 2").unwrap();
+    let url = server.url();
+    let lookup = move |k: &str| (k == "ANNOTRACE_LLM_BASE_URL").then(|| url.clone());
+    let p = LlmProposer::from_settings(&settings, &lookup, Some(&run), Some(&prompts)).unwrap();
+    assert_eq!(p.name(), "llm:m-from-file");
+    assert_eq!(p.propose(&proposal_request()).unwrap().code, GOOD);
+    let body = &server.seen()[0].body;
+    assert_eq!(body["temperature"], 0.7);
+    assert_eq!(
+        body["messages"][0]["content"],
+        "You are a terse detector author.\n"
+    );
+    drop(p);
+    assert_eq!(read_calls(&run).unwrap()[0].purpose, "evolve");
+}
