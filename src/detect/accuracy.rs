@@ -142,6 +142,23 @@ pub fn truth(env: Env, trace: &Trace, merge_s: f64) -> Vec<TruthEvent> {
     }
 }
 
+/// Whether a trace's event log can ground its labels: a billiards trace with pooltool events; a PHYRE
+/// or I-PHYRE trace with contact events or from annotrace's simulator (its `simulator` field), which
+/// logs every contact. An imported trace without contact events (such as `data/examples/`) says
+/// nothing about its contacts, so scoring it would count every contact a detector infers as false.
+pub fn scorable(env: Env, trace: &Trace) -> bool {
+    match env {
+        Env::Pooltool => trace.events.iter().any(|e| e.kind.starts_with("physics_")),
+        Env::Iphyre | Env::Phyre => {
+            trace.extra.contains_key("simulator")
+                || trace
+                    .events
+                    .iter()
+                    .any(|e| e.kind == "contact_begin" || e.kind == "contact_end")
+        }
+    }
+}
+
 /// The merged contacts of a trace: `(t, pair)` of each `contact_begin` that does not follow the same
 /// pair's last `contact_end` (or, without one, its last `contact_begin`) within `merge_s`.
 fn merged_contacts(trace: &Trace, merge_s: f64) -> Vec<(f64, Vec<String>)> {
@@ -504,5 +521,49 @@ mod tests {
             markdown(&scores.values().cloned().collect::<Vec<_>>())
                 .contains("| cue strike | 1 | 1 |")
         );
+    }
+
+    #[test]
+    fn iphyre_truth_merges_chatter_after_an_end_and_keeps_effective_removals() {
+        let mut trace = crate::testutil::synthetic_trace(Env::Iphyre, 0, 3, 1);
+        let c = |kind: &str, t: f64| ev(kind, t, json!({"agents": ["3", "1"]}));
+        trace.events = vec![
+            c("contact_begin", 0.50),
+            c("contact_end", 0.60),
+            c("contact_begin", 0.64), // 40 ms after its end: the same collision
+            c("contact_end", 0.90),
+            c("contact_begin", 1.00), // 100 ms after: a new one
+            ev(
+                "action_applied",
+                1.2,
+                json!({"agents": ["4"], "eliminated_object": 4, "effective": true}),
+            ),
+            ev(
+                "action_applied",
+                1.5,
+                json!({"agents": [], "eliminated_object": null, "effective": false}),
+            ),
+        ];
+        let truth = iphyre_truth(&trace, 0.05);
+        let got: Vec<(&str, f64, Vec<String>)> = truth
+            .iter()
+            .map(|e| (e.label, e.t, e.balls.clone()))
+            .collect();
+        let pair = vec!["1".to_string(), "3".to_string()];
+        assert_eq!(
+            got,
+            [
+                ("collision", 0.50, pair.clone()),
+                ("collision", 1.00, pair),
+                ("object removal", 1.2, vec!["4".to_string()]),
+            ]
+        );
+        assert!(scorable(Env::Iphyre, &trace));
+        trace.events.retain(|e| e.kind == "action_applied");
+        assert!(
+            !scorable(Env::Iphyre, &trace),
+            "no contact log, no simulator field"
+        );
+        assert_eq!(grounded(Env::Iphyre), IPHYRE_GROUNDED);
     }
 }

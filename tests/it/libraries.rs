@@ -10,6 +10,9 @@ use std::time::Duration;
 use annotrace::detect::accuracy::{LabelScore, grounded, score_trace, truth};
 use annotrace::detect::{Annotation, CandidateStatus, Library, SandboxLimits, WorkerPool};
 use annotrace::envs::iphyre::{Games, PhysicsParams, click_block, clicks_rng, play, random_clicks};
+use annotrace::envs::phyre::{
+    RecordOptions, TaskSet, action_rng, dataset_tasks, episode, random_valid_action,
+};
 use annotrace::trace::{Env, Trace};
 
 use crate::common::TestRun;
@@ -86,6 +89,28 @@ fn score(env: Env, traces: &[Trace], anns: &[Annotation]) -> BTreeMap<String, La
         );
     }
     scores
+}
+
+/// One seeded random valid red ball on the first task of each of the 25 PHYRE ball-tier templates (frames
+/// every 6 steps, as `simulate --env phyre`).
+fn phyre_traces() -> &'static [Trace] {
+    static TRACES: OnceLock<Vec<Trace>> = OnceLock::new();
+    TRACES.get_or_init(|| {
+        let set = TaskSet::default_tasks().unwrap();
+        let params = annotrace::envs::phyre::PhysicsParams::default();
+        dataset_tasks(set, 25, &[])
+            .iter()
+            .map(|id| {
+                let task = set.get(id).unwrap();
+                let index = set.position(id).unwrap() as u64;
+                let action = random_valid_action(&task, &mut action_rng(3, index, 0))
+                    .unwrap()
+                    .unwrap();
+                let r = episode::run(&task, &action, &params, &RecordOptions::default()).unwrap();
+                annotrace::envs::phyre::trace_of(&r, &task, &format!("lib-{id}"))
+            })
+            .collect()
+    })
 }
 
 fn count(anns: &[Annotation], label: &str) -> usize {
@@ -214,4 +239,71 @@ fn accuracy_scores_an_iphyre_run_from_the_cli() {
     .ok()
     .stdout_has("| collision |")
     .stdout_has("| object removal |");
+}
+
+#[test]
+fn the_phyre_library_loads_with_the_papers_twelve_labels() {
+    let lib = library("phyre");
+    let labels: Vec<&str> = lib.detectors.iter().map(|d| d.label.as_str()).collect();
+    assert_eq!(
+        labels,
+        [
+            "moving object hits stationary object",
+            "near collision",
+            "support relationship",
+            "lose support",
+            "falling object",
+            "rolling object",
+            "sliding contact",
+            "airborne motion",
+            "bounce",
+            "grid cell transition",
+            "wedged",
+            "tip over"
+        ]
+    );
+}
+
+#[test]
+fn the_phyre_library_runs_clean_and_scores_its_grounded_label() {
+    let traces = phyre_traces();
+    let lib = library("phyre");
+    let anns = annotate(&lib, traces);
+    let scores = score(Env::Phyre, traces, &anns);
+    let s = &scores["moving object hits stationary object"];
+    assert!(s.events > 20, "only {} events", s.events);
+    assert!(s.f1() >= 0.95, "{s:?}");
+    for label in [
+        "support relationship",
+        "falling object",
+        "airborne motion",
+        "bounce",
+        "grid cell transition",
+    ] {
+        assert!(count(&anns, label) > 0, "{label} never fired");
+    }
+    // Every falling object moves down (y up) between its first and last step.
+    for a in anns.iter().filter(|a| a.label == "falling object") {
+        let d = &a.parameters["object_details"];
+        let (_, o) = d.as_object().unwrap().iter().next().unwrap();
+        assert!(
+            o["start_position"][1].as_f64() > o["end_position"][1].as_f64(),
+            "{a:?}"
+        );
+    }
+}
+
+#[test]
+fn without_an_event_log_the_phyre_library_still_runs_clean() {
+    let traces: Vec<Trace> = phyre_traces()
+        .iter()
+        .take(10)
+        .map(|t| Trace {
+            events: Vec::new(),
+            ..t.clone()
+        })
+        .collect();
+    let anns = annotate(&library("phyre"), &traces);
+    // Ball contacts from geometry: a ball landing on the floor is found.
+    assert!(count(&anns, "support relationship") > 0, "{anns:#?}");
 }

@@ -1,15 +1,19 @@
 """chain movement: motion passes along a chain of objects, each set moving by the one before.
 
-A transfer is a collision (contact begin, chatter merged) in which a striker moving at least MOVING_V
-px/s hits a dynamic object at rest (at most REST_V px/s in the frame before) that moves at least
-MOVING_V within START_S after. Transfers link into a chain when the object set moving by one strikes
-the next within GAP_S. A chain of at least two transfers (three objects) is one pattern, from the first
-contact to the last; roles name each object's place in the chain.
+A transfer is either a collision (contact begin, chatter merged) in which a striker moving at least
+MOVING_V px/s hits a dynamic object at rest (at most REST_V px/s in the frame before) that moves at least
+MOVING_V within START_S after, a pull through a spring or joint: an object at rest whose spring/joint
+partner started moving before it starts moving itself within START_S, or a release: a click removes a
+block (`action_applied`) and a dynamic object at rest touching it starts moving within RELEASE_S. Transfers link into a chain when
+the object set moving by one moves the next within GAP_S. A chain of at least two transfers (three
+objects) is one pattern, from the first transfer to the last; roles name each object's place in the
+chain and parameters say how each link passed the motion on.
 """
 
 MOVING_V = 15.0
 REST_V = 2.0
 START_S = 0.2
+RELEASE_S = 0.5
 GAP_S = 2.0
 
 
@@ -34,7 +38,51 @@ def find_pattern(trace):
                     break
                 k += 1
             if moved:
-                transfers.append((g["t0"], hitter, hit))
+                transfers.append((g["t0"], hitter, hit, "collision"))
+    # Pulls through springs and joints: motion onsets (first frame at MOVING_V after one at REST_V).
+    onsets = {}
+    for oid, m in kin.items():
+        sp = [(v[0] ** 2 + v[1] ** 2) ** 0.5 for v in m["v"]]
+        rest = False
+        for n, k in enumerate(m["k"]):
+            if sp[n] <= REST_V:
+                rest = True
+            elif rest and sp[n] >= MOVING_V:
+                onsets.setdefault(oid, []).append(ts[k])
+                rest = False
+    links = {}
+    for oid, m in kin.items():
+        for kind in ("spring", "joint"):
+            c = m["o"][0].get(kind)
+            if c:
+                links.setdefault((kind, c), []).append(oid)
+    for (kind, _), ids in links.items():
+        if len(ids) != 2:
+            continue
+        for p, q in (ids, ids[::-1]):
+            for tq in onsets.get(q, []):
+                if any(0.0 < tq - tp <= START_S for tp in onsets.get(p, [])):
+                    transfers.append((tq, p, q, kind))
+    for t, p in _events(trace, ("action_applied",)):
+        gone = str(p.get("eliminated_object")) if p.get("effective") is True else None
+        if gone is None:
+            continue
+        pre = max(_at(ts, t) - 1, 0)
+        og = _obj_at(trace, pre, gone)
+        if og is None:
+            continue
+        for o in trace["timesteps"][pre].get("objects", []):
+            oid = str(o.get("index"))
+            if oid == gone or not o.get("dynamic") or _gap(og, o) > CONTACT_GAP:
+                continue
+            if _speed_at(kin, oid, pre) > REST_V:
+                continue
+            k = pre
+            while k < len(ts) and ts[k] <= t + RELEASE_S:
+                if _speed_at(kin, oid, k) >= MOVING_V:
+                    transfers.append((t, gone, oid, "removal"))
+                    break
+                k += 1
     transfers.sort()
     used = set()
     out = []
@@ -44,7 +92,7 @@ def find_pattern(trace):
         chain = [first]
         used.add(i)
         for j in range(i + 1, len(transfers)):
-            t, hitter, hit = transfers[j]
+            t, hitter, hit, _ = transfers[j]
             if j not in used and hitter == chain[-1][2] and 0.0 < t - chain[-1][0] <= GAP_S \
                     and hit not in [c[1] for c in chain]:
                 chain.append(transfers[j])
@@ -53,10 +101,11 @@ def find_pattern(trace):
             continue
         s, e, a, b = _span(idx, ts, chain[0][0], chain[-1][0])
         det = {chain[0][1]: _detail(trace, a, b, chain[0][1], "initiator", order=0)}
-        for n, (_, _, hit) in enumerate(chain):
+        for n, (_, _, hit, _) in enumerate(chain):
             role = "last moved" if n == len(chain) - 1 else "link"
             det[hit] = _detail(trace, a, b, hit, role, order=n + 1)
         out.append({"label": "chain movement", "start_timestep": s, "end_timestep": e,
                     "parameters": {"object_details": det, "links": len(chain),
-                                   "times": [round(c[0], 4) for c in chain]}})
+                                   "times": [round(c[0], 4) for c in chain],
+                                   "via": [c[3] for c in chain]}})
     return out

@@ -14,7 +14,7 @@ use super::annotate::{
     DetectorSetup, SANDBOX_PARAMS, annotations_of, read_annotations, status_counts, write,
 };
 use super::trace_files::{read_traces, trace_file_sets};
-use crate::detect::accuracy::{LabelScore, grounded, markdown, score_trace, truth};
+use crate::detect::accuracy::{LabelScore, grounded, markdown, scorable, score_trace, truth};
 use crate::detect::{Annotation, WorkerPool};
 use crate::pipeline::params::{ParamSpec, ParamType};
 use crate::pipeline::registry::{BuildError, StageKind};
@@ -68,7 +68,7 @@ pub static KIND: StageKind = StageKind {
           (contact_begin, chatter merged) and object removal (effective action_applied); PHYRE: moving \
           object hits stationary object (contact_begin of a moving and a resting body). A detection \
           matches an event of its label whose objects it all names and falls in its time span ± \
-          `tolerance`. Writes the accuracy table (one row per label).",
+          `tolerance`. Imported traces without the events that ground the labels are not scored. Writes the accuracy table (one row per label).",
     writes: "accuracy",
     params: PARAMS,
     build,
@@ -168,6 +168,7 @@ impl Stage for AccuracyStage {
         let mut scores: BTreeMap<String, LabelScore> = BTreeMap::new();
         let mut statuses: BTreeMap<String, u64> = BTreeMap::new();
         let mut n_traces = 0usize;
+        let mut unscored = 0usize;
         for set in &sets {
             let traces = read_traces(ctx.run(), set)?;
             let anns = match stored.as_mut() {
@@ -199,6 +200,10 @@ impl Stage for AccuracyStage {
                 }
             };
             for trace in &traces {
+                if !scorable(self.setup.env, trace) {
+                    unscored += 1;
+                    continue;
+                }
                 let mine: Vec<&Annotation> = anns
                     .iter()
                     .filter(|a| a.trace_id == trace.trace_id)
@@ -229,7 +234,8 @@ impl Stage for AccuracyStage {
             summary: json!({
                 "env": self.setup.env.as_str(),
                 "library": lib.name,
-                "traces": n_traces,
+                "traces": n_traces - unscored,
+                "unscored": unscored,
                 "tolerance": self.tolerance,
                 "merge": self.merge,
                 "hide_events": self.hide_events,
@@ -241,9 +247,15 @@ impl Stage for AccuracyStage {
                 "markdown": markdown(&ordered),
             }),
             line: format!(
-                "{n_traces} trace(s), {} event-grounded label(s) of {}: lowest F1 {min_f1:.3}",
+                "{} trace(s), {} event-grounded label(s) of {}: lowest F1 {min_f1:.3}{}",
+                n_traces - unscored,
                 ordered.len(),
-                lib.name
+                lib.name,
+                if unscored > 0 {
+                    format!(" ({unscored} trace(s) without a contact log not scored)")
+                } else {
+                    String::new()
+                }
             ),
         })
     }
