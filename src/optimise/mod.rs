@@ -11,8 +11,10 @@
 pub mod anneal;
 pub mod billiards;
 pub mod plot;
+pub mod scenes;
 
 pub use anneal::{Annealer, Dim, Schedule};
 pub use billiards::{
     Chain, CheckpointRow, GoalTask, RewardKind, Settings, ShotBounds, Timings, run_chains,
 };
+pub use scenes::{Layout, scenes};

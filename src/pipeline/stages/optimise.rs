@@ -18,10 +18,11 @@ use serde_json::{Value, json};
 
 use super::annotate::{DetectorSetup, SANDBOX_PARAMS, write};
 use crate::detect::Library;
-use crate::envs::Environment;
 use crate::envs::pool::PoolEnv;
 use crate::optimise::plot::{curves, png, svg};
-use crate::optimise::{Chain, GoalTask, RewardKind, Schedule, Settings, ShotBounds, run_chains};
+use crate::optimise::{
+    Chain, GoalTask, Layout, RewardKind, Schedule, Settings, ShotBounds, run_chains, scenes,
+};
 use crate::pipeline::params::{ParamSpec, ParamType};
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
@@ -56,6 +57,12 @@ const PARAMS: &[ParamSpec] = &[
         ParamType::Count,
         "1000",
         "seed of the held-out scenes (pick one no training or library data used)",
+    ),
+    ParamSpec::optional(
+        "layout",
+        ParamType::Choice(&["scatter", "rack"]),
+        "\"scatter\"",
+        "held-out scenes: balls scattered over the table, or 9-ball racks",
     ),
     ParamSpec::optional(
         "seeds",
@@ -140,6 +147,7 @@ pub struct OptimiseStage {
     setup: DetectorSetup,
     scenes: usize,
     scene_seed: u64,
+    layout: Layout,
     seeds: u64,
     budget: usize,
     checkpoint: usize,
@@ -253,6 +261,12 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     Ok(Box::new(OptimiseStage {
         scenes: count("scenes", 1)? as usize,
         scene_seed: count("scene_seed", 0)?,
+        layout: p
+            .get("layout")
+            .and_then(Value::as_str)
+            .unwrap_or("scatter")
+            .parse()
+            .map_err(|e: String| BuildError::param("layout", e))?,
         seeds: count("seeds", 1)?,
         budget: count("budget", 1)? as usize,
         checkpoint: count("checkpoint", 1)? as usize,
@@ -305,9 +319,8 @@ impl Stage for OptimiseStage {
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
         let mut env = PoolEnv::default();
         env.trace.dt = self.dt;
-        let scenes = env
-            .scenes(self.scenes, self.scene_seed)
-            .map_err(|e| StageError::Input(e.to_string()))?;
+        let scenes =
+            scenes(&env, self.layout, self.scenes, self.scene_seed).map_err(StageError::Input)?;
         let settings = Settings {
             env,
             bounds: self.bounds,
@@ -499,7 +512,7 @@ impl Stage for OptimiseStage {
             files: vec![svg_path, png_path],
             summary: json!({
                 "goals": self.goal_ids, "goal_file": self.goals.path, "library": self.library.name,
-                "scenes": self.scenes, "scene_seed": self.scene_seed, "seeds": self.seeds,
+                "scenes": self.scenes, "scene_seed": self.scene_seed, "layout": format!("{:?}", self.layout).to_lowercase(), "seeds": self.seeds,
                 "budget": self.budget, "checkpoint": self.checkpoint, "dt": self.dt,
                 "bounds": {"v0": self.bounds.v0, "theta": self.bounds.theta, "max_offset": self.bounds.max_offset},
                 "timings": totals, "final_success": last,
