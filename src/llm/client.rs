@@ -129,14 +129,21 @@ impl LlmClient {
         let endpoint = config.base_url.as_deref().map(endpoint_url).transpose()?;
         let shown = endpoint.as_deref().map(redact_url).unwrap_or_default();
         let http = match &endpoint {
-            Some(_) => Some(
-                reqwest::blocking::Client::builder()
+            Some(url) => {
+                let mut b = reqwest::blocking::Client::builder()
                     .timeout(config.timeout)
                     .connect_timeout(config.connect_timeout)
-                    .user_agent(format!("annotrace/{}", crate::VERSION))
-                    .build()
-                    .map_err(|e| LlmError::Config(format!("HTTP client: {e}")))?,
-            ),
+                    .user_agent(format!("annotrace/{}", crate::VERSION));
+                // A server on this machine is reached directly even when HTTP(S)_PROXY is set
+                // without a NO_PROXY for it (other hosts follow the proxy variables).
+                if is_loopback(url) {
+                    b = b.no_proxy();
+                }
+                Some(
+                    b.build()
+                        .map_err(|e| LlmError::Config(format!("HTTP client: {e}")))?,
+                )
+            }
             None => None,
         };
         let replay = config
@@ -531,9 +538,48 @@ fn estimate_prompt(req: &ChatRequest) -> u64 {
         + 3
 }
 
+/// Whether the URL's host is `localhost` or a loopback address.
+fn is_loopback(url: &str) -> bool {
+    let rest = url.split_once("://").map_or(url, |(_, r)| r);
+    let auth = rest.split(['/', '?', '#']).next().unwrap_or("");
+    let host = auth.rsplit('@').next().unwrap_or(auth);
+    let host = match host.strip_prefix('[') {
+        Some(v6) => v6.split(']').next().unwrap_or(""),
+        None => host.split(':').next().unwrap_or(""),
+    };
+    host.eq_ignore_ascii_case("localhost")
+        || host
+            .parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.is_loopback())
+}
+
 fn same_dir(a: &Path, b: &Path) -> bool {
     match (a.canonicalize(), b.canonicalize()) {
         (Ok(a), Ok(b)) => a == b,
         _ => a == b,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn loopback_hosts_are_recognised() {
+        for u in [
+            "http://localhost:8080/v1/chat/completions",
+            "http://127.0.0.1:1/v1",
+            "http://u:p@127.0.0.2/x",
+            "http://[::1]:8080/v1",
+        ] {
+            assert!(is_loopback(u), "{u}");
+        }
+        for u in [
+            "https://api.example.com/v1",
+            "http://10.0.0.5:8000",
+            "http://localhost.evil.com/",
+        ] {
+            assert!(!is_loopback(u), "{u}");
+        }
     }
 }

@@ -685,13 +685,16 @@ fn suggest_labels_reports_bad_configuration_and_unusable_answers() {
         t.csv("run", "SELECT count(*) AS n FROM llm_calls").trim(),
         "n\n1"
     );
-    // A bullet-list answer works too.
+    // A bullet-list answer works too; a local endpoint is reached directly despite a proxy setting.
     let server = ChatServer::start(vec![Reply::chat(
         "- Jump shot: the cue ball leaves the cloth\n- Stop shot",
     )]);
     let env = [
         ("ANNOTRACE_LLM_BASE_URL", server.url()),
         ("ANNOTRACE_LLM_MODEL", "m".into()),
+        ("HTTP_PROXY", "http://127.0.0.1:9".into()),
+        ("http_proxy", "http://127.0.0.1:9".into()),
+        ("ALL_PROXY", "http://127.0.0.1:9".into()),
     ];
     let env_ref: Vec<(&str, &str)> = env.iter().map(|(k, v)| (*k, v.as_str())).collect();
     cli(
