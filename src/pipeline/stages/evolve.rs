@@ -350,6 +350,19 @@ pub(crate) fn split(
     (train, hold)
 }
 
+/// The files of a written library folder (the runner removes a stage's files before it reruns).
+fn library_files(dir: &std::path::Path) -> Vec<PathBuf> {
+    let mut out: Vec<PathBuf> = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.is_file())
+        .collect();
+    out.sort();
+    out
+}
+
 /// Rounds checkpointed as shards of the stage.
 struct StagingCheckpoint<'a, 'b> {
     ctx: &'a StageContext<'b>,
@@ -629,7 +642,7 @@ impl Stage for EvolveStage {
         );
         Ok(StageOutput {
             rows,
-            files: vec![out_dir.clone()],
+            files: library_files(&out_dir),
             summary: json!({
                 "env": env.as_str(),
                 "seed": config.seed,
