@@ -118,7 +118,7 @@ pub fn suggest_labels(
 }
 
 /// Labels from an answer: the last JSON array of objects with a `label` (or `name`) field, or of
-/// strings, in a fence or bare; failing that, the items of a bullet or numbered list, split into label
+/// strings, in the last fence that has one, or else anywhere in the text; failing that, the items of a bullet or numbered list, split into label
 /// and description at the first ` — `, ` – `, ` - ` or `: `.
 pub fn parse_labels(answer: &str) -> Result<Vec<SuggestedLabel>, LabelsError> {
     let text = strip_think(answer);
@@ -126,9 +126,7 @@ pub fn parse_labels(answer: &str) -> Result<Vec<SuggestedLabel>, LabelsError> {
     candidates.reverse();
     candidates.push(&text);
     for c in candidates {
-        if let Some(v) = json_array(c)
-            && let Some(labels) = labels_of_json(&v)
-        {
+        if let Some(labels) = labels_in_json(c) {
             return Ok(labels);
         }
     }
@@ -141,21 +139,37 @@ pub fn parse_labels(answer: &str) -> Result<Vec<SuggestedLabel>, LabelsError> {
     })
 }
 
-/// The last `[...]` span of `s` that parses as a JSON array.
-fn json_array(s: &str) -> Option<Value> {
-    let t = s.trim();
-    if let Ok(v @ Value::Array(_)) = serde_json::from_str::<Value>(t) {
-        return Some(v);
-    }
-    let ends: Vec<usize> = t.match_indices(']').map(|(i, _)| i).collect();
-    for &end in ends.iter().rev() {
-        for (start, _) in t[..end].match_indices('[') {
-            if let Ok(v @ Value::Array(_)) = serde_json::from_str::<Value>(&t[start..=end]) {
-                return Some(v);
+/// Most `[` positions tried when looking for a JSON array in prose. A failed try stops at the first
+/// invalid token (and nesting deeper than 128 fails), so this bounds the work on bracket-heavy answers
+/// (code) to well under a second.
+const MAX_ARRAY_STARTS: usize = 50_000;
+
+/// The labels of the last JSON array in `s` that holds labels: each `[` is tried as the start of one
+/// JSON value (parsing stops at the value's end, or early at the first invalid token); a found array is
+/// skipped over whole, so arrays nested inside it are not taken instead.
+fn labels_in_json(s: &str) -> Option<Vec<SuggestedLabel>> {
+    let mut found = None;
+    let mut pos = 0;
+    let mut tries = 0;
+    while let Some(i) = s[pos..].find('[') {
+        let start = pos + i;
+        tries += 1;
+        if tries > MAX_ARRAY_STARTS {
+            break;
+        }
+        let mut stream = serde_json::Deserializer::from_str(&s[start..]).into_iter::<Value>();
+        match stream.next() {
+            Some(Ok(v)) => {
+                let end = start + stream.byte_offset();
+                if let Some(labels) = labels_of_json(&v) {
+                    found = Some(labels);
+                }
+                pos = end.max(start + 1);
             }
+            _ => pos = start + 1,
         }
     }
-    None
+    found
 }
 
 fn labels_of_json(v: &Value) -> Option<Vec<SuggestedLabel>> {
@@ -276,6 +290,78 @@ mod tests {
             ]
         );
         assert_eq!(l[0].description, "the cue ball drops into a pocket.");
+    }
+
+    /// Seeded random answers stitched from the pieces models emit (fences, think tags, brackets,
+    /// bullets, multi-byte text): the parsers return values or typed errors and never panic.
+    #[test]
+    fn random_answers_never_panic_the_parsers() {
+        const PIECES: &[&str] = &[
+            "```",
+            "```python\n",
+            "```json\n",
+            "```py",
+            "\n",
+            "  ",
+            "<think>",
+            "</think>",
+            "def find_pattern(trace):\n",
+            "    return []\n",
+            "def helper(x):",
+            "X = 1\n",
+            "[",
+            "]",
+            "{",
+            "}",
+            "\"label\": ",
+            "\"name\"",
+            ",",
+            ":",
+            "- ",
+            "* ",
+            "1. ",
+            "2) ",
+            "— ",
+            "–",
+            "é",
+            "日本",
+            "🎱",
+            "**",
+            "`",
+            "\"",
+            "null",
+            "42",
+            "Sure! ",
+            "# c\n",
+            "else:\n",
+            "\r\n",
+            "\u{0}",
+        ];
+        let mut state = 0x5eed_u64;
+        let mut next = || {
+            state = crate::llm::backoff::splitmix64(state);
+            state
+        };
+        for _ in 0..3000 {
+            let n = (next() % 24) as usize;
+            let text: String = (0..n)
+                .map(|_| PIECES[(next() % PIECES.len() as u64) as usize])
+                .collect();
+            let _ = crate::llm::extract_code(&text);
+            let _ = parse_labels(&text);
+            let _ = fences(&text);
+            let _ = strip_think(&text);
+        }
+    }
+
+    #[test]
+    fn the_outer_array_wins_and_bracket_heavy_answers_stay_cheap() {
+        let a = "[{\"label\": \"outer one\", \"description\": \"[\\\"x\\\"]\"}, {\"label\": \"outer two\"}]";
+        let l = parse_labels(a).unwrap();
+        assert_eq!(l.len(), 2);
+        assert_eq!(l[0].description, "[\"x\"]");
+        let noisy = format!("{}\n[\"real label\"]", "x[[[[ ]] ".repeat(5_000));
+        assert_eq!(parse_labels(&noisy).unwrap()[0].label, "real label");
     }
 
     #[test]
