@@ -28,7 +28,7 @@ enum Command {
     Eval(EvalArgs),
     /// Ask the configured LLM for a program for a goal sentence, repairing it on parse, check or
     /// execution errors (calls recorded in --run DIR's llm_calls).
-    Synthesise(SynthArgs),
+    Synthesise(Box<SynthArgs>),
 }
 
 #[derive(clap::Args, Debug)]
@@ -100,7 +100,7 @@ pub fn run(args: Args) -> CliResult {
     match args.command {
         Command::Check(a) => check(a),
         Command::Eval(a) => eval(a),
-        Command::Synthesise(a) => synthesise(a),
+        Command::Synthesise(a) => synthesise(*a),
     }
 }
 

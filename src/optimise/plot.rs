@@ -90,7 +90,7 @@ impl Frame {
         let y_max = if y_top <= 0.0 {
             0.1
         } else {
-            ((y_top * 10.0).ceil() / 10.0).min(1.0).max(0.1)
+            ((y_top * 10.0).ceil() / 10.0).clamp(0.1, 1.0)
         };
         Frame { x_max, y_max }
     }

@@ -237,7 +237,7 @@ fn pool_ball_of(color: &str, shape: &str) -> Vec<&'static str> {
         return Vec::new();
     };
     if shape.contains("stripe") {
-        stripe.into_iter().copied().collect()
+        stripe.iter().copied().collect()
     } else {
         std::iter::once(*solid).chain(*stripe).collect()
     }

@@ -431,6 +431,9 @@ fn object_id_and_cue_hit_from_the_event_log() {
     assert_eq!(e.category, ErrorCategory::Runtime);
 }
 
+/// A trace with its annotations.
+type Story = (Trace, Vec<Annotation>);
+
 /// A story: annotations plus the first ball the cue ball hits and when.
 fn story(first_hit: (&str, f64), anns: Vec<Annotation>) -> (Trace, Vec<Annotation>) {
     let mut tr = trace();
@@ -466,7 +469,7 @@ fn every_paper_goal_means_its_sentence() {
     let episode = |l: &str, b: &str, t0: f64, t1: f64| ann(l, t0, t1, &[b], json!({}));
     let pair = |l: &str, b: &str, t: f64| ann(l, t, t + 0.01, &["cue", b], json!({}));
     // (goal, the sentence acted out in order, the same events in an order the sentence excludes)
-    let cases: Vec<(&str, (Trace, Vec<Annotation>), (Trace, Vec<Annotation>))> = vec![
+    let cases: Vec<(&str, Story, Story)> = vec![
         (
             "curve-pot-8",
             story(("8", 0.6), vec![curve(0.2), pocket("8", 1.2)]),
