@@ -24,6 +24,7 @@ pub const FUNCTION_NAMES: &[&str] = &[
     "NEARBY_AT",
     "OBJECT_ID",
     "CUE_HIT",
+    "POCKETED",
 ];
 
 /// Parses and checks `text` against `schema`.
@@ -278,19 +279,43 @@ impl Checker<'_> {
                     cmp,
                 }
             }
-            "CUE_HIT" => {
+            "CUE_HIT" | "POCKETED" => {
                 if self.schema.env != Env::Pooltool {
                     return Err(err(
                         ErrorCategory::UnknownFunction,
                         e.pos,
                         format!(
-                            "CUE_HIT is a billiards fact; it does not exist for {}",
+                            "{f} is a billiards fact; it does not exist for {}",
                             self.schema.env
                         ),
                     ));
                 }
-                let b = bind(f, e.pos, args, &["ball"], 1, false)?;
-                NodeKind::CueHit(self.obj(f, b.slots[0].expect("required"))?)
+                if f == "POCKETED" {
+                    let b = bind(f, e.pos, args, &["ball", "pocket"], 1, false)?;
+                    let pocket = match b.get(1) {
+                        None => None,
+                        Some(x) => match &x.kind {
+                            ExprKind::Str(s) => Some(s.clone()),
+                            _ => {
+                                return Err(err(
+                                    ErrorCategory::ArgumentType,
+                                    x.pos,
+                                    format!(
+                                        "POCKETED: `pocket` is a pocket id string (lb, lc, lt, rb, rc, rt), found {}",
+                                        x.type_name()
+                                    ),
+                                ));
+                            }
+                        },
+                    };
+                    NodeKind::Pocketed {
+                        ball: self.obj(f, b.slots[0].expect("required"))?,
+                        pocket,
+                    }
+                } else {
+                    let b = bind(f, e.pos, args, &["ball"], 1, false)?;
+                    NodeKind::CueHit(self.obj(f, b.slots[0].expect("required"))?)
+                }
             }
             "AFTER" | "WITHIN" => self.after(f, e.pos, args)?,
             "NEARBY_AT" => {
@@ -437,7 +462,7 @@ impl Checker<'_> {
                         e.pos,
                         format!(
                             "{f} orders events in time: this argument must be a label, PATTERN, PATTERN_COUNT, \
-                             CUE_HIT, AFTER, WITHIN or an OR of those, found `{}`",
+                             CUE_HIT, POCKETED, AFTER, WITHIN or an OR of those, found `{}`",
                             match &e.kind {
                                 ExprKind::Call { name, .. } => name.as_str(),
                                 _ => "?",

@@ -178,6 +178,20 @@ impl Eval<'_, '_> {
                 let k = (*min_count).max(1) as usize;
                 all.get(k - 1).cloned().into_iter().collect()
             }
+            NodeKind::Pocketed { ball, pocket } => {
+                let id = Value::from(self.id(ball)?);
+                self.trace
+                    .pockets()
+                    .iter()
+                    .filter(|(b, p, _)| {
+                        value_matches(&id, &Value::from(b.as_str()))
+                            && pocket
+                                .as_ref()
+                                .is_none_or(|want| want.eq_ignore_ascii_case(p))
+                    })
+                    .map(|(_, _, o)| o.clone())
+                    .collect()
+            }
             NodeKind::CueHit(b) => {
                 let id = self.id(b)?;
                 match self.trace.cue_hit() {
@@ -254,6 +268,7 @@ impl Eval<'_, '_> {
         Ok(match &n.kind {
             NodeKind::Pattern(_)
             | NodeKind::CueHit(_)
+            | NodeKind::Pocketed { .. }
             | NodeKind::After { .. }
             | NodeKind::PatternCount { .. } => !self.occurrences(n)?.is_empty(),
             NodeKind::Count { pattern, n: k, cmp } => {

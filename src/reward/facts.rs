@@ -30,6 +30,7 @@ pub struct AnnotatedTrace<'a> {
     pub trace: &'a Trace,
     by_label: HashMap<String, Vec<Occurrence>>,
     cue_hit: Option<(String, Occurrence)>,
+    pockets: Vec<(String, String, Occurrence)>,
 }
 
 /// Unit length of `NEARBY_AT` thresholds per environment: `threshold_strength × scale` is the radius.
@@ -92,10 +93,16 @@ impl<'a> AnnotatedTrace<'a> {
         } else {
             None
         };
+        let pockets = if trace.env == Env::Pooltool {
+            pocket_drops(trace)
+        } else {
+            Vec::new()
+        };
         AnnotatedTrace {
             trace,
             by_label,
             cue_hit,
+            pockets,
         }
     }
 
@@ -110,6 +117,11 @@ impl<'a> AnnotatedTrace<'a> {
     /// The first ball the cue ball touches, and that contact as an occurrence.
     pub fn cue_hit(&self) -> Option<&(String, Occurrence)> {
         self.cue_hit.as_ref()
+    }
+
+    /// Balls that dropped, in time order: (ball, pocket, the drop as an occurrence).
+    pub fn pockets(&self) -> &[(String, String, Occurrence)] {
+        &self.pockets
     }
 
     /// The id of the object of `color` and `shape` in the trace's first timestep.
@@ -292,4 +304,35 @@ fn first_cue_contact(trace: &Trace) -> Option<(String, Occurrence)> {
             params,
         },
     ))
+}
+
+/// Every `physics_ball_pocket` event: (ball, pocket, the drop placed on the timestep clock).
+fn pocket_drops(trace: &Trace) -> Vec<(String, String, Occurrence)> {
+    let mut out: Vec<(String, String, Occurrence)> = trace
+        .events
+        .iter()
+        .filter(|e| e.kind == "physics_ball_pocket")
+        .filter_map(|e| {
+            let t = e.t?;
+            let agents = e.payload.as_ref()?.get("agents")?.as_array()?;
+            let ball = agents.first()?.as_str()?.to_string();
+            let pocket = agents.get(1)?.as_str()?.to_string();
+            let t0 = snap(trace, t);
+            let mut params = Map::new();
+            params.insert("t".into(), Value::from(t));
+            params.insert("pocket".into(), Value::from(pocket.clone()));
+            Some((
+                ball.clone(),
+                pocket.clone(),
+                Occurrence {
+                    t0,
+                    t1: t0,
+                    objects: vec![ball, pocket],
+                    params,
+                },
+            ))
+        })
+        .collect();
+    out.sort_by(|a, b| a.2.t0.total_cmp(&b.2.t0));
+    out
 }

@@ -64,6 +64,14 @@ pub enum NodeKind {
     },
     /// `CUE_HIT(ball)`: the first ball the cue ball touches is `ball` (an event at that contact).
     CueHit(ObjRef),
+    /// `POCKETED(ball, pocket?)`: billiards, `ball` drops (into `pocket`), from the trace's
+    /// `physics_ball_pocket` events (an event at the drop).
+    Pocketed {
+        /// The ball.
+        ball: ObjRef,
+        /// The pocket id (`lb`, `lc`, `lt`, `rb`, `rc`, `rt`), any when absent.
+        pocket: Option<String>,
+    },
     /// `AFTER(a, b, …)` / `WITHIN(a, b, window, …)`: an occurrence of `a` starts no earlier than one of
     /// `b`, with `min_delta <= t_a - t_b <= max_delta`; as an event, the qualifying occurrences of `a`.
     After {
@@ -104,6 +112,7 @@ impl NodeKind {
             NodeKind::Pattern(_)
             | NodeKind::PatternCount { .. }
             | NodeKind::CueHit(_)
+            | NodeKind::Pocketed { .. }
             | NodeKind::After { .. } => true,
             NodeKind::Or(xs) => xs.iter().all(|x| x.kind.is_event()),
             _ => false,

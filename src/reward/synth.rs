@@ -39,6 +39,7 @@ pub fn dsl_reference(env: Env) -> String {
     if env == Env::Pooltool {
         s.push_str(
             "- CUE_HIT(ball): true when the first ball the cue ball touches is `ball` (an event at that contact).\n\
+- POCKETED(ball, pocket=None): true when `ball` drops (into that pocket: lb, lc, lt, rb, rc, rt), an event at the drop.\n\
 Ball ids are strings: \"cue\", \"1\" ... \"9\" (1 yellow, 2 blue, 3 red, 4 purple, 5 orange, 6 green, 7 brown, 8 black, 9 yellow stripe).\n",
         );
     }

@@ -431,6 +431,37 @@ fn object_id_and_cue_hit_from_the_event_log() {
     assert_eq!(e.category, ErrorCategory::Runtime);
 }
 
+#[test]
+fn pocketed_comes_from_the_event_log() {
+    let (mut tr, a) = basic();
+    tr.events.push(event(
+        "physics_ball_pocket",
+        1.234,
+        json!({"agents": ["3", "rt"], "ball": "3"}),
+    ));
+    tr.events.push(event(
+        "physics_ball_pocket",
+        1.5,
+        json!({"agents": ["cue", "lb"], "ball": "cue"}),
+    ));
+    assert!(run(r#"POCKETED("3")"#, &tr, &a).success);
+    assert!(run(r#"POCKETED(OBJECT_ID("red", "ball"), "RT")"#, &tr, &a).success);
+    assert!(!run(r#"POCKETED("3", "lb")"#, &tr, &a).success);
+    assert!(!run(r#"POCKETED("8")"#, &tr, &a).success);
+    assert!(
+        run(
+            r#"AFTER(POCKETED("3"), CUE_HIT("3"), min_delta=0.7)"#,
+            &tr,
+            &a
+        )
+        .success
+    );
+    assert!(run(r#"AFTER(POCKETED("cue"), POCKETED("3"))"#, &tr, &a).success);
+    assert!(!run(r#"AFTER(POCKETED("3"), POCKETED("cue"))"#, &tr, &a).success);
+    let e = compile(r#"POCKETED("3", 4)"#, &schema()).unwrap_err();
+    assert_eq!((e.category, e.pos.col), (ErrorCategory::ArgumentType, 15));
+}
+
 /// A trace with its annotations.
 type Story = (Trace, Vec<Annotation>);
 
