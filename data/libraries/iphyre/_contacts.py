@@ -1,11 +1,13 @@
 """Prelude: contact episodes of object pairs, from the `contact_begin` / `contact_end` events when the
-trace has them, else from the capsule geometry of the frames (gap between the two capsules at most
-CONTACT_GAP px). A pair's contact that begins again within MERGE_S (50 ms) of its end is the same
+trace has them, else from the capsule geometry of the frames: a contact begins when the gap between the two capsules
+is at most CONTACT_GAP px and lasts while it stays at most KEEP_GAP px (hysteresis, so a resting pair
+does not flicker). A pair's contact that begins again within MERGE_S (50 ms) of its end is the same
 contact (rapier reports a ball crossing a block joint or resting on two blocks as end/begin chatter).
 
 library.toml prepends it to the detectors that list it; it defines no find_pattern."""
 
-CONTACT_GAP = 2.0
+CONTACT_GAP = 0.25
+KEEP_GAP = 1.0
 
 
 def _seg_point(px, py, ax, ay, bx, by):
@@ -94,10 +96,13 @@ def _contacts(trace):
                 o1, o2 = objs[i], objs[j]
                 if not (o1.get("dynamic") or o2.get("dynamic")):
                     continue
-                if _gap(o1, o2) > CONTACT_GAP:
+                gap = _gap(o1, o2)
+                if gap > KEEP_GAP:
                     continue
                 key = tuple(sorted((str(o1.get("index")), str(o2.get("index")))))
                 g = groups.get(key)
+                if gap > CONTACT_GAP and (g is None or g["last_k"] != k - 1):
+                    continue
                 if g is not None and (g["last_k"] == k - 1 or ts[k] - g["t1"] <= MERGE_S):
                     if g["last_k"] != k - 1:
                         g["begins"].append(ts[k])

@@ -4,7 +4,7 @@ A transfer is either a collision (contact begin, chatter merged) in which a stri
 MOVING_V px/s hits a dynamic object at rest (at most REST_V px/s in the frame before) that moves at least
 MOVING_V within START_S after, a pull through a spring or joint: an object at rest whose spring/joint
 partner started moving before it starts moving itself within START_S, or a release: a click removes a
-block (`action_applied`) and a dynamic object at rest touching it starts moving within RELEASE_S. Transfers link into a chain when
+block (`action_applied`, or without events an eliminable block vanishing) and a dynamic object at rest touching it starts moving within RELEASE_S. Transfers link into a chain when
 the object set moving by one moves the next within GAP_S. A chain of at least two transfers (three
 objects) is one pattern, from the first transfer to the last; roles name each object's place in the
 chain and parameters say how each link passed the motion on.
@@ -63,17 +63,22 @@ def find_pattern(trace):
             for tq in onsets.get(q, []):
                 if any(0.0 < tq - tp <= START_S for tp in onsets.get(p, [])):
                     transfers.append((tq, p, q, kind))
-    for t, p in _events(trace, ("action_applied",)):
-        gone = str(p.get("eliminated_object")) if p.get("effective") is True else None
-        if gone is None:
-            continue
+    removals = [(t, str(p.get("eliminated_object"))) for t, p in _events(trace, ("action_applied",))
+                if p.get("effective") is True]
+    if not _events(trace, ("action_applied", "scheduled_action")):
+        # No event log: an eliminable block that vanishes between two frames was removed.
+        for oid, m in kin.items():
+            k_last = m["k"][-1]
+            if m["o"][-1].get("eliminable") and k_last + 1 < len(ts):
+                removals.append((ts[k_last + 1], oid))
+    for t, gone in removals:
         pre = max(_at(ts, t) - 1, 0)
         og = _obj_at(trace, pre, gone)
         if og is None:
             continue
         for o in trace["timesteps"][pre].get("objects", []):
             oid = str(o.get("index"))
-            if oid == gone or not o.get("dynamic") or _gap(og, o) > CONTACT_GAP:
+            if oid == gone or not o.get("dynamic") or _gap(og, o) > KEEP_GAP:
                 continue
             if _speed_at(kin, oid, pre) > REST_V:
                 continue

@@ -30,7 +30,7 @@ def find_pattern(trace):
         if gone is not None:
             for o in trace["timesteps"][a0].get("objects", []):
                 other = str(o.get("index"))
-                if other != oid and o.get("dynamic") and _gap(gone, o) <= CONTACT_GAP:
+                if other != oid and o.get("dynamic") and _gap(gone, o) <= KEEP_GAP:
                     det[other] = _detail(trace, a0, b, other, "released object")
         params = {"object_details": det, "t": round(t, 4)}
         if "x" in p and "y" in p:

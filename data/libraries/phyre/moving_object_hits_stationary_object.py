@@ -19,13 +19,13 @@ def find_pattern(trace):
     out = []
     for g in _contacts(trace):
         x, y = g["pair"]
-        pre = _at(ts, g["t0"] - 1e-9)
+        pre = _at(ts, g["t0"] - 1e-9) if "t_seen" not in g else _at(ts, g["t0"])
         vx, vy = _speed_at(kin, x, pre), _speed_at(kin, y, pre)
         if vy > vx:
             x, y, vx, vy = y, x, vy, vx
         if vx < MOVING_V or vy > AT_REST_V:
             continue
-        s, e, a, b = _span(idx, ts, ts[pre], g["t0"])
+        s, e, a, b = _span(idx, ts, ts[pre], g.get("t_seen", g["t0"]))
         params = {"object_details": {x: _detail(trace, a, b, x, "moving object", speed=round(vx, 1)),
                                      y: _detail(trace, a, b, y, "stationary object", speed=round(vy, 1))},
                   "t": round(g["t0"], 4), "impact_speed": round(vx, 1)}
