@@ -27,7 +27,7 @@ pub fn histogram(active: &[bool], bins: usize) -> Vec<f64> {
         let mut count = vec![0usize; bins];
         let mut on = vec![0usize; bins];
         for (i, &a) in active.iter().enumerate() {
-            let k = (i * bins / n).min(bins - 1);
+            let k = ((i * bins).checked_div(n).unwrap_or(0)).min(bins - 1);
             count[k] += 1;
             on[k] += usize::from(a);
         }

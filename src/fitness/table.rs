@@ -123,7 +123,7 @@ mod tests {
         assert_ne!(id, set_id(&m.ids, 32));
         let b = distances_batch(&id, &m).unwrap();
         assert_eq!(b.num_rows(), 3);
-        let back = matrix_from_batches(&id, &m.ids, &[b.clone()]).unwrap();
+        let back = matrix_from_batches(&id, &m.ids, std::slice::from_ref(&b)).unwrap();
         assert_eq!(back.upper[0], 1.0);
         assert!(back.upper[1].is_nan());
         assert_eq!(back.upper[2], 2.0);

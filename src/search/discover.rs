@@ -191,8 +191,8 @@ impl Discovery<'_> {
         for (i, (bin, r)) in chosen.iter().enumerate() {
             for &f in &finals {
                 let (mut sum, mut n) = (0.0, 0u64);
-                for t in 0..self.holdout.len() {
-                    if let (Some(p), Some(q)) = (&hists[i][t], &hists[f][t]) {
+                for (a, b) in hists[i].iter().zip(&hists[f]) {
+                    if let (Some(p), Some(q)) = (a, b) {
                         sum += similarity(p, q);
                         n += 1;
                     }

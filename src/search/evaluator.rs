@@ -82,11 +82,11 @@ pub enum Evaluation {
     },
 }
 
+/// Per trace: the activation vector, the wall time (s) and the number of patterns.
+type Activations = (Vec<Vec<bool>>, Vec<f64>, Vec<usize>);
+
 /// The per-trace activations of detector 0 of a batch, or its first failure.
-fn activations(
-    batch: &BatchResult,
-    traces: &[Trace],
-) -> Result<(Vec<Vec<bool>>, Vec<f64>, Vec<usize>), DetectorError> {
+fn activations(batch: &BatchResult, traces: &[Trace]) -> Result<Activations, DetectorError> {
     let mut act = vec![Vec::new(); traces.len()];
     let mut time = vec![0.0; traces.len()];
     let mut count = vec![0usize; traces.len()];

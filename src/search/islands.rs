@@ -122,7 +122,7 @@ fn softmax_pick(scores: &[f64], temperature: f64, rng: &mut SplitMix64) -> usize
         return 0;
     }
     let max = scores.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
-    if !(temperature > 1e-9) || !max.is_finite() {
+    if temperature.is_nan() || temperature <= 1e-9 || !max.is_finite() {
         return scores.iter().position(|&s| s == max).unwrap_or(0);
     }
     let w: Vec<f64> = scores

@@ -230,7 +230,7 @@ impl State {
             let step = r.step as u64;
             if let Some(db) = &mut self.db {
                 self.best_by_step.push(db.best().terms.nu);
-                if cfg.reset_period > 0 && (step + 1) % cfg.reset_period == 0 {
+                if cfg.reset_period > 0 && (step + 1).is_multiple_of(cfg.reset_period) {
                     let mut rng =
                         SplitMix64::new(mix(&[cfg.seed, u64::from(label_index), step, 0x4E5E7]));
                     db.reset(&mut rng);

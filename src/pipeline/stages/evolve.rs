@@ -363,6 +363,9 @@ fn library_files(dir: &std::path::Path) -> Vec<PathBuf> {
     out
 }
 
+/// The proposer of a stage and, for the LLM proposer, its client (flushed at the end).
+type ProposerAndClient = (Box<dyn Proposer>, Option<Arc<LlmClient>>);
+
 /// Rounds checkpointed as shards of the stage.
 struct StagingCheckpoint<'a, 'b> {
     ctx: &'a StageContext<'b>,
@@ -414,11 +417,7 @@ impl Checkpoint for StagingCheckpoint<'_, '_> {
 
 impl EvolveStage {
     /// The proposer this stage uses (see the `proposer` parameter), and the LLM client behind it.
-    fn proposer(
-        &self,
-        ctx: &StageContext<'_>,
-        seed: u64,
-    ) -> Result<(Box<dyn Proposer>, Option<Arc<LlmClient>>), StageError> {
+    fn proposer(&self, ctx: &StageContext<'_>, seed: u64) -> Result<ProposerAndClient, StageError> {
         let env_url = std::env::var(crate::llm::ENV_BASE_URL)
             .ok()
             .filter(|v| !v.trim().is_empty());
