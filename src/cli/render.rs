@@ -38,7 +38,7 @@ pub struct Args {
     /// I-PHYRE: number the eliminable blocks 0…k−1 (the action indices DeepPHY shows a VLM).
     #[arg(long)]
     indices: bool,
-    /// PHYRE: draw this task's initial scene (no run needed), e.g. `00004:012`.
+    /// PHYRE: draw this task's initial scene (no run needed), e.g. `00004:063`.
     #[arg(long, conflicts_with_all = ["run", "trace", "frames", "t", "game"])]
     task: Option<String>,
     /// PHYRE: draw DeepPHY's 8×8 grid with cells numbered 1–64 from the top-left.

@@ -69,12 +69,12 @@ pub struct Args {
     /// iphyre replay mode: clicks `x,y,t;…` (px, s) or `k@t;…` (remove eliminable block k at t s).
     #[arg(long, requires = "game")]
     clicks: Option<String>,
-    /// phyre dataset mode: comma-separated template ids (00003), task ids (00003:012), fold splits
+    /// phyre dataset mode: comma-separated template ids (00003), task ids (00003:002), fold splits
     /// (ball_cross_template/0/test) or all; --scenes tasks round-robin over templates, --shots random
     /// valid actions per task.
     #[arg(long, default_value = "all", conflicts_with = "task")]
     tasks: String,
-    /// phyre replay mode: the task id, e.g. 00004:012.
+    /// phyre replay mode: the task id, e.g. 00004:063.
     #[arg(long, requires = "action")]
     task: Option<String>,
     /// phyre replay mode: the action, `[x, y, r]` in [0, 1] (or '{"x": …, "y": …, "r": …}', or DeepPHY's

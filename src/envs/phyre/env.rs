@@ -36,7 +36,7 @@ impl PhyreEnv {
 
 /// The tasks a dataset of `n` tasks uses, in order: template by template round-robin (task `i` is variant
 /// `i / T` of template `i mod T`, T the number of templates), so even a few dozen tasks cover every
-/// template. `only` restricts to the given template ids (`00003`) and task ids (`00003:012`).
+/// template. `only` restricts to the given template ids (`00003`) and task ids (`00003:002`).
 pub fn dataset_tasks(set: &TaskSet, n: usize, only: &[String]) -> Vec<String> {
     let wanted: std::collections::HashSet<&str> = only.iter().map(String::as_str).collect();
     let keep = |id: &str| {

@@ -10,14 +10,14 @@ pub enum PhyreError {
     /// The task file is malformed: not gzip, not JSON, a missing field, a bad body index.
     #[error("invalid PHYRE task data: {field}: {message}")]
     InvalidTask {
-        /// Where (`line 17`, `00003:012 bodies[4].shapes[0]`, …).
+        /// Where (`line 17`, `00003:002 bodies[4].shapes[0]`, …).
         field: String,
         /// What is wrong with it.
         message: String,
     },
     /// A task id that the task set does not have.
     #[error(
-        "unknown PHYRE task {id:?} (ball-tier task ids look like \"00004:012\": template 00000-00024, then a variant number)"
+        "unknown PHYRE task {id:?} (ball-tier task ids look like \"00004:063\": template 00000-00024, then a variant number)"
     )]
     UnknownTask {
         /// The id asked for.

@@ -27,9 +27,9 @@ pub struct PhysicsParams {
     pub steps_for_solution: usize,
     /// Ball–ball goal rule: touching when the centre distance < r₁ + r₂ + this (px): 0.1.
     pub ball_touch_threshold_px: f64,
-    /// Contact distance (m) below which two shapes count as touching. Box2D keeps polygons a skin of
-    /// 0.01 m apart and reports them touching there; rapier keeps no skin, so contacts closer than this
-    /// count. Tuned against PHYRE (docs/fidelity.md).
+    /// Contact distance (m) below which two shapes count as touching: 0.02. Box2D gives every polygon
+    /// a 0.01 m skin and reports shapes touching when their skins meet (0.02 m apart for two polygons);
+    /// rapier keeps no skin, so contacts closer than this count. Tuned against PHYRE (docs/fidelity.md).
     pub touch_distance: f64,
     /// rapier solver iterations per step (Box2D: 15 velocity + 20 position). Tuned (docs/fidelity.md).
     pub solver_iterations: usize,
@@ -37,8 +37,9 @@ pub struct PhysicsParams {
     pub stabilization_iterations: usize,
     /// Whether resting bodies may sleep (Box2D's default world allows sleeping).
     pub sleeping: bool,
-    /// A body may sleep once its furthest point has moved slower than this (m/s) for `sleep_time`
-    /// (Box2D's `b2_linearSleepTolerance` is 0.01 m/s). Tuned (docs/fidelity.md).
+    /// A body may sleep once its furthest point has moved slower than this (m/s) for `sleep_time`:
+    /// 0.05, rapier's default (Box2D's `b2_linearSleepTolerance` is 0.01 m/s, but rapier bodies at rest
+    /// jitter more; 0.05 agreed slightly better with PHYRE and freezes episodes sooner, docs/fidelity.md).
     pub sleep_linear: f64,
     /// Seconds of rest before a body sleeps (Box2D's `b2_timeToSleep`: 0.5).
     pub sleep_time: f64,
@@ -60,11 +61,11 @@ impl Default for PhysicsParams {
             max_steps: 1000,
             steps_for_solution: 180,
             ball_touch_threshold_px: 0.1,
-            touch_distance: 0.01,
+            touch_distance: 0.02,
             solver_iterations: 4,
             stabilization_iterations: 1,
             sleeping: true,
-            sleep_linear: 0.01,
+            sleep_linear: 0.05,
             sleep_time: 0.5,
         }
     }

@@ -19,8 +19,8 @@ pub const DEFAULT_TASKS_GZ: &[u8] = include_bytes!("../../../data/tasks/phyre_ba
 #[derive(Debug)]
 pub struct TaskSet {
     text: String,
-    /// (task id, line byte range), sorted by task id.
-    index: Vec<(String, Range<usize>)>,
+    /// (task id, line byte range, 1-based line number), sorted by task id.
+    index: Vec<(String, Range<usize>, usize)>,
 }
 
 fn bad(field: String, message: impl Into<String>) -> PhyreError {
@@ -77,7 +77,7 @@ impl TaskSet {
                     "expected a JSON object starting with \"task_id\"",
                 )
             })?;
-            index.push((id.to_string(), range));
+            index.push((id.to_string(), range, n + 1));
         }
         index.sort_by(|a, b| a.0.cmp(&b.0));
         if let Some(w) = index.windows(2).find(|w| w[0].0 == w[1].0) {
@@ -98,12 +98,12 @@ impl TaskSet {
 
     /// Every task id, sorted.
     pub fn ids(&self) -> impl ExactSizeIterator<Item = &str> + '_ {
-        self.index.iter().map(|(id, _)| id.as_str())
+        self.index.iter().map(|(id, _, _)| id.as_str())
     }
 
     /// The task id at sorted position `i`.
     pub fn id_at(&self, i: usize) -> Option<&str> {
-        self.index.get(i).map(|(id, _)| id.as_str())
+        self.index.get(i).map(|(id, _, _)| id.as_str())
     }
 
     /// Whether the set has task `id`.
@@ -114,7 +114,7 @@ impl TaskSet {
     /// The sorted position of task `id` (stable for a given task file; seeds datasets).
     pub fn position(&self, id: &str) -> Option<usize> {
         self.index
-            .binary_search_by(|(k, _)| k.as_str().cmp(id))
+            .binary_search_by(|(k, _, _)| k.as_str().cmp(id))
             .ok()
     }
 
@@ -140,13 +140,8 @@ impl TaskSet {
         let i = self
             .position(id)
             .ok_or_else(|| PhyreError::UnknownTask { id: id.to_string() })?;
-        let range = self.index[i].1.clone();
-        let line_no = self.text[..range.start]
-            .bytes()
-            .filter(|&b| b == b'\n')
-            .count()
-            + 1;
-        Task::from_json_line(&self.text[range], &format!("line {line_no}"))
+        let (_, range, line) = &self.index[i];
+        Task::from_json_line(&self.text[range.clone()], &format!("line {line}"))
     }
 }
 

@@ -10,7 +10,7 @@
 //! it (a jar is three convex colliders on one body). Dynamic shapes have density 0.25 kg/m², static ones
 //! none; every shape has friction 0.5 (rapier's `Average` rule gives Box2D's √(f₁f₂) = 0.5) and
 //! restitution 0.2 (`Max`, as Box2D). Bodies get angular damping 0.01 and may sleep with Box2D's
-//! thresholds (0.01 m/s, 0.5 s by default).
+//! rest time (0.5 s) and rapier's 0.05 m/s threshold (`PhysicsParams::sleep_linear`).
 
 use std::collections::HashMap;
 use std::sync::mpsc;

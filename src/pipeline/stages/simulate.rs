@@ -117,9 +117,9 @@ pub static KIND: StageKind = StageKind {
         ParamSpec::maybe(
             "tasks",
             ParamType::Str,
-            "phyre dataset mode: comma-separated template ids (00003), task ids (00003:012), fold splits (ball_cross_template/0/test) or all (default); `scenes` tasks round-robin over templates, `shots` random valid actions each",
+            "phyre dataset mode: comma-separated template ids (00003), task ids (00003:002), fold splits (ball_cross_template/0/test) or all (default); `scenes` tasks round-robin over templates, `shots` random valid actions each",
         ),
-        ParamSpec::maybe("task", ParamType::Str, "phyre replay mode: the task id (00004:012)"),
+        ParamSpec::maybe("task", ParamType::Str, "phyre replay mode: the task id (00004:063)"),
         ParamSpec::maybe(
             "action",
             ParamType::Str,

@@ -7,7 +7,7 @@
 //! simulate anything itself (`envs::phyre`).
 //!
 //! Two modes. **Dataset**: `scenes` tasks taken round-robin over templates from the `tasks` selection
-//! (default all 2,500; items are `all`, template ids `00003`, task ids `00003:012`, and fold splits
+//! (default all 2,500; items are `all`, template ids `00003`, task ids `00003:002`, and fold splits
 //! `ball_within_template/0/test`), with `shots` seeded random valid actions each (uniform draws from
 //! [0, 1]³ until the ball fits, from (`seed`, task, sample) alone, so the tables do not depend on sharding
 //! or thread count). Every `scenes_per_shard` traces make one shard. **Replay**: `task` and `action`
@@ -130,7 +130,7 @@ pub(super) fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage
 }
 
 /// The task ids a `tasks` list selects: comma-separated `all`, template ids (`00003`), task ids
-/// (`00003:012`) and fold splits (`ball_cross_template/0/test`: setup, seed, `train`/`dev`/`test`). An
+/// (`00003:002`) and fold splits (`ball_cross_template/0/test`: setup, seed, `train`/`dev`/`test`). An
 /// empty result means every task.
 pub fn select_tasks(set: &TaskSet, list: &str) -> Result<Vec<String>, String> {
     let mut out = Vec::new();
@@ -162,7 +162,7 @@ pub fn select_tasks(set: &TaskSet, list: &str) -> Result<Vec<String>, String> {
             out.push(item.to_string());
         } else {
             return Err(format!(
-                "{item:?} is neither a PHYRE ball-tier task id (00004:012), a template id (00000-00024), a fold split (ball_within_template/0/test) nor all"
+                "{item:?} is neither a PHYRE ball-tier task id (00004:063), a template id (00000-00024), a fold split (ball_within_template/0/test) nor all"
             ));
         }
     }
@@ -403,8 +403,8 @@ mod tests {
         let set = TaskSet::default_tasks().unwrap();
         assert!(select_tasks(set, "all").unwrap().is_empty());
         assert_eq!(
-            select_tasks(set, "00003, 00004:012").unwrap(),
-            ["00003", "00004:012"]
+            select_tasks(set, "00003, 00004:063").unwrap(),
+            ["00003", "00004:063"]
         );
         assert_eq!(
             select_tasks(set, "ball_cross_template/0/test")
