@@ -25,6 +25,9 @@ use super::task::{Shape, Task};
 /// Box2D's `b2_angularSleepTolerance` (2°/s in rad/s).
 const SLEEP_ANGULAR: f32 = 2.0 * std::f32::consts::PI / 180.0;
 
+/// What the world needs of one body: index, dynamic, origin (px), angle, shapes.
+type BodySpec<'a> = (usize, bool, [f64; 2], f64, &'a [Shape]);
+
 /// A contact change between two bodies during one step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ContactChange {
@@ -116,7 +119,7 @@ impl World {
         let mut dynamic = Vec::new();
         let mut initial = Vec::with_capacity(n);
         let user_shapes;
-        let mut specs: Vec<(usize, bool, [f64; 2], f64, &[Shape])> = task
+        let mut specs: Vec<BodySpec<'_>> = task
             .bodies
             .iter()
             .map(|b| (b.id, b.dynamic, b.position, b.angle, b.shapes.as_slice()))
