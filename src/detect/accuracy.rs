@@ -134,12 +134,19 @@ pub fn grounded(env: Env) -> &'static [&'static str] {
 
 /// The ground truth of a trace of `env`, from its event log (and, for PHYRE, the frame before each
 /// contact).
+///
+/// PHYRE and I-PHYRE events after the trace's last timestep are left out: no pattern can span them (an
+/// imported trace may keep fewer frames than its event log covers).
 pub fn truth(env: Env, trace: &Trace, merge_s: f64) -> Vec<TruthEvent> {
+    let last = trace.timesteps.last().map_or(f64::NEG_INFINITY, |s| s.t);
     match env {
         Env::Pooltool => pooltool_truth(trace, merge_s),
         Env::Iphyre => iphyre_truth(trace, merge_s),
         Env::Phyre => phyre_truth(trace, merge_s),
     }
+    .into_iter()
+    .filter(|e| env == Env::Pooltool || e.t <= last + 1e-9)
+    .collect()
 }
 
 /// Whether a trace's event log can ground its labels: a billiards trace with pooltool events; a PHYRE
@@ -558,6 +565,8 @@ mod tests {
                 ("object removal", 1.2, vec!["4".to_string()]),
             ]
         );
+        // The synthetic trace's 3 steps end at 0.02 s: no pattern could span these events.
+        assert!(super::truth(Env::Iphyre, &trace, 0.05).is_empty());
         assert!(scorable(Env::Iphyre, &trace));
         trace.events.retain(|e| e.kind == "action_applied");
         assert!(

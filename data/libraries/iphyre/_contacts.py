@@ -78,6 +78,8 @@ def _contacts(trace):
                     g["t1"] = t
                     g["ended"] = True
                 continue
+            if t > ts[-1] + 1e-9:
+                continue  # after the last frame: no span can hold it
             if g is not None and (not g["ended"] or t - g["t1"] <= MERGE_S):
                 g["begins"].append(t)
                 g["ended"] = False

@@ -14,7 +14,7 @@ def find_pattern(trace):
     idx, ts = _clock(trace)
     removals = []
     for t, p in _events(trace, ("action_applied",)):
-        if p.get("effective") is True and p.get("eliminated_object") is not None:
+        if p.get("effective") is True and p.get("eliminated_object") is not None and t <= ts[-1] + 1e-9:
             removals.append((t, str(p["eliminated_object"]), p))
     if not _events(trace, ("action_applied", "scheduled_action")):
         for oid, tr in _tracks(trace).items():

@@ -34,6 +34,8 @@ def _contacts(trace):
                 if g is not None:
                     g["t1"], g["ended"] = t, True
                 continue
+            if t > ts[-1] + 1e-9:
+                continue  # after the last frame: no span can hold it
             if g is not None and (not g["ended"] or t - g["t1"] <= MERGE_S):
                 g["begins"].append(t)
                 g["ended"], g["t1"] = False, ts[-1]
