@@ -6,11 +6,12 @@
 //! **Owns:** the games as data ([`Games`], default `data/games/iphyre_games.json`), the physics constants
 //! ([`PhysicsParams`]), the rapier2d world ([`World`]: bodies, capsules, rods, springs, contact events),
 //! clicks and their quirks ([`Click`], [`ClickSchedule`], the discrete adapter [`click_block`], seeded
-//! random click sets [`random_clicks`]), the episode loop ([`Episode`] in `step.rs`), success and reward ([`success`]), and the conversion into an
-//! annotrace [`Trace`](crate::trace::Trace) ([`trace_of`]).
-//! **Does not:** write Parquet or run stages (`pipeline/`), read argv, print, or compare against pymunk
-//! (fidelity and speed checks are separate work). rapier handles never leave this module: the
-//! boundary speaks in the games' object indices.
+//! random click sets [`random_clicks`]), the episode loop ([`Episode`] in `step.rs`), success and
+//! reward ([`success`]), the conversion into an annotrace [`Trace`](crate::trace::Trace)
+//! ([`trace_of`]), pictures ([`render`]) and outcome agreement with the original on a reference set made
+//! offline ([`reference`]).
+//! **Does not:** write Parquet or run stages (`pipeline/stages/simulate_iphyre.rs`), read argv, print, or
+//! run Python. rapier handles never leave this module: the boundary speaks in the games' object indices.
 //!
 //! **Entry point:** [`IphyreEnv`] (the [`Environment`](super::Environment) implementation), or an episode
 //! directly:
