@@ -9,7 +9,7 @@
 //! random click sets [`random_clicks`]), the episode loop ([`Episode`] in `step.rs`), success and
 //! reward ([`success`]), the conversion into an annotrace [`Trace`](crate::trace::Trace)
 //! ([`trace_of`]), pictures ([`render`]) and outcome agreement with the original on a reference set made
-//! offline ([`reference`]).
+//! offline ([`reference`](mod@reference)).
 //! **Does not:** write Parquet or run stages (`pipeline/stages/simulate_iphyre.rs`), read argv, print, or
 //! run Python. rapier handles never leave this module: the boundary speaks in the games' object indices.
 //!
