@@ -86,6 +86,8 @@ fn unknown_traces_and_other_environments_are_input_errors() {
         "r",
     ])
     .ok();
+    // PHYRE traces render too (docs/envs/phyre.md); the example's bodies do not match task 00000:000's,
+    // so they are drawn from the trace's own shape and diameter.
     t.run(&[
         "render",
         "--run",
@@ -95,7 +97,6 @@ fn unknown_traces_and_other_environments_are_input_errors() {
         "--out",
         "x.png",
     ])
-    .code(2)
-    .stderr_has("only pooltool traces");
-    assert!(!t.path("x.png").exists());
+    .ok();
+    assert_eq!(&std::fs::read(t.path("x.png")).unwrap()[1..4], b"PNG");
 }

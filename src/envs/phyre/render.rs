@@ -45,6 +45,43 @@ struct Pose {
     angle: f64,
     /// For the user ball (not in the task): its radius (px).
     radius: Option<f64>,
+    /// The trace's shape name (`ball`, `bar`, `jar`, `wall`, …).
+    shape: String,
+    /// The trace's diameter (px).
+    diameter: f64,
+}
+
+/// A body's pieces in scene coordinates: the task's shapes when the task body matches the pose (same
+/// shape type), else an outline from the pose's own features — a circle for a ball, a bar of the
+/// diameter's length and PHYRE's bar thickness (256/50 px) otherwise — so traces imported from elsewhere
+/// (whose bodies need not match the task file) still draw. Walls are not drawn (they lie outside).
+fn pose_shapes(task: &Task, pose: &Pose) -> Vec<Shape> {
+    if let Some(r) = pose.radius {
+        return vec![Shape::Circle { radius: r }];
+    }
+    if pose.shape == "wall" {
+        return Vec::new();
+    }
+    if let Some(b) = task.bodies.get(pose.index)
+        && !b.is_wall
+        && b.shape_type == pose.shape
+    {
+        return b.world_shapes([pose.x, pose.y], pose.angle);
+    }
+    if pose.shape == "ball" {
+        return vec![Shape::Circle {
+            radius: pose.diameter / 2.0,
+        }];
+    }
+    let (hx, hy) = (pose.diameter / 2.0, task.height / 100.0);
+    let (s, c) = pose.angle.sin_cos();
+    let corner = |u: f64, v: f64| [pose.x + c * u - s * v, pose.y + s * u + c * v];
+    vec![Shape::Polygon(vec![
+        corner(-hx, -hy),
+        corner(hx, -hy),
+        corner(hx, hy),
+        corner(-hx, hy),
+    ])]
 }
 
 fn paint(c: [u8; 3]) -> Paint<'static> {
@@ -149,12 +186,7 @@ fn draw(
     let mut p = new_pixmap(opts.size, opts.size)?;
     p.fill(SkColor::WHITE);
     for pose in poses {
-        let shapes: Vec<Shape> = match (pose.radius, task.bodies.get(pose.index)) {
-            (Some(r), _) => vec![Shape::Circle { radius: r }],
-            (None, Some(b)) if !b.is_wall => b.world_shapes([pose.x, pose.y], pose.angle),
-            _ => continue,
-        };
-        for shape in shapes {
+        for shape in pose_shapes(task, pose) {
             let path = match shape {
                 Shape::Circle { radius } => {
                     let (cx, cy) = to_px(pose.x, pose.y);
@@ -255,6 +287,8 @@ fn poses_at(trace: &Trace, t: f64) -> Result<(Vec<Pose>, f64), EnvError> {
             y: b.y,
             angle: b.angle,
             radius: b.is_user_input.then_some(b.diameter / 2.0),
+            shape: b.shape.clone(),
+            diameter: b.diameter,
         });
     }
     Ok((poses, ts.t))
@@ -322,6 +356,12 @@ pub fn render_task_png(task: &Task, opts: &RenderOptions) -> Result<Vec<u8>, Env
             y: b.position[1],
             angle: b.angle,
             radius: None,
+            shape: if b.is_wall {
+                "wall".to_string()
+            } else {
+                b.shape_type.clone()
+            },
+            diameter: b.diameter,
         })
         .collect();
     draw(task, &poses, None, opts)?
