@@ -457,6 +457,9 @@ def run_detector(detector_id, trace_key):
     if len(out) > MAX_PATTERNS:
         return None, _error("invalid_output", "find_pattern returned %d patterns (limit %d)" % (len(out), MAX_PATTERNS),
                             path="$", **timing)
+    if _exceeds(out, MAX_OUTPUT_BYTES):
+        return None, _error("invalid_output", "the output is over %d bytes (limit %d)" % (MAX_OUTPUT_BYTES, MAX_OUTPUT_BYTES),
+                            path="$", **timing)
     try:
         text = json.dumps(out, separators=(",", ":"), allow_nan=False, default=_not_json)
     except MemoryError:
@@ -471,6 +474,32 @@ def run_detector(detector_id, trace_key):
     printed = _SINK.take()
     head = '{"ok":true,"wall":%r,"cpu":%r,"printed":%s,"patterns":' % (wall, cpu, json.dumps(printed[:1000]))
     return (head + text + "}").encode(), None
+
+
+def _exceeds(value, budget):
+    """Whether the JSON text of `value` is surely longer than `budget` bytes, found by a bounded walk that
+    stops as soon as the budget is spent, so a huge output is refused without being encoded. Each value
+    counts at least one byte and each string its length, so the walk under-estimates the text and never
+    refuses an output that would fit."""
+    stack = [value]
+    used = 0
+    while stack:
+        v = stack.pop()
+        used += 1
+        if isinstance(v, str):
+            used += len(v)
+        elif isinstance(v, dict):
+            for k, item in v.items():
+                used += 1 + (len(k) if isinstance(k, str) else 1)
+                stack.append(item)
+        elif isinstance(v, (list, tuple)):
+            used += len(v)
+            if used > budget:
+                return True
+            stack.extend(v)
+        if used > budget:
+            return True
+    return False
 
 
 def serve():
