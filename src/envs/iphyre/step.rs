@@ -150,7 +150,12 @@ impl Episode {
             result: EpisodeResult {
                 game: game.name.clone(),
                 clicks: clicks.to_vec(),
-                frames: Vec::new(),
+                // The loop runs at most ceil(max_time · fps) + 1 steps (float counter); one frame each.
+                frames: Vec::with_capacity(if record_frames {
+                    (params.max_time * params.fps).ceil() as usize + 2
+                } else {
+                    0
+                }),
                 events,
                 success: false,
                 steps: 0,
