@@ -32,10 +32,10 @@ pub struct PhysicsParams {
     pub spring_stiffness: f64,
     /// Spring damping (force per px/s): 0.3.
     pub spring_damping: f64,
-    /// rapier solver iterations (substeps) per step: 4, rapier's default. Chipmunk's default
-    /// `Space.iterations` is 10, but the measured outcome agreement with the original is the same or
-    /// better with 4 (`docs/fidelity.md`) and the solver is most of the step's cost
-    /// (`docs/performance.md`).
+    /// rapier solver iterations (substeps) per step: 3. Chipmunk's default `Space.iterations` is 10,
+    /// but the measured outcome agreement with the original is the same from 3 to 20 (`docs/fidelity.md`:
+    /// 2 solves fewer games than the original, 1 loses eliminations at 10 fps) and the solver is most of
+    /// a step's cost (`docs/performance.md`).
     pub solver_iterations: usize,
     /// rapier's `length_unit`, which scales its tolerances (allowed penetration 0.001·unit, prediction
     /// distance 0.002·unit, maximum corrective velocity 10·unit per s): 1, i.e. tolerances in pixels.
@@ -60,7 +60,7 @@ impl Default for PhysicsParams {
             spring_rest_length: 20.0,
             spring_stiffness: 1.0,
             spring_damping: 0.3,
-            solver_iterations: 4,
+            solver_iterations: 3,
             length_unit: 1.0,
         }
     }

@@ -229,8 +229,8 @@ impl Episode {
             if self.exited[o.index] {
                 continue;
             }
-            if let Some(s) = self.world.state(o.index)
-                && ball_out(s.centre[1])
+            if let Some(c) = self.world.centre(o.index)
+                && ball_out(c[1])
             {
                 self.exited[o.index] = true;
                 self.result.events.push(EpisodeEvent::BallExit {

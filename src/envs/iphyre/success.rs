@@ -24,8 +24,8 @@ pub fn all_balls_out(world: &World) -> bool {
         .filter(|o| o.kind == super::game::ObjectKind::Ball)
     {
         any = true;
-        match world.state(o.index) {
-            Some(s) if ball_out(s.centre[1]) => {}
+        match world.centre(o.index) {
+            Some(c) if ball_out(c[1]) => {}
             _ => return false,
         }
     }
