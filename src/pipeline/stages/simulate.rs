@@ -28,7 +28,7 @@ use crate::pipeline::spec::{PipelineSpec, StageDef, hex};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
 use crate::store::ParquetSink;
 use crate::trace::batch::scene_batch;
-use crate::trace::{Env, TraceBatchBuilder, schema};
+use crate::trace::{Env, Trace, TraceBatchBuilder, schema};
 
 /// The `simulate` stage kind.
 pub static KIND: StageKind = StageKind {
@@ -119,7 +119,11 @@ pub static KIND: StageKind = StageKind {
             ParamType::Str,
             "phyre dataset mode: comma-separated template ids (00003), task ids (00003:002), fold splits (ball_cross_template/0/test) or all (default); `scenes` tasks round-robin over templates, `shots` random valid actions each",
         ),
-        ParamSpec::maybe("task", ParamType::Str, "phyre replay mode: the task id (00004:063)"),
+        ParamSpec::maybe(
+            "task",
+            ParamType::Str,
+            "phyre replay mode: the task id (00004:063)",
+        ),
         ParamSpec::maybe(
             "action",
             ParamType::Str,
@@ -347,6 +351,7 @@ pub(super) struct ShardSinks<'a, 'c> {
     env: Env,
     name: String,
     sinks: BTreeMap<&'static str, ParquetSink>,
+    builder: TraceBatchBuilder,
 }
 
 impl<'a, 'c> ShardSinks<'a, 'c> {
@@ -357,7 +362,39 @@ impl<'a, 'c> ShardSinks<'a, 'c> {
             env,
             name,
             sinks: BTreeMap::new(),
+            builder: TraceBatchBuilder::new(),
         }
+    }
+
+    /// Appends one trace's rows to the `traces`, `timesteps`, `frames` and `events` files. With
+    /// `mid_shard = Some(ordinal)` (the shard's first trace) the mid-shard fault point fires between the
+    /// frames and the events, so a crash test finds some of the shard's files half written.
+    pub(super) fn write_trace(
+        &mut self,
+        trace: &Trace,
+        scene_id: &str,
+        source: &str,
+        mid_shard: Option<usize>,
+    ) -> Result<(), StageError> {
+        for ts in &trace.timesteps {
+            self.builder.push_timestep(ts);
+        }
+        let b = self.builder.finish(&crate::trace::TraceMeta {
+            trace_id: &trace.trace_id,
+            scene_id,
+            task_id: &trace.task_id,
+            events: &trace.events,
+            outcome: &trace.outcome,
+            extra: &trace.extra,
+            source,
+        })?;
+        self.write("traces", &b.traces)?;
+        self.write("timesteps", &b.timesteps)?;
+        self.write("frames", &b.frames)?;
+        if let Some(ordinal) = mid_shard {
+            self.ctx.checkpoint_mid_shard(ordinal)?;
+        }
+        self.write("events", &b.events)
     }
 
     /// Appends `batch` to `table`'s file, opening it on first use (empty batches open nothing).
@@ -476,7 +513,6 @@ impl SimulateStage {
         let mut sinks = ShardSinks::new(ctx, Env::Pooltool, name.clone());
         let (mut traces, mut successes, mut capped, mut events) = (0u64, 0u64, 0u64, 0u64);
         let source = format!("simulate:{}", ctx.stage_id());
-        let mut builder = TraceBatchBuilder::new();
         for index in lo..hi {
             let (scene, shots) = self.scene_work(index);
             let system = scene
@@ -504,26 +540,12 @@ impl SimulateStage {
                     "max_events" | "max_time"
                 ));
                 events += sim.events.len() as u64;
-                for ts in &trace.timesteps {
-                    builder.push_timestep(ts);
-                }
-                let b = builder.finish(&crate::trace::TraceMeta {
-                    trace_id: &trace.trace_id,
-                    scene_id: &scene.scene_id,
-                    task_id: &trace.task_id,
-                    events: &trace.events,
-                    outcome: &trace.outcome,
-                    extra: &trace.extra,
-                    source: &source,
-                })?;
-                sinks.write("traces", &b.traces)?;
-                sinks.write("timesteps", &b.timesteps)?;
-                sinks.write("frames", &b.frames)?;
-                if index == lo {
-                    // The mid-shard fault fires with some of the shard's files half written.
-                    ctx.checkpoint_mid_shard(ordinal)?;
-                }
-                sinks.write("events", &b.events)?;
+                sinks.write_trace(
+                    &trace,
+                    &scene.scene_id,
+                    &source,
+                    (index == lo).then_some(ordinal),
+                )?;
             }
             ctx.progress().advance(ctx.stage_id(), 1);
         }

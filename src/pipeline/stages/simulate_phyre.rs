@@ -34,8 +34,8 @@ use crate::envs::phyre::{
 use crate::pipeline::registry::BuildError;
 use crate::pipeline::spec::{PipelineSpec, StageDef, hex};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
+use crate::trace::Env;
 use crate::trace::batch::scene_batch;
-use crate::trace::{Env, TraceBatchBuilder};
 
 /// What to simulate.
 #[derive(Debug)]
@@ -259,7 +259,6 @@ impl PhyreSimulateStage {
         let mut sinks = ShardSinks::new(ctx, Env::Phyre, name.clone());
         let (mut traces, mut successes, mut invalid, mut steps) = (0u64, 0u64, 0u64, 0u64);
         let source = format!("simulate:{}", ctx.stage_id());
-        let mut builder = TraceBatchBuilder::new();
         let mut task: Option<Task> = None;
         for i in lo..hi {
             let (task_id, sample, trace_id) = self.item(i);
@@ -290,26 +289,7 @@ impl PhyreSimulateStage {
             successes += u64::from(result.status == Status::Solved);
             invalid += u64::from(result.status == Status::InvalidInput);
             steps += result.steps as u64;
-            for ts in &trace.timesteps {
-                builder.push_timestep(ts);
-            }
-            let b = builder.finish(&crate::trace::TraceMeta {
-                trace_id: &trace.trace_id,
-                scene_id: &scene_id,
-                task_id: &trace.task_id,
-                events: &trace.events,
-                outcome: &trace.outcome,
-                extra: &trace.extra,
-                source: &source,
-            })?;
-            sinks.write("traces", &b.traces)?;
-            sinks.write("timesteps", &b.timesteps)?;
-            sinks.write("frames", &b.frames)?;
-            if i == lo {
-                // The mid-shard fault fires with some of the shard's files half written.
-                ctx.checkpoint_mid_shard(ordinal)?;
-            }
-            sinks.write("events", &b.events)?;
+            sinks.write_trace(&trace, &scene_id, &source, (i == lo).then_some(ordinal))?;
             ctx.progress().advance(ctx.stage_id(), 1);
         }
         let rows = sinks.commit()?;
