@@ -119,8 +119,8 @@ mod tests {
 
     /// A measuring tool, not a check (`tests/it/iphyre.rs` holds the check on the committed set):
     /// `ANNOTRACE_IPHYRE_REFERENCE=pairs.json cargo test --lib iphyre::reference -- --ignored --nocapture`
-    /// prints the agreement per frame rate and the games that disagree; `IPHYRE_ITERATIONS` and
-    /// `IPHYRE_LENGTH_UNIT` override the solver settings for tuning.
+    /// prints the agreement per frame rate and the games that disagree; `IPHYRE_ITERATIONS`,
+    /// `IPHYRE_STABILIZATION` and `IPHYRE_LENGTH_UNIT` override the solver settings for tuning.
     #[test]
     #[ignore = "needs a reference file in ANNOTRACE_IPHYRE_REFERENCE"]
     fn measure_agreement() {
@@ -131,6 +131,9 @@ mod tests {
         let mut params = PhysicsParams::default();
         if let Ok(v) = std::env::var("IPHYRE_ITERATIONS") {
             params.solver_iterations = v.parse().unwrap();
+        }
+        if let Ok(v) = std::env::var("IPHYRE_STABILIZATION") {
+            params.stabilization_iterations = v.parse().unwrap();
         }
         if let Ok(v) = std::env::var("IPHYRE_LENGTH_UNIT") {
             params.length_unit = v.parse().unwrap();

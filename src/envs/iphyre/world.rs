@@ -97,6 +97,7 @@ impl World {
         let integration = IntegrationParameters {
             dt: params.dt() as f32,
             num_solver_iterations: params.solver_iterations,
+            num_internal_stabilization_iterations: params.stabilization_iterations,
             length_unit: params.length_unit as f32,
             ..IntegrationParameters::default()
         };
