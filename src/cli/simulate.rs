@@ -272,7 +272,7 @@ fn run_stage(mut stage: SimulateStage, args: &Args, quiet: bool) -> CliResult {
     let text = toml::to_string(&OneStage { stage: vec![stage] })
         .map_err(|e| CliError::failed(anyhow::anyhow!("internal error: {e}")))?;
     let spec = PipelineSpec::from_toml(Path::new("annotrace-simulate.toml"), &text)
-        .map_err(CliError::input)?;
+        .map_err(|e| CliError::input(anyhow::anyhow!("{}", as_flag_error(&e))))?;
     let opts = RunOptions {
         run_dir: Some(args.run.clone()),
         fault: fault_from_env()?,
@@ -310,4 +310,21 @@ fn run_stage(mut stage: SimulateStage, args: &Args, quiet: bool) -> CliResult {
         if stage.cached { " (nothing to do)" } else { "" }
     );
     Ok(0)
+}
+
+/// A validation error of the one-stage pipeline the command builds, worded for the command line: the
+/// internal file, line and stage id are dropped and the parameter is named as its flag
+/// (`` `game`: unknown I-PHYRE game "nope" `` → `--game: unknown I-PHYRE game "nope"`).
+fn as_flag_error(e: &annotrace::pipeline::SpecError) -> String {
+    let annotrace::pipeline::SpecError::Invalid { message, .. } = e else {
+        return e.to_string();
+    };
+    let rest = match message.strip_prefix("stage \"") {
+        Some(r) => r.split_once("\": ").map_or(message.as_str(), |(_, m)| m),
+        None => message.as_str(),
+    };
+    match rest.strip_prefix('`').and_then(|r| r.split_once("`: ")) {
+        Some((key, m)) => format!("--{}: {m}", key.replace('_', "-")),
+        None => rest.to_string(),
+    }
 }
