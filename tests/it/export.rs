@@ -57,7 +57,10 @@ fn export_stages_write_csv_markdown_and_latex() {
     assert_eq!(phyre[1], "31", "{csv}");
     assert!(md.contains("| env | traces | steps |"), "{md}");
     assert!(
-        md.contains(&format!("| phyre | {} | {} | {} | {} |", phyre[1], phyre[2], phyre[3], phyre[4])),
+        md.contains(&format!(
+            "| phyre | {} | {} | {} | {} |",
+            phyre[1], phyre[2], phyre[3], phyre[4]
+        )),
         "{md}"
     );
     assert!(
@@ -66,7 +69,10 @@ fn export_stages_write_csv_markdown_and_latex() {
     );
     assert!(tex.contains("frame\\_rows"), "{tex}");
     assert!(
-        tex.contains(&format!("phyre & {} & {} & {} & {} & ", phyre[1], phyre[2], phyre[3], phyre[4])),
+        tex.contains(&format!(
+            "phyre & {} & {} & {} & {} & ",
+            phyre[1], phyre[2], phyre[3], phyre[4]
+        )),
         "{tex}"
     );
     assert!(
