@@ -299,31 +299,18 @@ impl Stage for SimulateStage {
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
-        let shards: Vec<(u64, u64)> = match &self.work {
-            Work::Dataset { scenes, .. } => (0..scenes.div_ceil(self.per_shard))
-                .map(|s| (s * self.per_shard, ((s + 1) * self.per_shard).min(*scenes)))
-                .collect(),
-            Work::Replay { .. } => vec![(0, 1)],
+        let total = match &self.work {
+            Work::Dataset { scenes, .. } => *scenes,
+            Work::Replay { .. } => 1,
         };
-        let total: u64 = shards.iter().map(|(a, b)| b - a).sum();
         self.check_ids_are_new(ctx, total)?;
         ctx.progress().set_total(ctx.stage_id(), total);
-        let records: Vec<Value> = shards
-            .par_iter()
-            .enumerate()
-            .map(|(i, &(lo, hi))| self.run_shard(ctx, i, lo, hi))
-            .collect::<Result<_, _>>()?;
-        let mut rows: BTreeMap<String, u64> = BTreeMap::new();
-        let (mut traces, mut successes, mut capped, mut events) = (0u64, 0u64, 0u64, 0u64);
-        for r in &records {
-            traces += r["traces"].as_u64().unwrap_or(0);
-            successes += r["successes"].as_u64().unwrap_or(0);
-            capped += r["capped"].as_u64().unwrap_or(0);
-            events += r["physics_events"].as_u64().unwrap_or(0);
-            for (t, n) in r["rows"].as_object().into_iter().flatten() {
-                *rows.entry(t.clone()).or_default() += n.as_u64().unwrap_or(0);
-            }
-        }
+        let sums = run_shards(total, self.per_shard, |i, lo, hi| {
+            self.run_shard(ctx, i, lo, hi)
+        })?;
+        let (traces, successes) = (sums.count("traces"), sums.count("successes"));
+        let (capped, events) = (sums.count("capped"), sums.count("physics_events"));
+        let rows = sums.rows;
         let frames = rows.get("frames").copied().unwrap_or(0);
         let line = format!(
             "{traces} pool trace(s), {successes} successful, {capped} capped; {events} physics events, {frames} frame rows"
@@ -343,6 +330,58 @@ impl Stage for SimulateStage {
             line,
         })
     }
+}
+
+/// The sums of a stage's shard records: each numeric field (`traces`, `successes`, …) and the rows
+/// written per table.
+#[derive(Default)]
+pub(super) struct ShardTotals {
+    fields: BTreeMap<String, f64>,
+    /// Rows written per table.
+    pub(super) rows: BTreeMap<String, u64>,
+}
+
+impl ShardTotals {
+    /// The sum of a numeric field as a count (0 when no shard reported it).
+    pub(super) fn count(&self, field: &str) -> u64 {
+        self.fields.get(field).copied().unwrap_or(0.0) as u64
+    }
+
+    /// The sum of a numeric field.
+    pub(super) fn sum(&self, field: &str) -> f64 {
+        self.fields.get(field).copied().unwrap_or(0.0)
+    }
+}
+
+/// Splits `0..total` into shards of `per_shard` items, runs `run_shard(shard, lo, hi)` on them in
+/// parallel (rayon) and sums their records.
+pub(super) fn run_shards(
+    total: u64,
+    per_shard: u64,
+    run_shard: impl Fn(usize, u64, u64) -> Result<Value, StageError> + Sync,
+) -> Result<ShardTotals, StageError> {
+    let per_shard = per_shard.max(1);
+    let shards: Vec<(u64, u64)> = (0..total.div_ceil(per_shard))
+        .map(|s| (s * per_shard, ((s + 1) * per_shard).min(total)))
+        .collect();
+    let records: Vec<Value> = shards
+        .par_iter()
+        .enumerate()
+        .map(|(i, &(lo, hi))| run_shard(i, lo, hi))
+        .collect::<Result<_, _>>()?;
+    let mut totals = ShardTotals::default();
+    for r in &records {
+        for (k, v) in r.as_object().into_iter().flatten() {
+            if k == "rows" {
+                for (t, n) in v.as_object().into_iter().flatten() {
+                    *totals.rows.entry(t.clone()).or_default() += n.as_u64().unwrap_or(0);
+                }
+            } else if let Some(x) = v.as_f64() {
+                *totals.fields.entry(k.clone()).or_default() += x;
+            }
+        }
+    }
+    Ok(totals)
 }
 
 /// The open Parquet files of one shard, one per table (also used by the other environments' halves).

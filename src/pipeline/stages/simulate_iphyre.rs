@@ -19,13 +19,11 @@
 //! dataset traces are `iphyre-<seed>-<game>-<sample:04>`, a replay is `iphyre-<game>-<first 8 hex digits
 //! of the click list's hash>`.
 
-use std::collections::BTreeMap;
 
-use rayon::prelude::*;
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
-use super::simulate::ShardSinks;
+use super::simulate::{ShardSinks, run_shards};
 use crate::envs::iphyre::{
     Click, Episode, Game, Games, PhysicsParams, click_block, clicks_rng, random_clicks, trace_of,
     validate_clicks,
@@ -333,27 +331,14 @@ impl Stage for IphyreSimulateStage {
 
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
         let total = self.total();
-        let shards: Vec<(u64, u64)> = (0..total.div_ceil(self.per_shard))
-            .map(|s| (s * self.per_shard, ((s + 1) * self.per_shard).min(total)))
-            .collect();
         self.check_ids_are_new(ctx)?;
         ctx.progress().set_total(ctx.stage_id(), total);
-        let records: Vec<Value> = shards
-            .par_iter()
-            .enumerate()
-            .map(|(i, &(lo, hi))| self.run_shard(ctx, i, lo, hi))
-            .collect::<Result<_, _>>()?;
-        let mut rows: BTreeMap<String, u64> = BTreeMap::new();
-        let (mut traces, mut successes, mut eliminations, mut reward) = (0u64, 0u64, 0u64, 0.0);
-        for r in &records {
-            traces += r["traces"].as_u64().unwrap_or(0);
-            successes += r["successes"].as_u64().unwrap_or(0);
-            eliminations += r["eliminations"].as_u64().unwrap_or(0);
-            reward += r["reward"].as_f64().unwrap_or(0.0);
-            for (t, n) in r["rows"].as_object().into_iter().flatten() {
-                *rows.entry(t.clone()).or_default() += n.as_u64().unwrap_or(0);
-            }
-        }
+        let sums = run_shards(total, self.per_shard, |i, lo, hi| {
+            self.run_shard(ctx, i, lo, hi)
+        })?;
+        let (traces, successes) = (sums.count("traces"), sums.count("successes"));
+        let (eliminations, reward) = (sums.count("eliminations"), sums.sum("reward"));
+        let rows = sums.rows;
         let frames = rows.get("frames").copied().unwrap_or(0);
         let mean_reward = if traces > 0 {
             reward / traces as f64

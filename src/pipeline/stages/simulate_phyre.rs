@@ -19,13 +19,11 @@
 //! traces are `phyre-<seed>-<template>-<variant>-<sample:03>`, a replay `phyre-<template>-<variant>-<8 hex
 //! digits of the action's hash>`.
 
-use std::collections::BTreeMap;
 
-use rayon::prelude::*;
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
-use super::simulate::ShardSinks;
+use super::simulate::{ShardSinks, run_shards};
 use crate::envs::phyre::{
     BallAction, DEFAULT_STRIDE, DEFAULT_TASKS_GZ, EvalSetup, PhyreEnv, PhysicsParams,
     RecordOptions, Status, Task, TaskSet, action_rng, dataset_tasks, episode, fold,
@@ -331,27 +329,14 @@ impl Stage for PhyreSimulateStage {
 
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
         let total = self.total();
-        let shards: Vec<(u64, u64)> = (0..total.div_ceil(self.per_shard))
-            .map(|s| (s * self.per_shard, ((s + 1) * self.per_shard).min(total)))
-            .collect();
         self.check_ids_are_new(ctx)?;
         ctx.progress().set_total(ctx.stage_id(), total);
-        let records: Vec<Value> = shards
-            .par_iter()
-            .enumerate()
-            .map(|(i, &(lo, hi))| self.run_shard(ctx, i, lo, hi))
-            .collect::<Result<_, _>>()?;
-        let mut rows: BTreeMap<String, u64> = BTreeMap::new();
-        let (mut traces, mut successes, mut invalid, mut steps) = (0u64, 0u64, 0u64, 0u64);
-        for r in &records {
-            traces += r["traces"].as_u64().unwrap_or(0);
-            successes += r["successes"].as_u64().unwrap_or(0);
-            invalid += r["invalid"].as_u64().unwrap_or(0);
-            steps += r["steps"].as_u64().unwrap_or(0);
-            for (t, n) in r["rows"].as_object().into_iter().flatten() {
-                *rows.entry(t.clone()).or_default() += n.as_u64().unwrap_or(0);
-            }
-        }
+        let sums = run_shards(total, self.per_shard, |i, lo, hi| {
+            self.run_shard(ctx, i, lo, hi)
+        })?;
+        let (traces, successes) = (sums.count("traces"), sums.count("successes"));
+        let (invalid, steps) = (sums.count("invalid"), sums.count("steps"));
+        let rows = sums.rows;
         let frames = rows.get("frames").copied().unwrap_or(0);
         let line = format!(
             "{traces} phyre trace(s), {successes} solved, {invalid} invalid input; {steps} physics steps, {frames} frame rows (stride {})",
