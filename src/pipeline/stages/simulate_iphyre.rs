@@ -19,7 +19,6 @@
 //! dataset traces are `iphyre-<seed>-<game>-<sample:04>`, a replay is `iphyre-<game>-<first 8 hex digits
 //! of the click list's hash>`.
 
-
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 

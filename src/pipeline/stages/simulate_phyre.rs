@@ -19,7 +19,6 @@
 //! traces are `phyre-<seed>-<template>-<variant>-<sample:03>`, a replay `phyre-<template>-<variant>-<8 hex
 //! digits of the action's hash>`.
 
-
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
