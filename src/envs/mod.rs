@@ -2,7 +2,8 @@
 //!
 //! **Owns:** the [`Environment`] trait (scenes, action validation, simulate → [`Trace`], success,
 //! rendering) and its implementations: [`pool`] (billiards, pooltool 0.6.0 physics) and [`iphyre`]
-//! (I-PHYRE on rapier2d) and [`phyre`] (PHYRE's ball tier on rapier2d).
+//! (I-PHYRE on rapier2d) and [`phyre`] (PHYRE's ball tier on rapier2d), which share the rapier state of
+//! [`rapier`].
 //! **Does not:** write run folders or order stages (`pipeline/`), parse command lines (`cli/`). It uses
 //! only [`crate::trace`] below it.
 //!
@@ -19,6 +20,7 @@
 pub mod iphyre;
 pub mod phyre;
 pub mod pool;
+pub mod rapier;
 
 use crate::trace::{Env, Trace};
 

@@ -1,8 +1,8 @@
 //! [`World`]: one I-PHYRE game as rapier2d bodies, colliders and joints, stepped at a fixed `dt`.
 //!
-//! **Owns:** the rapier sets (bodies, colliders, impulse joints, islands, broad and narrow phase), the
-//! mapping between rapier handles and the game's stable object indices, object removal, and contact
-//! begin/end changes reported by rapier's collision events.
+//! **Owns:** the game's rapier bodies, colliders and joints (held and stepped by
+//! [`crate::envs::rapier::Physics`]), the mapping between rapier handles and the game's stable object
+//! indices, object removal, and contact begin/end changes reported by rapier's collision events.
 //! **Does not:** decide when to remove a block (`action.rs`, `step.rs`), judge success (`success.rs`)
 //! or build traces (`to_trace.rs`).
 //!
@@ -18,9 +18,10 @@
 //! (Chipmunk's default space has no sleeping).
 
 use std::collections::HashMap;
-use std::sync::mpsc;
 
 use rapier2d::prelude::*;
+
+use crate::envs::rapier::Physics;
 
 use super::error::Result;
 use super::game::{Game, GameObject, ObjectKind};
@@ -59,22 +60,7 @@ pub struct World {
     objects: Vec<GameObject>,
     bodies_of: Vec<Option<RigidBodyHandle>>,
     object_of_collider: HashMap<ColliderHandle, usize>,
-    gravity: Vector,
-    integration: IntegrationParameters,
-    pipeline: PhysicsPipeline,
-    islands: IslandManager,
-    broad_phase: BroadPhaseBvh,
-    narrow_phase: NarrowPhase,
-    bodies: RigidBodySet,
-    colliders: ColliderSet,
-    impulse_joints: ImpulseJointSet,
-    multibody_joints: MultibodyJointSet,
-    soft_bodies: SoftBodySet,
-    ccd: CCDSolver,
-    collision_rx: mpsc::Receiver<CollisionEvent>,
-    force_rx: mpsc::Receiver<ContactForceEvent>,
-    tear_rx: mpsc::Receiver<SoftBodyTearEvent>,
-    events: ChannelEventCollector,
+    physics: Physics,
 }
 
 impl std::fmt::Debug for World {
@@ -184,64 +170,33 @@ impl World {
                 impulse_joints.insert(ha, hb, spring, true);
             }
         }
-        let (collision_tx, collision_rx) = mpsc::channel();
-        let (force_tx, force_rx) = mpsc::channel();
-        let (tear_tx, tear_rx) = mpsc::channel();
         Ok(World {
             objects: game.objects.clone(),
             bodies_of,
             object_of_collider,
-            gravity: Vector::new(0.0, params.gravity as f32),
-            integration,
-            pipeline: PhysicsPipeline::new(),
-            islands: IslandManager::new(),
-            broad_phase: BroadPhaseBvh::new(),
-            narrow_phase: NarrowPhase::new(),
-            bodies,
-            colliders,
-            impulse_joints,
-            multibody_joints: MultibodyJointSet::new(),
-            soft_bodies: SoftBodySet::new(),
-            ccd: CCDSolver::new(),
-            collision_rx,
-            force_rx,
-            tear_rx,
-            events: ChannelEventCollector::new(collision_tx, force_tx, tear_tx),
+            physics: Physics::new(
+                Vector::new(0.0, params.gravity as f32),
+                integration,
+                bodies,
+                colliders,
+                impulse_joints,
+            ),
         })
     }
 
     /// Advances the world by one `dt` and returns the contact changes of that step, in rapier's order.
     pub fn step(&mut self) -> Vec<ContactChange> {
-        self.pipeline.step(
-            self.gravity,
-            &self.integration,
-            &mut self.islands,
-            &mut self.broad_phase,
-            &mut self.narrow_phase,
-            &mut self.bodies,
-            &mut self.colliders,
-            &mut self.impulse_joints,
-            &mut self.multibody_joints,
-            &mut self.soft_bodies,
-            &mut self.ccd,
-            &(),
-            &self.events,
-        );
-        while self.force_rx.try_recv().is_ok() {}
-        while self.tear_rx.try_recv().is_ok() {}
         let mut changes = Vec::new();
-        while let Ok(event) = self.collision_rx.try_recv() {
+        let object_of_collider = &self.object_of_collider;
+        self.physics.step(|_, event| {
             let (a, b) = (event.collider1(), event.collider2());
-            if let (Some(&a), Some(&b)) = (
-                self.object_of_collider.get(&a),
-                self.object_of_collider.get(&b),
-            ) {
+            if let (Some(&a), Some(&b)) = (object_of_collider.get(&a), object_of_collider.get(&b)) {
                 changes.push(ContactChange {
                     began: event.started(),
                     objects: [a.min(b), a.max(b)],
                 });
             }
-        }
+        });
         changes
     }
 
@@ -251,14 +206,15 @@ impl World {
         let Some(handle) = self.bodies_of.get_mut(index).and_then(Option::take) else {
             return false;
         };
-        self.bodies
+        self.physics
+            .bodies
             .remove(
                 handle,
-                &mut self.islands,
-                &mut self.colliders,
-                &mut self.impulse_joints,
-                &mut self.multibody_joints,
-                &mut self.soft_bodies,
+                &mut self.physics.islands,
+                &mut self.physics.colliders,
+                &mut self.physics.impulse_joints,
+                &mut self.physics.multibody_joints,
+                &mut self.physics.soft_bodies,
                 true,
             )
             .is_some()
@@ -283,14 +239,14 @@ impl World {
     /// ends), or `None` when it was removed or does not exist.
     pub fn centre(&self, index: usize) -> Option<[f64; 2]> {
         let handle = (*self.bodies_of.get(index)?)?;
-        let t = self.bodies.get(handle)?.translation();
+        let t = self.physics.bodies.get(handle)?.translation();
         Some([t.x as f64, t.y as f64])
     }
 
     /// The current state of object `index`, or `None` when it was removed or does not exist.
     pub fn state(&self, index: usize) -> Option<ObjectState> {
         let handle = (*self.bodies_of.get(index)?)?;
-        let body = self.bodies.get(handle)?;
+        let body = self.physics.bodies.get(handle)?;
         let o = &self.objects[index];
         let t = body.translation();
         let centre = [t.x as f64, t.y as f64];

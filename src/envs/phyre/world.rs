@@ -1,7 +1,7 @@
 //! [`World`]: one PHYRE task plus the red user ball as rapier2d bodies, stepped at 60 Hz.
 //!
-//! **Owns:** the rapier sets, the mapping between rapier handles and PHYRE body indices (scene bodies
-//! `0..n`, the user ball `n`), contact begin/end per body pair from rapier's collision events, and PHYRE's
+//! **Owns:** the task's rapier bodies and colliders (held and stepped by [`crate::envs::rapier::Physics`]),
+//! the mapping between rapier handles and PHYRE body indices (scene bodies `0..n`, the user ball `n`), contact begin/end per body pair from rapier's collision events, and PHYRE's
 //! "touching" test for the goal.
 //! **Does not:** decide validity (`action.rs`), run the episode loop (`episode.rs`) or build traces.
 //!
@@ -13,9 +13,10 @@
 //! rest time (0.5 s) and rapier's 0.05 m/s threshold (`PhysicsParams::sleep_linear`).
 
 use std::collections::HashMap;
-use std::sync::mpsc;
 
 use rapier2d::prelude::*;
+
+use crate::envs::rapier::Physics;
 
 use super::action::UserBall;
 use super::error::{PhyreError, Result};
@@ -69,22 +70,7 @@ pub struct World {
     ball_threshold: f32,
     touch_distance: f32,
     active_pairs: HashMap<[usize; 2], u32>,
-    gravity: Vector,
-    integration: IntegrationParameters,
-    pipeline: PhysicsPipeline,
-    islands: IslandManager,
-    broad_phase: BroadPhaseBvh,
-    narrow_phase: NarrowPhase,
-    bodies: RigidBodySet,
-    colliders: ColliderSet,
-    impulse_joints: ImpulseJointSet,
-    multibody_joints: MultibodyJointSet,
-    soft_bodies: SoftBodySet,
-    ccd: CCDSolver,
-    collision_rx: mpsc::Receiver<CollisionEvent>,
-    force_rx: mpsc::Receiver<ContactForceEvent>,
-    tear_rx: mpsc::Receiver<SoftBodyTearEvent>,
-    events: ChannelEventCollector,
+    physics: Physics,
 }
 
 impl std::fmt::Debug for World {
@@ -197,9 +183,6 @@ impl World {
             };
             (r(task.body1), r(task.body2))
         });
-        let (collision_tx, collision_rx) = mpsc::channel();
-        let (force_tx, force_rx) = mpsc::channel();
-        let (tear_tx, tear_rx) = mpsc::channel();
         Ok(World {
             bodies_of,
             colliders_of,
@@ -210,22 +193,13 @@ impl World {
             ball_threshold: m(params.ball_touch_threshold_px),
             touch_distance: params.touch_distance as f32,
             active_pairs: HashMap::new(),
-            gravity: Vector::new(0.0, -params.gravity as f32),
-            integration,
-            pipeline: PhysicsPipeline::new(),
-            islands: IslandManager::new(),
-            broad_phase: BroadPhaseBvh::new(),
-            narrow_phase: NarrowPhase::new(),
-            bodies,
-            colliders,
-            impulse_joints: ImpulseJointSet::new(),
-            multibody_joints: MultibodyJointSet::new(),
-            soft_bodies: SoftBodySet::new(),
-            ccd: CCDSolver::new(),
-            collision_rx,
-            force_rx,
-            tear_rx,
-            events: ChannelEventCollector::new(collision_tx, force_tx, tear_tx),
+            physics: Physics::new(
+                Vector::new(0.0, -params.gravity as f32),
+                integration,
+                bodies,
+                colliders,
+                ImpulseJointSet::new(),
+            ),
         })
     }
 
@@ -242,33 +216,17 @@ impl World {
     /// Advances one step and appends the body-pair contact changes of that step to `out`. A jar touching
     /// a ball with two of its parts is one contact: it begins with the first part and ends with the last.
     pub fn step(&mut self, out: &mut Vec<ContactChange>) {
-        self.pipeline.step(
-            self.gravity,
-            &self.integration,
-            &mut self.islands,
-            &mut self.broad_phase,
-            &mut self.narrow_phase,
-            &mut self.bodies,
-            &mut self.colliders,
-            &mut self.impulse_joints,
-            &mut self.multibody_joints,
-            &mut self.soft_bodies,
-            &mut self.ccd,
-            &(),
-            &self.events,
-        );
-        while self.force_rx.try_recv().is_ok() {}
-        while self.tear_rx.try_recv().is_ok() {}
-        while let Ok(event) = self.collision_rx.try_recv() {
-            let index = |h: ColliderHandle| self.colliders.get(h).map(|c| c.user_data as usize);
+        let active_pairs = &mut self.active_pairs;
+        self.physics.step(|colliders, event| {
+            let index = |h: ColliderHandle| colliders.get(h).map(|c| c.user_data as usize);
             let (Some(a), Some(b)) = (index(event.collider1()), index(event.collider2())) else {
-                continue;
+                return;
             };
             if a == b {
-                continue;
+                return;
             }
             let key = [a.min(b), a.max(b)];
-            let count = self.active_pairs.entry(key).or_insert(0);
+            let count = active_pairs.entry(key).or_insert(0);
             if event.started() {
                 *count += 1;
                 if *count == 1 {
@@ -286,7 +244,7 @@ impl World {
                     });
                 }
             }
-        }
+        });
     }
 
     /// PHYRE's goal test: the two goal balls' centres closer than r₁ + r₂ + 0.1 px, or else a contact
@@ -294,8 +252,8 @@ impl World {
     pub fn goal_holds(&self) -> bool {
         let [g1, g2] = self.goal;
         if let Some((r1, r2)) = self.two_ball {
-            let p1 = self.bodies[self.bodies_of[g1]].translation();
-            let p2 = self.bodies[self.bodies_of[g2]].translation();
+            let p1 = self.physics.bodies[self.bodies_of[g1]].translation();
+            let p2 = self.physics.bodies[self.bodies_of[g2]].translation();
             return (p1 - p2).length() < r1 + r2 + self.ball_threshold;
         }
         self.touching(g1, g2)
@@ -309,11 +267,14 @@ impl World {
         };
         ca.iter().any(|&h1| {
             cb.iter().any(|&h2| {
-                self.narrow_phase.contact_pair(h1, h2).is_some_and(|pair| {
-                    pair.manifolds()
-                        .iter()
-                        .any(|mf| mf.points.iter().any(|p| p.dist <= self.touch_distance))
-                })
+                self.physics
+                    .narrow_phase
+                    .contact_pair(h1, h2)
+                    .is_some_and(|pair| {
+                        pair.manifolds()
+                            .iter()
+                            .any(|mf| mf.points.iter().any(|p| p.dist <= self.touch_distance))
+                    })
             })
         })
     }
@@ -322,7 +283,7 @@ impl World {
     pub fn all_asleep(&self) -> bool {
         self.dynamic
             .iter()
-            .all(|&i| self.bodies[self.bodies_of[i]].is_sleeping())
+            .all(|&i| self.physics.bodies[self.bodies_of[i]].is_sleeping())
     }
 
     /// The indices of the dynamic bodies.
@@ -332,7 +293,7 @@ impl World {
 
     /// The state of body `index` in scene units.
     pub fn state(&self, index: usize) -> Option<BodyState> {
-        let body = self.bodies.get(*self.bodies_of.get(index)?)?;
+        let body = self.physics.bodies.get(*self.bodies_of.get(index)?)?;
         let t = body.translation();
         let v = body.linvel();
         let k = PIXELS_PER_METRE;
