@@ -21,6 +21,7 @@ mod annotation;
 mod detector;
 mod error;
 mod library;
+mod marshal;
 mod pool;
 mod protocol;
 mod sandbox;

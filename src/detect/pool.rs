@@ -463,7 +463,7 @@ impl WorkerPool {
             .call_timeout
             .max(std::time::Duration::from_secs(30));
         match worker.request(kind, &body, wait) {
-            Reply::Frame(f) if parse(&f).is_ok_and(|v| v["ok"] == Value::Bool(true)) => {}
+            Reply::Frame(f) if parse(&f, 0).is_ok_and(|v| v["ok"] == Value::Bool(true)) => {}
             Reply::Frame(_) => {
                 return Err(DetectorError::Memory {
                     limit_bytes: self.limits.memory_bytes,
@@ -500,7 +500,7 @@ impl WorkerPool {
     /// Turns a reply into JSON, or into the error of a killed or dead worker (which is then dropped).
     fn interpret(&self, reply: Reply, slot: &mut Option<Worker>) -> Result<Value, DetectorError> {
         match reply {
-            Reply::Frame(f) => parse(&f).map_err(|e| {
+            Reply::Frame(f) => parse(&f, self.limits.max_output_bytes).map_err(|e| {
                 *slot = None;
                 DetectorError::Crashed {
                     message: e.to_string(),

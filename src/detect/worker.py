@@ -18,14 +18,18 @@
 #   b"E" {"ids": [...]}             evict traces                                        -> {"ok": true}
 #   b"C" {"id", "code"}             check and compile a detector                        -> {"ok": true} | error
 #   b"R" {"detectors", "trace"}     run each detector in turn      -> one reply per detector: patterns | error
-# Before every request the soft RLIMIT_CPU is re-armed to (CPU used + cpu_seconds), a backstop behind the
-# Rust side's wall-clock timer.
+#                                   (patterns as b"M" <f64 wall><f64 cpu><u32 n><printed, n bytes UTF-8>
+#                                   <marshal.dumps(out, 4)>, or as JSON when marshal refuses the value)
+# Before every request and call at least cpu_seconds of CPU time remain below the soft RLIMIT_CPU (re-armed
+# to twice that when fewer do), a backstop behind the Rust side's wall-clock timer.
 # An error reply is {"ok": false, "error": {"category", "message", "line", "column", ...}}.
 import array
 import ast
 import builtins as _builtins
+import fcntl
 import gc
 import json
+import marshal
 import os
 import resource
 import struct
@@ -44,9 +48,17 @@ MAX_PRINT_BYTES = 4096
 PYTHON_GUARD = bool(CONFIG.get("python_guard", True))
 CPU_SECONDS = float(CONFIG.get("cpu_seconds", 0))
 
+# Larger pipes (1 MiB, Linux's default ceiling for unprivileged processes): a trace or a large reply then
+# crosses in one or two writes instead of many 64 KiB rounds, each of which wakes the other side.
+for _fd in (0, 1):
+    try:
+        fcntl.fcntl(_fd, 1031, 1 << 20)  # F_SETPIPE_SZ
+    except (OSError, ValueError, AttributeError):
+        pass
 _IN = open(0, "rb", buffering=0, closefd=False)
 _OUT = open(1, "wb", buffering=0, closefd=False)
 _PACK = struct.Struct("<I")
+_MARSHAL_HEAD = struct.Struct("<ddI")  # wall, cpu, length of the printed text
 
 
 class _Sink:
@@ -317,36 +329,53 @@ DETECTORS = {}
 
 
 def load_pool_columns(frame):
-    """Rebuilds a pooltool trace dict, identical to the JSON path's, from its columns: the header holds
-    the trace without timesteps plus per-step and per-object columns; the block holds every step's t,
-    then per object position[3], velocity[3], angular_velocity[3], radius."""
+    """Rebuilds a pooltool trace dict, identical to the JSON path's, from its columns (protocol.rs
+    `pool_columns` describes the layout). Only the objects that changed since the previous step are
+    built, all at once; a step reuses the previous step's (read-only) dicts in the other slots. The
+    3-vectors come out of the block as tuples in C (`struct.iter_unpack`)."""
     (hlen,) = _PACK.unpack(frame[1:5])
     head = json.loads(frame[5:5 + hlen], object_hook=_freeze)
-    block = array.array("d")
-    block.frombytes(frame[5 + hlen:])
+    counts, indices, changed, proto = head["n"], head["index"], head["changed"], head["proto"]
+    n_steps, n_new = len(counts), len(proto)
+    view = memoryview(frame)
+    at = 5 + hlen
+    times = array.array("d")
+    times.frombytes(view[at:at + 8 * n_steps])
+    at += 8 * n_steps
+    vecs = struct.iter_unpack("<3d", view[at:at + 72 * n_new])
+    at += 72 * n_new
+    radii = array.array("d")
+    radii.frombytes(view[at:at + 8 * n_new])
     if sys.byteorder != "little":
-        block.byteswap()
-    nums = block.tolist()
-    counts, indices = head["n"], head["index"]
-    n_steps = len(counts)
+        times.byteswap()
+        radii.byteswap()
     fd = FrozenDict
-    objs = []
-    k = n_steps
-    for bid, kind, code, state in zip(head["ball_id"], head["kind"], head["code"], head["state"]):
-        objs.append(fd(kind=kind, ball_id=bid, position=tuple(nums[k:k + 3]),
-                       velocity=tuple(nums[k + 3:k + 6]), angular_velocity=tuple(nums[k + 6:k + 9]),
-                       motion_state_code=code, motion_state=state, radius=nums[k + 9]))
-        k += 10
+    new = [fd({"kind": kind, "ball_id": bid, "position": p, "velocity": v, "angular_velocity": w,
+               "motion_state_code": code, "motion_state": state, "radius": r})
+           for (bid, kind, code, state), p, v, w, r
+           in zip(map(head["protos"].__getitem__, proto), vecs, vecs, vecs, radii.tolist())]
     extras = head.get("step_extra")
     steps = []
-    j = 0
-    for s, (n, ix) in enumerate(zip(counts, indices)):
-        d = {"index": ix, "t": nums[s], "objects": tuple(objs[j:j + n])}
+    prev = ()
+    q = 0
+    for s, (n, ix, t, slots) in enumerate(zip(counts, indices, times.tolist(), changed)):
+        if slots is None:
+            objs = tuple(new[q:q + n])
+            q += n
+        elif slots:
+            row = list(prev)
+            for j in slots:
+                row[j] = new[q]
+                q += 1
+            objs = tuple(row)
+        else:
+            objs = prev
+        d = {"index": ix, "t": t, "objects": objs}
         if extras and extras[s]:
             for key, v in extras[s].items():
                 d[key] = v
         steps.append(fd(d))
-        j += n
+        prev = objs
     shell = head["trace"]
     return head["id"], fd((key, tuple(steps) if key == "timesteps" else v) for key, v in shell.items())
 
@@ -371,19 +400,32 @@ def _tb_line(tb):
     return line
 
 
-def _set_cpu_limit(seconds):
-    """Soft RLIMIT_CPU at (CPU used so far + seconds): the kernel ends a call that overruns (SIGXCPU)."""
+_CPU = {"soft": None, "used": 0.0}  # the soft RLIMIT_CPU last set, and process CPU time at the last call's end
+
+
+def _set_cpu_limit(seconds, used=None):
+    """Keeps the soft RLIMIT_CPU at least `seconds` (plus one) above the CPU used so far, so the kernel
+    ends a call that overruns (SIGXCPU). Re-armed to twice that only when less remains: one system call
+    every few seconds of CPU instead of three per call (each costs microseconds on a virtual machine).
+    `used` is the CPU time already known (the end of the previous call), else it is read."""
     if not seconds:
         return
-    used = time.process_time()
-    soft, hard = resource.getrlimit(resource.RLIMIT_CPU)
-    want = int(used + seconds) + 1
-    if hard != resource.RLIM_INFINITY:
-        want = min(want, hard)
+    if used is None:
+        used = time.process_time()
+    soft = _CPU["soft"]
+    if soft is not None and soft - used >= seconds + 1:
+        return
+    want = int(used + 2 * seconds) + 1
+    if _CPU_HARD != resource.RLIM_INFINITY:
+        want = min(want, _CPU_HARD)
     try:
-        resource.setrlimit(resource.RLIMIT_CPU, (want, hard))
+        resource.setrlimit(resource.RLIMIT_CPU, (want, _CPU_HARD))
+        _CPU["soft"] = want
     except (ValueError, OSError):
         pass
+
+
+_CPU_HARD = resource.getrlimit(resource.RLIMIT_CPU)[1]
 
 
 def compile_detector(msg):
@@ -448,8 +490,10 @@ def run_detector(detector_id, trace_key):
     except BaseException as e:  # noqa: B036
         return None, _error("runtime", "%s: %s" % (type(e).__name__, str(e)[:500]),
                             _tb_line(e.__traceback__), exception=type(e).__name__)
+    finally:
+        _CPU["used"] = time.process_time()  # also after a failed call, for the next call's CPU limit
     wall = time.perf_counter() - w0
-    cpu = time.process_time() - c0
+    cpu = _CPU["used"] - c0
     timing = {"wall": wall, "cpu": cpu}
     if not isinstance(out, list):
         return None, _error("invalid_output", "find_pattern must return a list, found %s" % type(out).__name__,
@@ -457,6 +501,21 @@ def run_detector(detector_id, trace_key):
     if len(out) > MAX_PATTERNS:
         return None, _error("invalid_output", "find_pattern returned %d patterns (limit %d)" % (len(out), MAX_PATTERNS),
                             path="$", **timing)
+    try:
+        # C speed, floats as raw doubles; repeated objects are shared by reference (the Rust reader
+        # charges each copy against the output limit). Refuses subclasses of dict and list (the trace's
+        # read-only dicts, say): those take the JSON path below.
+        body = marshal.dumps(out, 4)
+    except (ValueError, TypeError):
+        body = None
+    except MemoryError:
+        return None, _error("memory", "MemoryError while encoding the output", fatal=True)
+    if body is not None:
+        if len(body) > MAX_OUTPUT_BYTES:
+            return None, _error("invalid_output", "the output is over %d bytes (limit %d)" % (MAX_OUTPUT_BYTES, MAX_OUTPUT_BYTES),
+                                path="$", **timing)
+        printed = _SINK.take()[:1000].encode("utf-8", "replace")
+        return b"".join((b"M", _MARSHAL_HEAD.pack(wall, cpu, len(printed)), printed, body)), None
     if _exceeds(out, MAX_OUTPUT_BYTES):
         return None, _error("invalid_output", "the output is over %d bytes (limit %d)" % (MAX_OUTPUT_BYTES, MAX_OUTPUT_BYTES),
                             path="$", **timing)
@@ -537,7 +596,7 @@ def serve():
             elif kind == b"R":
                 msg = json.loads(frame[1:])
                 for detector_id in msg["detectors"]:
-                    _set_cpu_limit(CPU_SECONDS)
+                    _set_cpu_limit(CPU_SECONDS, _CPU["used"])
                     raw, err = run_detector(detector_id, msg["trace"])
                     if raw is not None:
                         _send(raw)

@@ -1,15 +1,18 @@
 //! One sandboxed worker process: start it, send requests, wait for replies with a deadline, kill it.
 //!
-//! A reader thread turns the worker's standard output into frames on a channel, so that waiting for a
-//! reply has a timeout; another drains standard error into a bounded buffer (the last 8 KiB), quoted
-//! when the worker dies. The worker remembers which traces and detectors it holds, so that the pool
-//! sends each only once.
+//! Replies are read straight from the worker's standard output by the thread that waits for them:
+//! `poll(2)` gives the wait its deadline, then whatever the pipe holds is read into a buffer and cut
+//! into frames ([`FrameReader`]). No thread sits between the pipe and the caller, so a reply costs one
+//! wake-up, not two (on a virtual machine each is tens of microseconds, as much as a short detector
+//! call; `docs/performance.md`). A thread drains standard error into a bounded buffer (the last 8 KiB),
+//! quoted when the worker dies. The worker remembers which traces and detectors it holds, so that the
+//! pool sends each only once.
 
 use std::collections::{HashSet, VecDeque};
 use std::io::Read;
 use std::path::Path;
-use std::process::{Child, ChildStdin, Stdio};
-use std::sync::mpsc::{Receiver, RecvTimeoutError, channel};
+use std::process::{Child, ChildStdin, ChildStdout, Stdio};
+use std::sync::mpsc::channel;
 use std::sync::{Arc, Mutex};
 use std::thread;
 use std::time::{Duration, Instant};
@@ -17,7 +20,7 @@ use std::time::{Duration, Instant};
 use serde_json::Value;
 
 use super::error::DetectError;
-use super::protocol::{self, read_frame, write_frame};
+use super::protocol::{self, write_frame};
 use super::sandbox::{SandboxLayers, SandboxLimits, worker_command};
 
 /// The worker's Python source, embedded at build time.
@@ -92,7 +95,7 @@ fn spawn_from_long_lived_thread(cmd: std::process::Command) -> std::io::Result<C
 pub(crate) struct Worker {
     child: Child,
     stdin: Option<ChildStdin>,
-    replies: Receiver<std::io::Result<Vec<u8>>>,
+    replies: FrameReader,
     stderr: Arc<Mutex<VecDeque<u8>>>,
     /// Trace keys loaded, least recently used first.
     pub traces: VecDeque<String>,
@@ -113,24 +116,9 @@ impl Worker {
             message: format!("{}: {e}", python.display()),
         })?;
         let stdin = child.stdin.take();
-        let mut stdout = child.stdout.take().expect("piped");
+        let stdout = child.stdout.take().expect("piped");
         let mut err = child.stderr.take().expect("piped");
-        let max = limits.max_output_bytes + (64 << 10);
-        let (tx, rx) = channel();
-        thread::Builder::new()
-            .name("detect-reader".into())
-            .spawn(move || {
-                loop {
-                    let frame = read_frame(&mut stdout, max);
-                    let stop = frame.is_err();
-                    if tx.send(frame).is_err() || stop {
-                        break;
-                    }
-                }
-            })
-            .map_err(|e| DetectError::Spawn {
-                message: format!("reader thread: {e}"),
-            })?;
+        let replies = FrameReader::new(stdout, limits.max_output_bytes + (64 << 10));
         let stderr = Arc::new(Mutex::new(VecDeque::new()));
         let sink = stderr.clone();
         thread::Builder::new()
@@ -153,7 +141,7 @@ impl Worker {
         let mut w = Worker {
             child,
             stdin,
-            replies: rx,
+            replies,
             stderr,
             traces: VecDeque::new(),
             detectors: HashSet::new(),
@@ -161,7 +149,7 @@ impl Worker {
         };
         let ready = match w.wait_reply(START_TIMEOUT) {
             Reply::Frame(f) => {
-                protocol::parse_reply(&f).map_err(|m| DetectError::Spawn { message: m })?
+                protocol::parse_reply(&f, 0).map_err(|m| DetectError::Spawn { message: m })?
             }
             Reply::Timeout => {
                 return Err(DetectError::Spawn {
@@ -207,14 +195,10 @@ impl Worker {
     }
 
     fn wait_reply(&mut self, timeout: Duration) -> Reply {
-        let deadline = Instant::now() + timeout;
-        match self
-            .replies
-            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
-        {
-            Ok(Ok(frame)) => Reply::Frame(frame),
-            Ok(Err(_)) | Err(RecvTimeoutError::Disconnected) => Reply::Died(self.reap()),
-            Err(RecvTimeoutError::Timeout) => {
+        match self.replies.next(Instant::now() + timeout) {
+            Ok(frame) => Reply::Frame(frame),
+            Err(Wait::Closed) => Reply::Died(self.reap()),
+            Err(Wait::Timeout) => {
                 self.kill();
                 Reply::Timeout
             }
@@ -285,7 +269,168 @@ impl Drop for Worker {
     }
 }
 
-/// Parses a reply frame.
-pub(crate) fn parse(frame: &[u8]) -> Result<Value, DetectError> {
-    protocol::parse_reply(frame).map_err(DetectError::Internal)
+/// Why no frame came.
+#[derive(Debug, PartialEq)]
+enum Wait {
+    /// Nothing complete before the deadline.
+    Timeout,
+    /// The pipe closed, failed, or announced a frame over the bound: the worker is gone or broken.
+    Closed,
+}
+
+/// Cuts the worker's standard output into frames (4-byte little-endian length, then the bytes).
+struct FrameReader {
+    out: ChildStdout,
+    buf: Vec<u8>,
+    /// Bytes of `buf` already handed out.
+    start: usize,
+    /// Largest frame accepted.
+    max: usize,
+}
+
+impl FrameReader {
+    fn new(out: ChildStdout, max: usize) -> Self {
+        FrameReader {
+            out,
+            buf: Vec::with_capacity(64 << 10),
+            start: 0,
+            max,
+        }
+    }
+
+    /// The next frame, waiting until `deadline` at most.
+    fn next(&mut self, deadline: Instant) -> Result<Vec<u8>, Wait> {
+        loop {
+            let have = &self.buf[self.start..];
+            let mut want = 64 << 10;
+            if have.len() >= 4 {
+                let n = u32::from_le_bytes([have[0], have[1], have[2], have[3]]) as usize;
+                if n > self.max {
+                    return Err(Wait::Closed);
+                }
+                if have.len() >= 4 + n {
+                    let frame = have[4..4 + n].to_vec();
+                    self.start += 4 + n;
+                    if self.start == self.buf.len() {
+                        self.buf.clear();
+                        self.start = 0;
+                    }
+                    return Ok(frame);
+                }
+                want = want.max(4 + n - have.len());
+            }
+            if self.start > 0 {
+                self.buf.drain(..self.start);
+                self.start = 0;
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if !readable(&self.out, left)? {
+                return Err(Wait::Timeout);
+            }
+            let old = self.buf.len();
+            self.buf.resize(old + want.min(1 << 20), 0);
+            match self.out.read(&mut self.buf[old..]) {
+                Ok(0) => {
+                    self.buf.truncate(old);
+                    return Err(Wait::Closed);
+                }
+                Ok(k) => self.buf.truncate(old + k),
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => self.buf.truncate(old),
+                Err(_) => {
+                    self.buf.truncate(old);
+                    return Err(Wait::Closed);
+                }
+            }
+        }
+    }
+}
+
+/// Waits up to `left` for the pipe to have data (or be closed); `false` when the time ran out.
+#[cfg(unix)]
+fn readable(out: &ChildStdout, left: Duration) -> Result<bool, Wait> {
+    use std::os::fd::AsRawFd;
+    let mut fd = libc::pollfd {
+        fd: out.as_raw_fd(),
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    let deadline = Instant::now() + left;
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        // Whole milliseconds, rounded up, so that a wait never ends early.
+        let ms = i32::try_from(left.as_micros().div_ceil(1000)).unwrap_or(i32::MAX);
+        // SAFETY: one valid pollfd, owned by this frame, for the duration of the call.
+        let r = unsafe { libc::poll(&mut fd, 1, ms) };
+        match r {
+            1.. => return Ok(true),
+            0 if Instant::now() >= deadline => return Ok(false),
+            0 => continue,
+            _ if std::io::Error::last_os_error().kind() == std::io::ErrorKind::Interrupted => {
+                continue;
+            }
+            _ => return Err(Wait::Closed),
+        }
+    }
+}
+
+/// Without `poll(2)` the read blocks; the worker itself (`resource`, `fcntl`) needs a Unix system anyway.
+#[cfg(not(unix))]
+fn readable(_out: &ChildStdout, _left: Duration) -> Result<bool, Wait> {
+    Ok(true)
+}
+
+/// Parses a reply frame; marshalled patterns are decoded under a budget of `max_output_bytes`.
+pub(crate) fn parse(frame: &[u8], max_output_bytes: usize) -> Result<Value, DetectError> {
+    protocol::parse_reply(frame, max_output_bytes).map_err(DetectError::Internal)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A reader over what `sh` prints: frames split or joined however the pipe delivers them.
+    fn reader(script: &str, max: usize) -> (Child, FrameReader) {
+        let mut child = std::process::Command::new("sh")
+            .arg("-c")
+            .arg(script)
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let out = child.stdout.take().unwrap();
+        (child, FrameReader::new(out, max))
+    }
+
+    #[test]
+    fn frames_are_cut_from_the_pipe_and_a_closed_pipe_is_reported() {
+        // Two frames in one write, then a third in pieces with a pause between them.
+        let (mut c, mut r) = reader(
+            r"printf '\002\000\000\000ab\001\000\000\000c'; sleep 0.2; printf '\003\000'; sleep 0.1; printf '\000\000xyz'",
+            16,
+        );
+        let far = Instant::now() + Duration::from_secs(10);
+        assert_eq!(r.next(far).unwrap(), b"ab");
+        assert_eq!(r.next(far).unwrap(), b"c");
+        assert_eq!(r.next(far).unwrap(), b"xyz");
+        assert_eq!(r.next(far), Err(Wait::Closed));
+        c.wait().unwrap();
+    }
+
+    #[test]
+    fn a_silent_worker_times_out_and_an_oversized_frame_is_refused() {
+        let (mut c, mut r) = reader("sleep 5", 16);
+        let t0 = Instant::now();
+        assert_eq!(
+            r.next(Instant::now() + Duration::from_millis(150)),
+            Err(Wait::Timeout)
+        );
+        assert!(t0.elapsed() >= Duration::from_millis(150));
+        let _ = c.kill();
+        let _ = c.wait();
+        let (mut c, mut r) = reader(r"printf '\377\377\000\000'", 16);
+        assert_eq!(
+            r.next(Instant::now() + Duration::from_secs(10)),
+            Err(Wait::Closed)
+        );
+        c.wait().unwrap();
+    }
 }

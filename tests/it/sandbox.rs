@@ -409,3 +409,45 @@ fn invalid_output_is_reported_with_its_json_path() {
         "{s:?}"
     );
 }
+
+/// What a detector returns reaches Rust as `json.dumps` would have written it, whichever way it
+/// travels: marshalled (plain dicts, lists, tuples, shared sub-values, integer keys, integers past 64
+/// bits) or as JSON (values holding the trace's own read-only dicts, which marshal refuses).
+#[test]
+fn outputs_reach_rust_as_json_would_carry_them() {
+    let pool = WorkerPool::new(limits(true)).expect("workers start");
+    let marshalled = det(r#"
+def find_pattern(trace):
+    shared = [1.5, -2, "é"]
+    return [{"label": "Probe", "start_timestep": 0, "end_timestep": 1,
+             "parameters": {"object_details": {3: {"role": "r", "p": (0.25, 1e300)}},
+                            "a": shared, "b": shared, "big": 2 ** 70, "neg": -(2 ** 40),
+                            True: None, None: False}}]
+"#);
+    let as_json = det(r#"
+def find_pattern(trace):
+    first = trace["timesteps"][0]
+    return [{"label": "probe", "start_timestep": 0, "end_timestep": 0,
+             "parameters": {"object_details": {"0": {"role": "r"}}, "step": first}}]
+"#);
+    let batch = pool.run(&[marshalled, as_json], &traces()[..1]);
+    let params: Vec<serde_json::Value> = batch
+        .results
+        .iter()
+        .map(|r| {
+            assert_eq!(r.status, CandidateStatus::Ok, "{r:?}");
+            serde_json::Value::Object(r.patterns[0].parameters.clone())
+        })
+        .collect();
+    assert_eq!(
+        params[0],
+        serde_json::json!({
+            "object_details": {"3": {"role": "r", "p": [0.25, 1e300]}},
+            "a": [1.5, -2, "é"], "b": [1.5, -2, "é"],
+            "big": 1180591620717411303424.0, "neg": -1099511627776i64,
+            "true": null, "null": false,
+        })
+    );
+    assert_eq!(params[1]["step"]["index"], 0);
+    assert!(params[1]["step"]["objects"].is_array(), "{}", params[1]);
+}
