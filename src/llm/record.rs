@@ -3,7 +3,7 @@
 //!
 //! Parquet files cannot grow, so "appending" means adding files: a client buffers rows and writes
 //! `llm_calls/llm-<session>.<nnnnn>.parquet` (atomically, through [`ParquetSink`]) every
-//! [`FLUSH_EVERY`] rows, on [`CallLog::flush`] and when dropped. A killed process loses at most the rows
+//! [`FLUSH_EVERY`] rows, on `CallLog::flush` and when dropped. A killed process loses at most the rows
 //! of its unflushed buffer; no reader ever sees a partial file. Every text column has the API key
 //! scrubbed before it is stored.
 

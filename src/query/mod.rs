@@ -2,7 +2,7 @@
 //!
 //! **Owns:** registering every table of a run folder in a DataFusion `SessionContext` ([`RunQuery`]),
 //! running SQL and collecting results, listing tables with row counts and schemas, and rendering results
-//! ([`format`]). **Does not:** write tables (stages do that through `store/`).
+//! ([`format`](mod@format)). **Does not:** write tables (stages do that through `store/`).
 //!
 //! The trace tables (`scenes`, `traces`, `timesteps`, `frames`, `events`) are always registered with
 //! their documented schemas, empty if the run has none yet, and expose the `env` partition as a column.

@@ -6,7 +6,7 @@
 //! seeded 9-ball racks or explicit JSON), shots ([`Shot`] with validation, [`aim`] helpers, the
 //! [`deepphy`] action adapter), the conversion of a [`Simulation`] into an annotrace
 //! [`Trace`](crate::trace::Trace) on a fixed `dt` ([`to_trace`]), the success rule and outcome, PNG
-//! rendering ([`render`]), and comparison with pooltool reference traces ([`reference`]).
+//! rendering ([`render`]), and comparison with pooltool reference traces ([`reference`](mod@reference)).
 //! **Does not:** write Parquet or run stages (`pipeline/stages/simulate.rs` does), read argv, or print.
 //!
 //! **Entry point:** [`PoolEnv`] (the [`Environment`](super::Environment) implementation), or the

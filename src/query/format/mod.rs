@@ -1,6 +1,6 @@
 //! Result formats: a terminal table, CSV, Markdown, LaTeX (booktabs), JSON and JSON Lines.
 //!
-//! Every format reads the same cells: [`Cells`] renders each value once, with floats at a chosen
+//! Every format reads the same cells: `Cells` renders each value once, with floats at a chosen
 //! precision for the human formats (table, Markdown, LaTeX) and in full, round-trip precision for the
 //! machine formats (CSV, JSON). Each format lives in its own file, as ripgrep keeps one printer per file.
 
