@@ -20,14 +20,14 @@ fn chatter(r: &RefTrace, t: Option<f64>) -> (usize, bool) {
         }
         let mut key = e.ids.clone();
         key.sort();
-        if let Some(&prev) = last.get(&key) {
-            if e.time - prev < 0.05 {
-                n += 1;
-                if let Some(t) = t {
-                    if (e.time - t).abs() < 0.05 {
-                        during = true;
-                    }
-                }
+        if let Some(&prev) = last.get(&key)
+            && e.time - prev < 0.05
+        {
+            n += 1;
+            if let Some(t) = t
+                && (e.time - t).abs() < 0.05
+            {
+                during = true;
             }
         }
         last.insert(key, e.time);
@@ -44,7 +44,7 @@ fn main() {
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| {
             p.file_name()
-                .map_or(false, |n| n.to_string_lossy().starts_with("shot_"))
+                .is_some_and(|n| n.to_string_lossy().starts_with("shot_"))
         })
         .collect();
     paths.sort();

@@ -44,8 +44,8 @@ pub fn synthetic_trace(env: Env, index: usize, steps: usize, objects: usize) -> 
         timesteps,
         events,
         outcome: Outcome {
-            success: index % 2 == 0,
-            terminal_status: if index % 2 == 0 {
+            success: index.is_multiple_of(2),
+            terminal_status: if index.is_multiple_of(2) {
                 "success".into()
             } else {
                 "timeout".into()
@@ -73,7 +73,7 @@ fn object(env: Env, k: usize, s: usize) -> Object {
         }),
         Env::Phyre => Body::Phyre(PhyreObject {
             object_index: k as i64,
-            shape: if k % 2 == 0 {
+            shape: if k.is_multiple_of(2) {
                 "ball".into()
             } else {
                 "bar".into()

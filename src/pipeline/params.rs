@@ -170,6 +170,9 @@ fn check_type(spec: &ParamSpec, node: &Node) -> Result<Value, String> {
     })
 }
 
+/// A stage's parameters with defaults filled in, and the line of each given key.
+pub(crate) type Resolved = (Map<String, Value>, Vec<(String, usize)>);
+
 /// Checks a stage's parameter entries against the kind's specs. Returns the parameters with defaults
 /// filled in, and the line of each given key.
 pub(crate) fn resolve(
@@ -179,7 +182,7 @@ pub(crate) fn resolve(
     kind: &str,
     specs: &[ParamSpec],
     entries: &[&Entry],
-) -> Result<(Map<String, Value>, Vec<(String, usize)>), SpecError> {
+) -> Result<Resolved, SpecError> {
     let mut out = Map::new();
     let mut lines = Vec::new();
     for e in entries {

@@ -27,6 +27,9 @@ impl BuildError {
     }
 }
 
+/// Builds a stage of one kind from its validated definition in a pipeline.
+pub type BuildStage = fn(&StageDef, &PipelineSpec) -> Result<Box<dyn Stage>, BuildError>;
+
 /// A kind of stage: its name, docs, parameters and constructor.
 #[derive(Debug)]
 pub struct StageKind {
@@ -41,7 +44,7 @@ pub struct StageKind {
     /// Its parameters.
     pub params: &'static [ParamSpec],
     /// Builds the stage from validated parameters; also called once during validation.
-    pub build: fn(&StageDef, &PipelineSpec) -> Result<Box<dyn Stage>, BuildError>,
+    pub build: BuildStage,
 }
 
 /// Every stage kind, in the order `annotrace stages` lists them.

@@ -414,10 +414,10 @@ impl PipelineSpec {
         let mut out = BTreeSet::new();
         let mut todo = vec![id.to_string()];
         while let Some(cur) = todo.pop() {
-            if out.insert(cur.clone()) {
-                if let Some(s) = self.stage(&cur) {
-                    todo.extend(s.inputs.iter().cloned());
-                }
+            if out.insert(cur.clone())
+                && let Some(s) = self.stage(&cur)
+            {
+                todo.extend(s.inputs.iter().cloned());
             }
         }
         out

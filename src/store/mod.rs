@@ -425,13 +425,12 @@ pub fn remove_files(files: &[PathBuf]) -> Result<(), StoreError> {
             Ok(()) => {
                 if let Some(parent) = f.parent() {
                     let _ = fs::remove_dir(parent);
-                    if let Some(grand) = parent.parent().filter(|g| g.file_name().is_some()) {
-                        if parent
+                    if let Some(grand) = parent.parent().filter(|g| g.file_name().is_some())
+                        && parent
                             .file_name()
                             .is_some_and(|n| n.to_string_lossy().starts_with("env="))
-                        {
-                            let _ = fs::remove_dir(grand);
-                        }
+                    {
+                        let _ = fs::remove_dir(grand);
                     }
                 }
             }

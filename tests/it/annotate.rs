@@ -42,7 +42,10 @@ fn straight_pot(v0: f64, b: f64, dt: f64) -> Trace {
     )
 }
 
-fn run_library(traces: &[Trace]) -> (Library, Vec<Vec<(String, Vec<String>, i64, i64)>>) {
+/// Per trace: (detector label, pattern objects, start step, end step) for every pattern found.
+type Found = Vec<Vec<(String, Vec<String>, i64, i64)>>;
+
+fn run_library(traces: &[Trace]) -> (Library, Found) {
     let lib = library();
     let pool = WorkerPool::new(SandboxLimits {
         workers: 2,

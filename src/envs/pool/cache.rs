@@ -105,10 +105,10 @@ impl TransitionCache {
     pub fn earliest(&self) -> Option<(usize, f64, EventKind)> {
         let mut best: Option<(usize, f64, EventKind)> = None;
         for (i, t) in self.next.iter().enumerate() {
-            if let Some((time, kind)) = t {
-                if best.map_or(true, |b| *time < b.1) {
-                    best = Some((i, *time, *kind));
-                }
+            if let Some((time, kind)) = t
+                && best.is_none_or(|b| *time < b.1)
+            {
+                best = Some((i, *time, *kind));
             }
         }
         best

@@ -55,7 +55,7 @@ impl BallParams {
         if self.u_s < 0.0 || self.u_r < 0.0 || self.u_sp < 0.0 || self.f_c < 0.0 {
             return Err(PoolError::Data("friction coefficients must be >= 0".into()));
         }
-        if !(self.e_c > 0.0 && self.e_c <= 1.0) || !(self.e_b >= 0.0 && self.e_b <= 1.0) {
+        if !(self.e_c > 0.0 && self.e_c <= 1.0 && self.e_b >= 0.0 && self.e_b <= 1.0) {
             return Err(PoolError::Data("restitution out of range".into()));
         }
         Ok(())

@@ -240,13 +240,10 @@ pub fn compare(r: &RefTrace, s: &Simulation) -> Comparison {
         }
     }
     let all_sequence_equal = r.events.len() == s.events.len()
-        && r.events.iter().zip(s.events.iter()).all(|(x, y)| {
-            x.kind == y.kind
-                && x.ids
-                    .iter()
-                    .map(|q| q.as_str())
-                    .eq(s.event_ids(y).into_iter())
-        });
+        && r.events
+            .iter()
+            .zip(s.events.iter())
+            .all(|(x, y)| x.kind == y.kind && x.ids.iter().map(|q| q.as_str()).eq(s.event_ids(y)));
     Comparison {
         all_sequence_equal,
         n_ref: a.len(),

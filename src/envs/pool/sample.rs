@@ -19,7 +19,7 @@ pub struct Sample {
 
 /// The sample times pooltool's `continuize(dt)` produces for a shot ending at `t_end`.
 pub fn sample_times(t_end: f64, dt: f64) -> Vec<f64> {
-    if !(dt > 0.0) || !dt.is_finite() || !t_end.is_finite() || t_end < 0.0 {
+    if !dt.is_finite() || dt <= 0.0 || !t_end.is_finite() || t_end < 0.0 {
         return vec![];
     }
     let num = (t_end / dt).floor() as usize + 1;

@@ -330,10 +330,10 @@ impl<'a> Engine<'a> {
 pub fn simulate(system: &System, shot: &Shot, opts: &SimOptions) -> Result<Simulation> {
     shot.validate()?;
     let cue_idx = system.validate()?;
-    if let Some(tf) = opts.t_final {
-        if !tf.is_finite() {
-            return Err(PoolError::InvalidShot("t_final must be finite".into()));
-        }
+    if let Some(tf) = opts.t_final
+        && !tf.is_finite()
+    {
+        return Err(PoolError::InvalidShot("t_final must be finite".into()));
     }
     let n = system.balls.len();
     let table = system.table.clone();
@@ -544,11 +544,11 @@ pub fn simulate(system: &System, shot: &Shot, opts: &SimOptions) -> Result<Simul
             balls,
         });
 
-        if let Some(tf) = opts.t_final {
-            if eng.t >= tf {
-                status = Status::MaxTime;
-                break;
-            }
+        if let Some(tf) = opts.t_final
+            && eng.t >= tf
+        {
+            status = Status::MaxTime;
+            break;
         }
         if opts.max_events > 0 && num_events > opts.max_events {
             for s in eng.states.iter_mut() {

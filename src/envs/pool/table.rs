@@ -230,7 +230,7 @@ impl Table {
         }
         let mut circular = Vec::new();
         for (id, c) in t.circular.0 {
-            if !(c.radius > 0.0) || !vec3::is_finite(c.center) {
+            if c.radius.is_nan() || c.radius <= 0.0 || !vec3::is_finite(c.center) {
                 return Err(PoolError::Data(format!("bad jaw {id}")));
             }
             circular.push(CircularCushion {
@@ -241,7 +241,11 @@ impl Table {
         }
         let mut pockets = Vec::new();
         for (id, p) in t.pockets.0 {
-            if !(p.radius > 0.0) || !vec3::is_finite(p.center) || !p.depth.is_finite() {
+            if p.radius.is_nan()
+                || p.radius <= 0.0
+                || !vec3::is_finite(p.center)
+                || !p.depth.is_finite()
+            {
                 return Err(PoolError::Data(format!("bad pocket {id}")));
             }
             pockets.push(Pocket {

@@ -520,10 +520,10 @@ impl TraceConsumer for Importer<'_, '_> {
         if self.first_step.is_none() {
             self.first_step = Some(ts);
         }
-        if self.builder.buffered_frames() >= self.stage.spill_rows {
-            if let Err(e) = self.spill_frames() {
-                self.failure = Some(e);
-            }
+        if self.builder.buffered_frames() >= self.stage.spill_rows
+            && let Err(e) = self.spill_frames()
+        {
+            self.failure = Some(e);
         }
     }
 

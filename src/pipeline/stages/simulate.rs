@@ -195,7 +195,7 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     }
     let max_time = p.get("max_time").and_then(Value::as_f64);
     if let Some(t) = max_time
-        && !(t > 0.0)
+        && (t.is_nan() || t <= 0.0)
     {
         return Err(BuildError::param(
             "max_time",

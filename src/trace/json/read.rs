@@ -528,10 +528,10 @@ impl Partial {
 
     fn finish(mut self, env: Env) -> Result<TraceHeader, Fault> {
         // A contradicting environment explains every layout fault after it, so it wins.
-        if let Some((name, parsed)) = &self.environment {
-            if *parsed != Some(env) {
-                return Err(env_mismatch(name, env));
-            }
+        if let Some((name, parsed)) = &self.environment
+            && *parsed != Some(env)
+        {
+            return Err(env_mismatch(name, env));
         }
         if let Some(f) = self.fault.take() {
             return Err(f);

@@ -3,6 +3,7 @@
 //!   C = l₀ + l·c ± R‖l‖ (+ for SIDE1, − for SIDE2, both for BOTH); a root counts if it is
 //!   real, > EPS and the ball centre then projects onto the segment (s ∈ [0, 1]);
 //! * circular jaw: quartic ‖r(t) − p‖² = (ρ + R)², halved.
+//!
 //! Mirrors pooltool `solve.py::ball_linear_cushion_collision_time` and
 //! `ball_circular_cushion_collision_coeffs`.
 

@@ -252,13 +252,10 @@ fn cubic_largest_real(p: f64, q: f64) -> f64 {
 
 /// All complex roots of `c[0] z³ + c[1] z² + c[2] z + c[3]` (c[0] ≠ 0).
 fn cubic_roots(c: [f64; 4], out: &mut Roots) {
-    let (a, b, cc, d) = (c[1] / c[0], c[2] / c[0], c[3] / c[0], ());
-    let _ = d;
-    let dd = c[3] / c[0];
+    let (a, b, dd) = (c[1] / c[0], c[2] / c[0], c[3] / c[0]);
     // depressed: z = y − a/3
     let p = b - a * a / 3.0;
     let q = 2.0 * a * a * a / 27.0 - a * b / 3.0 + dd;
-    let _ = cc;
     let y1 = cubic_largest_real(p, q);
     let mut z1 = y1 - a / 3.0;
     z1 = polish(&c, C64::real(z1)).re;
@@ -353,7 +350,8 @@ pub fn quartic(a: f64, b: f64, c: f64, d: f64, e: f64) -> Roots {
             }
             m = mn;
         }
-        if !(m > 0.0) {
+        // Also catches NaN.
+        if m.is_nan() || m <= 0.0 {
             m = m.abs().max(1e-300);
         }
         let s2m = (2.0 * m).sqrt();
@@ -379,7 +377,7 @@ pub fn smallest_positive_real(roots: &[C64]) -> f64 {
     let mut min = f64::INFINITY;
     for z in roots {
         let (re, im) = (z.re, z.im);
-        if !(re >= 0.0) {
+        if re.is_nan() || re < 0.0 {
             continue;
         }
         let (ia, ra) = (im.abs(), re.abs());

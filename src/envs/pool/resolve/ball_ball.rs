@@ -5,6 +5,7 @@
 //!    push apart along the line of centres);
 //! 2. frictional inelastic impulse with μ_b from the Alciatore curve, e = mean(e_b);
 //! 3. the "continually touching" fix-up for nearly co-moving balls.
+//!
 //! Both balls end sliding.
 
 use super::super::detect::roots::quadratic_complex;
@@ -40,7 +41,7 @@ pub fn make_kiss(s1: &mut BallState, s2: &mut BallState, radius: f64) {
         let mut best: Option<f64> = None;
         for z in roots {
             let keep = (z.im.abs() / z.re.abs()) < 1e-3;
-            if keep && best.map_or(true, |t| z.re.abs() < t.abs()) {
+            if keep && best.is_none_or(|t| z.re.abs() < t.abs()) {
                 best = Some(z.re);
             }
         }

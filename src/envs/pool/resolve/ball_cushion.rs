@@ -44,7 +44,8 @@ pub fn make_kiss_linear(st: &mut BallState, seg: &LinearCushion, radius: f64) {
     let t1 = (radius + MIN_DIST - d0) / vn;
     let t2 = (-(radius + MIN_DIST) - d0) / vn;
     let t = if t1.abs() < t2.abs() { t1 } else { t2 };
-    if !(vec3::norm(vec3::scale(v, t)) <= 5.0 * MIN_DIST) {
+    let shift = vec3::norm(vec3::scale(v, t));
+    if shift.is_nan() || shift > 5.0 * MIN_DIST {
         st.r = fallback_linear(st, seg, radius);
         return;
     }
@@ -72,7 +73,7 @@ pub fn make_kiss_circular(st: &mut BallState, jaw: &CircularCushion, radius: f64
     let mut best: Option<f64> = None;
     for z in quadratic_complex(alpha, beta, gamma) {
         let keep = (z.im.abs() / z.re.abs()) < 1e-3;
-        if keep && best.map_or(true, |t| z.re.abs() < t.abs()) {
+        if keep && best.is_none_or(|t| z.re.abs() < t.abs()) {
             best = Some(z.re);
         }
     }
@@ -96,6 +97,8 @@ fn phase_restitution(t: f64, omega_n: f64, e_n: f64) -> f64 {
 }
 
 /// Which Stronge branch resolved a cushion impact.
+// The variant names are Stronge's own (gross slip, stick–slip, slip–stick–slip).
+#[allow(clippy::enum_variant_names)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum StrongeRegime {
     GrossSlip,

@@ -150,13 +150,12 @@ pub fn toms748<F: Fn(f64) -> f64>(f: F, a: f64, b: f64) -> f64 {
         let ab_width = ab[1] - ab[0];
         let mut cc: Option<f64> = None;
         for nsteps in 2..(k + 2) {
-            if let Some(fe_v) = fe {
-                if notclose([fab[0], fab[1], fd, fe_v], 32.0 * eps) {
-                    let c0 =
-                        interpolated_poly([fab[0], fab[1], fd, fe_v], [ab[0], ab[1], d, e], 0.0);
-                    if ab[0] < c0 && c0 < ab[1] {
-                        cc = Some(c0);
-                    }
+            if let Some(fe_v) = fe
+                && notclose([fab[0], fab[1], fd, fe_v], 32.0 * eps)
+            {
+                let c0 = interpolated_poly([fab[0], fab[1], fd, fe_v], [ab[0], ab[1], d, e], 0.0);
+                if ab[0] < c0 && c0 < ab[1] {
+                    cc = Some(c0);
                 }
             }
             let c = match cc {
