@@ -11,7 +11,7 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
@@ -190,6 +190,14 @@ impl WorkerPool {
                 s.spawn(move || {
                     let mut guard = slot.lock().unwrap_or_else(|p| p.into_inner());
                     let mut local = RunStats::default();
+                    let store = |(t, out): (usize, Vec<CallResult>)| {
+                        let mut r = results.lock().unwrap_or_else(|p| p.into_inner());
+                        for (d, res) in out.into_iter().enumerate() {
+                            r[t * nd + d] = Some(res);
+                        }
+                    };
+                    // The previous trace's replies, decoded while the worker runs the next trace.
+                    let mut unsettled: Option<Unsettled> = None;
                     // Traces this worker holds already (a search runs many candidates over one set).
                     let mut mine: Vec<usize> = match guard.as_ref() {
                         Some(w) => (0..traces.len())
@@ -213,13 +221,20 @@ impl WorkerPool {
                                 t
                             }
                         };
-                        let out = self.run_trace(
-                            &mut guard, detectors, t, &keys[t], &traces[t], shared, &mut local,
+                        let next = self.run_trace(
+                            &mut guard,
+                            detectors,
+                            t,
+                            &keys[t],
+                            &traces[t],
+                            shared,
+                            &mut local,
+                            (&mut unsettled, &store),
                         );
-                        let mut r = results.lock().unwrap_or_else(|p| p.into_inner());
-                        for (d, res) in out.into_iter().enumerate() {
-                            r[t * nd + d] = Some(res);
-                        }
+                        unsettled = Some(next);
+                    }
+                    if let Some(u) = unsettled.take() {
+                        store(u.settle(detectors, &self.limits));
                     }
                     stats.lock().unwrap_or_else(|p| p.into_inner()).add(&local);
                 });
@@ -268,9 +283,14 @@ impl WorkerPool {
     }
 
     /// Loads the trace into the worker (once), compiles the detectors it lacks (once), then runs
-    /// them all with one request: the worker streams one reply per detector, each awaited with the call
-    /// deadline, so Rust validates a result while the worker runs the next. When a call kills the
-    /// worker, the detectors after it go to a fresh worker.
+    /// them all with one request. The worker gathers the replies and writes them together (at least
+    /// every [`BATCH_FLUSH`] before starting a call, so every wait has the call deadline plus that);
+    /// their patterns are decoded and validated later ([`Unsettled`]), while the worker runs the next
+    /// trace: `prev`, the previous trace's replies, is settled (and stored) as soon as this trace's run
+    /// request is on its way. When a call kills the worker, the detectors after it go to a fresh worker;
+    /// if the worker dies with more than one reply missing, which call did it is unknown (the earlier
+    /// ones may have finished, their replies unwritten), so the missing ones run again, each reply
+    /// written as its call ends.
     #[allow(clippy::too_many_arguments)]
     fn run_trace(
         &self,
@@ -281,7 +301,15 @@ impl WorkerPool {
         trace: &Trace,
         shared: &Shared,
         stats: &mut RunStats,
-    ) -> Vec<CallResult> {
+        (prev, store): (&mut Option<Unsettled>, &dyn Fn((usize, Vec<CallResult>))),
+    ) -> Unsettled {
+        let mut settle_prev = || {
+            if let Some(p) = prev.take() {
+                store(p.settle(detectors, &self.limits));
+            }
+        };
+        let mut frames: Vec<(usize, Vec<u8>)> = Vec::new();
+        let mut one_by_one = false;
         let steps = trace
             .timesteps
             .first()
@@ -386,25 +414,54 @@ impl WorkerPool {
             }
             let Some(worker) = slot.as_mut() else { break };
             let ids: Vec<&str> = ready.iter().map(|&d| detectors[d].id.as_str()).collect();
+            let batched = ready.len() > 1 && !one_by_one;
+            let flush = if batched { BATCH_FLUSH } else { Duration::ZERO };
+            let wait = timeout + flush;
             let mut started = Instant::now();
-            let mut first = Some(worker.request(RUN, &protocol::run_body(&ids, key), timeout));
+            let sent = worker.send(RUN, &protocol::run_body(&ids, key, flush.as_secs_f64()));
+            // The worker is busy with this trace: decode the previous one's replies meanwhile.
+            settle_prev();
+            let mut first = Some(match sent {
+                Ok(()) => slot.as_mut().map_or(Reply::Timeout, |w| w.wait(wait)),
+                Err(death) => Reply::Died(death),
+            });
             let mut settled = 0;
             for (pos, &d) in ready.iter().enumerate() {
                 let reply = match first.take() {
                     Some(r) => r,
                     None => match slot.as_mut() {
-                        Some(w) => w.wait(timeout),
+                        Some(w) => w.wait(wait),
                         None => break,
                     },
                 };
+                if batched && ready.len() - pos > 1 && !matches!(reply, Reply::Frame(_)) {
+                    // Timed out or died with several replies missing: run those again one by one.
+                    if let Reply::Died(_) | Reply::Timeout = reply {
+                        *slot = None;
+                    }
+                    one_by_one = true;
+                    break;
+                }
                 let det = &detectors[d];
-                let parsed = self.interpret(reply, slot);
                 let res = &mut out[d];
                 res.round_trip_s = started.elapsed().as_secs_f64();
                 started = Instant::now();
                 stats.calls += 1;
                 stats.round_trip_s += res.round_trip_s;
                 settled = pos + 1;
+                // Patterns in marshal format: decoded later; only the timing is read now.
+                if let Reply::Frame(f) = &reply
+                    && let Some((wall, cpu)) = protocol::marshal_times(f)
+                {
+                    res.wall_s = wall;
+                    res.cpu_s = cpu;
+                    stats.detector_wall_s += wall;
+                    if let Reply::Frame(f) = reply {
+                        frames.push((d, f));
+                    }
+                    continue;
+                }
+                let parsed = self.interpret(reply, slot);
                 let worker_gone = parsed.is_err();
                 match parsed {
                     Ok(mut v) => {
@@ -438,7 +495,13 @@ impl WorkerPool {
             }
             pending = ready[settled..].to_vec();
         }
-        out
+        settle_prev();
+        Unsettled {
+            trace: t,
+            steps,
+            out,
+            frames,
+        }
     }
 
     /// Makes sure the worker holds the trace, evicting its least recently used one beyond the cache size.
@@ -517,6 +580,45 @@ impl WorkerPool {
                 Err(self.death_error(&death))
             }
         }
+    }
+}
+
+/// How long a worker may hold finished replies before writing them (checked before each call starts).
+const BATCH_FLUSH: Duration = Duration::from_millis(20);
+
+/// The results of one trace whose marshalled patterns are not decoded yet.
+struct Unsettled {
+    trace: usize,
+    steps: Option<(i64, i64)>,
+    out: Vec<CallResult>,
+    /// (detector, reply frame) of the calls that returned patterns.
+    frames: Vec<(usize, Vec<u8>)>,
+}
+
+impl Unsettled {
+    /// Decodes and validates the patterns: (trace, results by detector).
+    fn settle(
+        mut self,
+        detectors: &[Detector],
+        limits: &SandboxLimits,
+    ) -> (usize, Vec<CallResult>) {
+        for (d, frame) in self.frames {
+            let res = &mut self.out[d];
+            match protocol::parse_reply(&frame, limits.max_output_bytes) {
+                Ok(mut v) if v["ok"] == Value::Bool(true) => {
+                    res.printed = v["printed"].as_str().unwrap_or_default().to_string();
+                    match validate(v["patterns"].take(), &detectors[d], self.steps) {
+                        Ok(p) => res.patterns = p,
+                        Err(e) => res.status = CandidateStatus::Failed(e),
+                    }
+                }
+                Ok(v) => res.status = CandidateStatus::Failed(error_of(&v["error"], limits)),
+                Err(message) => {
+                    res.status = CandidateStatus::Failed(DetectorError::Crashed { message })
+                }
+            }
+        }
+        (self.trace, self.out)
     }
 }
 

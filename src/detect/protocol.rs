@@ -185,10 +185,21 @@ pub(crate) fn compile_body(id: &str, code: &str) -> Vec<u8> {
     serde_json::to_vec(&serde_json::json!({"id": id, "code": code})).expect("serialises")
 }
 
-/// The body of a run request: run each detector in turn on the trace; one reply per detector.
-pub(crate) fn run_body(detectors: &[&str], trace: &str) -> Vec<u8> {
-    serde_json::to_vec(&serde_json::json!({"detectors": detectors, "trace": trace}))
-        .expect("serialises")
+/// The body of a run request: run each detector in turn on the trace; one reply per detector, written
+/// as each call ends (`flush_s` 0) or gathered and written together at most `flush_s` after the last
+/// write (before the next call starts) and at the end.
+pub(crate) fn run_body(detectors: &[&str], trace: &str, flush_s: f64) -> Vec<u8> {
+    serde_json::to_vec(
+        &serde_json::json!({"detectors": detectors, "trace": trace, "flush": flush_s}),
+    )
+    .expect("serialises")
+}
+
+/// The wall and CPU seconds of a marshal reply, read without decoding its patterns.
+pub(crate) fn marshal_times(bytes: &[u8]) -> Option<(f64, f64)> {
+    let f = |i: usize| Some(f64::from_le_bytes(bytes.get(i..i + 8)?.try_into().ok()?));
+    (bytes.first() == Some(&MARSHAL_REPLY)).then_some(())?;
+    Some((f(1)?, f(9)?))
 }
 
 /// The body of an evict request.

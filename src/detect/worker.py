@@ -17,7 +17,10 @@
 #                                   dict, built from columns: floats travel as raw doubles) -> {"ok": true}
 #   b"E" {"ids": [...]}             evict traces                                        -> {"ok": true}
 #   b"C" {"id", "code"}             check and compile a detector                        -> {"ok": true} | error
-#   b"R" {"detectors", "trace"}     run each detector in turn      -> one reply per detector: patterns | error
+#   b"R" {"detectors", "trace", "flush"}  run each detector in turn -> one reply per detector: patterns | error
+#                                   (written as each call ends, or with "flush" > 0 gathered and written
+#                                   together, at the latest before the first call that starts "flush" seconds
+#                                   after the last write, and at the end)
 #                                   (patterns as b"M" <f64 wall><f64 cpu><u32 n><printed, n bytes UTF-8>
 #                                   <marshal.dumps(out, 4)>, or as JSON when marshal refuses the value)
 # Before every request and call at least cpu_seconds of CPU time remain below the soft RLIMIT_CPU (re-armed
@@ -100,8 +103,24 @@ def _read_exact(n):
     return bytes(buf)
 
 
-def _send(obj_bytes):
-    _OUT.write(_PACK.pack(len(obj_bytes)) + obj_bytes)
+_OUTBOX = []  # frames not written yet (a run request may gather several replies into one write)
+
+
+def _send(payload, flush=True):
+    _OUTBOX.append(_PACK.pack(len(payload)))
+    _OUTBOX.append(payload)
+    if flush:
+        _flush()
+
+
+def _flush():
+    """Writes every waiting frame with one system call (more only if the pipe takes part of it)."""
+    if not _OUTBOX:
+        return
+    data = memoryview(b"".join(_OUTBOX))
+    _OUTBOX.clear()
+    while data:
+        data = data[_OUT.write(data):]
 
 
 def _reply(obj):
@@ -595,15 +614,26 @@ def serve():
                 _reply(compile_detector(json.loads(frame[1:])))
             elif kind == b"R":
                 msg = json.loads(frame[1:])
+                # With "flush" (seconds) > 0, replies wait in the outbox and go out together: before a
+                # call once that long has passed since the last write, and at the end. Each write wakes
+                # the Rust side, which costs about as much as a short call on a virtual machine. The
+                # Rust side waits call_timeout + flush for each write.
+                flush = float(msg.get("flush") or 0)
+                last = time.perf_counter()
                 for detector_id in msg["detectors"]:
+                    if _OUTBOX and time.perf_counter() - last >= flush:
+                        _flush()
+                        last = time.perf_counter()
                     _set_cpu_limit(CPU_SECONDS, _CPU["used"])
                     raw, err = run_detector(detector_id, msg["trace"])
                     if raw is not None:
-                        _send(raw)
+                        _send(raw, flush=not flush)
                     else:
                         _reply(err)
+                        last = time.perf_counter()
                         if err["error"].get("fatal"):
                             sys.exit(3)
+                _flush()
             else:
                 _reply(_error("internal", "unknown message type %r" % kind))
         except MemoryError:

@@ -178,14 +178,19 @@ impl Worker {
 
     /// Sends a request and waits up to `timeout` for its reply. On timeout the worker is killed.
     pub fn request(&mut self, kind: u8, body: &[u8], timeout: Duration) -> Reply {
+        match self.send(kind, body) {
+            Ok(()) => self.wait_reply(timeout),
+            Err(death) => Reply::Died(death),
+        }
+    }
+
+    /// Sends a request without waiting for its reply (collect it with [`Worker::wait`]).
+    pub fn send(&mut self, kind: u8, body: &[u8]) -> Result<(), Death> {
         let sent = match self.stdin.as_mut() {
             Some(stdin) => write_frame(stdin, kind, body),
             None => Err(std::io::Error::other("worker stdin closed")),
         };
-        if sent.is_err() {
-            return Reply::Died(self.reap());
-        }
-        self.wait_reply(timeout)
+        sent.map_err(|_| self.reap())
     }
 
     /// Waits up to `timeout` for the next reply (of a request that has several). On timeout the worker

@@ -218,6 +218,23 @@ fn an_endless_loop_times_out_and_the_batch_goes_on() {
 }
 
 #[test]
+fn a_crash_among_gathered_replies_is_blamed_on_the_call_that_crashed() {
+    // The worker writes a trace's replies together, so when it dies the replies of the calls before
+    // the crash are lost with it; they run again, one reply at a time, and only the crashing call
+    // fails. (OS layer test: with the Python layer off, a detector can reach ctypes and crash the
+    // interpreter outright.)
+    let s = contain(&wrap("import ctypes\nreturn ctypes.string_at(0)"), false);
+    assert!(
+        matches!(&s[0], CandidateStatus::Failed(DetectorError::Crashed { message }) if message.contains("signal 11")),
+        "{s:?}"
+    );
+    assert!(
+        matches!(s[1], CandidateStatus::Failed(DetectorError::Skipped { .. })),
+        "{s:?}"
+    );
+}
+
+#[test]
 fn allocating_ten_gigabytes_is_a_memory_error() {
     let s = contain(
         &wrap("x = [0] * (10 * 1024 ** 3 // 8)\nreturn [len(x)]"),
