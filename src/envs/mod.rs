@@ -3,7 +3,7 @@
 //! **Owns:** the [`Environment`] trait (scenes, action validation, simulate → [`Trace`], success,
 //! rendering) and its implementations: [`pool`] (billiards, pooltool 0.6.0 physics) and [`iphyre`]
 //! (I-PHYRE on rapier2d) and [`phyre`] (PHYRE's ball tier on rapier2d), which share the rapier state of
-//! [`rapier`].
+//! [`rapier`]. Their renderers share the pixmap, PNG and strip plumbing of the private `draw` module.
 //! **Does not:** write run folders or order stages (`pipeline/`), parse command lines (`cli/`). It uses
 //! only [`crate::trace`] below it.
 //!
@@ -17,6 +17,7 @@
 //! assert_eq!(trace.events[1].kind, "physics_stick_ball");
 //! ```
 
+mod draw;
 pub mod iphyre;
 pub mod phyre;
 pub mod pool;

@@ -11,13 +11,12 @@
 //!
 //! Text (indices, the time) uses a small stroke font of our own: seven-segment digits plus `t = . s`.
 
-use tiny_skia::{
-    Color, FillRule, LineCap, LineJoin, Paint, PathBuilder, Pixmap, PixmapPaint, Stroke, Transform,
-};
+use tiny_skia::{Color, LineCap, LineJoin, PathBuilder, Pixmap, Stroke, Transform};
 
 use super::action::SCREEN;
 use super::game::{Game, ObjectKind};
 use crate::envs::EnvError;
+use crate::envs::draw::{self, encode_png, fill_circle, new_pixmap, paint};
 use crate::envs::pool::render::timestep_at;
 use crate::trace::{Body, Trace};
 
@@ -93,7 +92,7 @@ fn items_of_game(game: &Game) -> Vec<Item> {
 pub fn render_scene_png(game: &Game, opts: &RenderOptions) -> Result<Vec<u8>, EnvError> {
     let order = eliminable_order(&items_of_game(game));
     let p = draw(&items_of_game(game), &order, None, opts)?;
-    encode(&p)
+    encode_png(&p)
 }
 
 /// The timestep of `trace` nearest to `t`, as PNG bytes. `game`, when given, supplies which objects
@@ -105,7 +104,7 @@ pub fn render_png(
     t: f64,
     opts: &RenderOptions,
 ) -> Result<Vec<u8>, EnvError> {
-    encode(&frame(trace, game, t, opts)?)
+    encode_png(&frame(trace, game, t, opts)?)
 }
 
 /// Frames at `times`, side by side left to right (`size·k` × `size` pixels), as PNG bytes.
@@ -115,53 +114,21 @@ pub fn render_strip_png(
     times: &[f64],
     opts: &RenderOptions,
 ) -> Result<Vec<u8>, EnvError> {
-    if times.is_empty() {
-        return Err(EnvError::Render("a strip needs at least one frame".into()));
-    }
-    let width = u32::try_from(times.len())
-        .ok()
-        .and_then(|k| k.checked_mul(opts.size))
-        .filter(|w| *w <= 16_384)
-        .ok_or_else(|| {
-            EnvError::Render(format!(
-                "a strip of {} frames of {} px is too wide (at most 16384 px)",
-                times.len(),
-                opts.size
-            ))
-        })?;
-    let mut strip = new_pixmap(width, opts.size)?;
-    strip.fill(Color::from_rgba8(90, 90, 90, 255));
-    for (i, &t) in times.iter().enumerate() {
-        let f = frame(trace, game, t, opts)?;
-        strip.draw_pixmap(
-            (i as u32 * opts.size) as i32,
-            0,
-            f.as_ref(),
-            &PixmapPaint::default(),
-            Transform::identity(),
-            None,
+    let mut strip = draw::strip(times.len(), opts.size, |i| {
+        frame(trace, game, times[i], opts)
+    })?;
+    // A thin separator between frames (frames are opaque, so no background shows elsewhere).
+    for i in 1..times.len() {
+        fill_rect(
+            &mut strip,
+            (i as u32 * opts.size) as f32 - 1.0,
+            0.0,
+            2.0,
+            opts.size as f32,
+            [90, 90, 90],
         );
-        // A thin separator between frames.
-        if i > 0 {
-            fill_rect(
-                &mut strip,
-                (i as u32 * opts.size) as f32 - 1.0,
-                0.0,
-                2.0,
-                opts.size as f32,
-                [90, 90, 90],
-            );
-        }
     }
-    encode(&strip)
-}
-
-fn encode(p: &Pixmap) -> Result<Vec<u8>, EnvError> {
-    p.encode_png().map_err(|e| EnvError::Render(e.to_string()))
-}
-
-fn new_pixmap(w: u32, h: u32) -> Result<Pixmap, EnvError> {
-    Pixmap::new(w, h).ok_or_else(|| EnvError::Render(format!("cannot make a {w}×{h} image")))
+    encode_png(&strip)
 }
 
 /// Action index of each eliminable block: position among the eliminable objects in object order.
@@ -225,13 +192,6 @@ fn frame(
     draw(&items, &order, opts.time_label.then_some(ts.t), opts)
 }
 
-fn paint(c: [u8; 3]) -> Paint<'static> {
-    let mut p = Paint::default();
-    p.set_color_rgba8(c[0], c[1], c[2], 255);
-    p.anti_alias = true;
-    p
-}
-
 fn fill_rect(p: &mut Pixmap, x: f32, y: f32, w: f32, h: f32, c: [u8; 3]) {
     if let Some(r) = tiny_skia::Rect::from_xywh(x, y, w, h) {
         p.fill_rect(r, &paint(c), Transform::identity(), None);
@@ -282,15 +242,7 @@ fn draw(
     }
     for it in items.iter().filter(|i| i.ball) {
         let (cx, cy) = px(it.p1);
-        if let Some(path) = PathBuilder::from_circle(cx, cy, it.radius as f32 * k) {
-            p.fill_path(
-                &path,
-                &paint(RED),
-                FillRule::Winding,
-                Transform::identity(),
-                None,
-            );
-        }
+        fill_circle(&mut p, cx, cy, it.radius as f32 * k, RED);
     }
     // Constraints: the two objects sharing a joint (spring) number, centre to centre.
     let picks: [fn(&Item) -> i64; 2] = [|i| i.joint, |i| i.spring];
@@ -409,7 +361,8 @@ fn text(p: &mut Pixmap, x: f32, y: f32, h: f32, s: &str, colour: [u8; 3]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::envs::iphyre::{Games, PhysicsParams, click_block, play, trace_of};
+    use crate::envs::iphyre::Games;
+    use crate::envs::iphyre::to_trace::support_episode;
 
     fn pixel(png: &[u8], x: u32, y: u32) -> [u8; 3] {
         let p = Pixmap::decode_png(png).unwrap();
@@ -453,14 +406,8 @@ mod tests {
 
     #[test]
     fn trace_frames_follow_the_motion_and_strips_are_wide() {
-        let games = Games::default_games().unwrap();
-        let g = games.get("support").unwrap();
-        let clicks = [
-            click_block(g, 0, 0.5).unwrap(),
-            click_block(g, 1, 0.5).unwrap(),
-        ];
-        let r = play(g, &clicks, &PhysicsParams::with_fps(10.0)).unwrap();
-        let tr = trace_of(&r, g, "support-render");
+        let (game, _, tr) = support_episode("support-render");
+        let g = &game;
         let opts = RenderOptions {
             size: 600,
             block_indices: true,

@@ -9,12 +9,12 @@
 //! is printed in the top-left corner. Text uses a tiny built-in segment font (digits, `.`, `t`, `s`).
 
 use tiny_skia::{
-    Color as SkColor, FillRule, LineCap, LineJoin, Paint, PathBuilder, Pixmap, PixmapPaint, Stroke,
-    Transform,
+    Color as SkColor, FillRule, LineCap, LineJoin, PathBuilder, Pixmap, Stroke, Transform,
 };
 
 use super::task::{Color, Shape, Task};
 use crate::envs::EnvError;
+use crate::envs::draw::{self, encode_png, new_pixmap, paint};
 use crate::envs::pool::render::timestep_at;
 use crate::trace::{Body, Trace};
 
@@ -82,17 +82,6 @@ fn pose_shapes(task: &Task, pose: &Pose) -> Vec<Shape> {
         corner(hx, hy),
         corner(-hx, hy),
     ])]
-}
-
-fn paint(c: [u8; 3]) -> Paint<'static> {
-    let mut p = Paint::default();
-    p.set_color_rgba8(c[0], c[1], c[2], 255);
-    p.anti_alias = true;
-    p
-}
-
-fn new_pixmap(w: u32, h: u32) -> Result<Pixmap, EnvError> {
-    Pixmap::new(w, h).ok_or_else(|| EnvError::Render(format!("cannot make a {w}×{h} image")))
 }
 
 fn check_size(opts: &RenderOptions) -> Result<(), EnvError> {
@@ -302,9 +291,7 @@ pub fn render_png(
     opts: &RenderOptions,
 ) -> Result<Vec<u8>, EnvError> {
     let (poses, at) = poses_at(trace, t)?;
-    draw(task, &poses, Some(at), opts)?
-        .encode_png()
-        .map_err(|e| EnvError::Render(e.to_string()))
+    encode_png(&draw(task, &poses, Some(at), opts)?)
 }
 
 /// Frames at `times`, left to right, as PNG bytes (`size·k` × `size` pixels).
@@ -315,33 +302,11 @@ pub fn render_strip_png(
     opts: &RenderOptions,
 ) -> Result<Vec<u8>, EnvError> {
     check_size(opts)?;
-    let width = u32::try_from(times.len())
-        .ok()
-        .and_then(|k| k.checked_mul(opts.size))
-        .filter(|w| (1..=16_384).contains(w))
-        .ok_or_else(|| {
-            EnvError::Render(format!(
-                "a strip of {} frames of {} px must be 1..=16384 px wide",
-                times.len(),
-                opts.size
-            ))
-        })?;
-    let mut strip = new_pixmap(width, opts.size)?;
-    for (i, &t) in times.iter().enumerate() {
-        let (poses, at) = poses_at(trace, t)?;
-        let f = draw(task, &poses, Some(at), opts)?;
-        strip.draw_pixmap(
-            (i as u32 * opts.size) as i32,
-            0,
-            f.as_ref(),
-            &PixmapPaint::default(),
-            Transform::identity(),
-            None,
-        );
-    }
-    strip
-        .encode_png()
-        .map_err(|e| EnvError::Render(e.to_string()))
+    let strip = draw::strip(times.len(), opts.size, |i| {
+        let (poses, at) = poses_at(trace, times[i])?;
+        draw(task, &poses, Some(at), opts)
+    })?;
+    encode_png(&strip)
 }
 
 /// A task's initial scene without a user ball (what an agent sees before acting), as PNG bytes.
@@ -364,9 +329,7 @@ pub fn render_task_png(task: &Task, opts: &RenderOptions) -> Result<Vec<u8>, Env
             diameter: b.diameter,
         })
         .collect();
-    draw(task, &poses, None, opts)?
-        .encode_png()
-        .map_err(|e| EnvError::Render(e.to_string()))
+    encode_png(&draw(task, &poses, None, opts)?)
 }
 
 #[cfg(test)]

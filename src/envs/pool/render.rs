@@ -11,12 +11,12 @@
 //! few glyphs needed (digits, `t = . s`, pocket letters), so no font file ships with annotrace.
 
 use tiny_skia::{
-    Color, FillRule, LineCap, LineJoin, Mask, Paint, PathBuilder, Pixmap, PixmapPaint, Rect,
-    Stroke, Transform,
+    Color, FillRule, LineCap, LineJoin, Mask, PathBuilder, Pixmap, Rect, Stroke, Transform,
 };
 
 use super::config::PoolConfig;
 use crate::envs::EnvError;
+use crate::envs::draw::{self, encode_png, fill_circle, new_pixmap, paint};
 use crate::trace::{Body, PoolBall, Timestep, Trace};
 
 /// Picture options.
@@ -64,10 +64,7 @@ pub fn render_png(
     t: f64,
     opts: &RenderOptions,
 ) -> Result<Vec<u8>, EnvError> {
-    let pixmap = frame(trace, config, t, opts)?;
-    pixmap
-        .encode_png()
-        .map_err(|e| EnvError::Render(e.to_string()))
+    encode_png(&frame(trace, config, t, opts)?)
 }
 
 /// Frames at `times`, side by side left to right, as PNG bytes (`size·k` × `size` pixels).
@@ -77,39 +74,10 @@ pub fn render_strip_png(
     times: &[f64],
     opts: &RenderOptions,
 ) -> Result<Vec<u8>, EnvError> {
-    if times.is_empty() {
-        return Err(EnvError::Render("a strip needs at least one frame".into()));
-    }
-    let width = u32::try_from(times.len())
-        .ok()
-        .and_then(|k| k.checked_mul(opts.size))
-        .filter(|w| *w <= 16_384)
-        .ok_or_else(|| {
-            EnvError::Render(format!(
-                "a strip of {} frames of {} px is too wide (at most 16384 px)",
-                times.len(),
-                opts.size
-            ))
-        })?;
-    let mut strip = new_pixmap(width, opts.size)?;
-    for (i, &t) in times.iter().enumerate() {
-        let f = frame(trace, config, t, opts)?;
-        strip.draw_pixmap(
-            (i as u32 * opts.size) as i32,
-            0,
-            f.as_ref(),
-            &PixmapPaint::default(),
-            Transform::identity(),
-            None,
-        );
-    }
-    strip
-        .encode_png()
-        .map_err(|e| EnvError::Render(e.to_string()))
-}
-
-fn new_pixmap(w: u32, h: u32) -> Result<Pixmap, EnvError> {
-    Pixmap::new(w, h).ok_or_else(|| EnvError::Render(format!("cannot make a {w}×{h} image")))
+    let strip = draw::strip(times.len(), opts.size, |i| {
+        frame(trace, config, times[i], opts)
+    })?;
+    encode_png(&strip)
 }
 
 /// Standard pool colours: (base colour, striped).
@@ -139,13 +107,6 @@ fn luminance(c: [u8; 3]) -> f64 {
     0.299 * c[0] as f64 + 0.587 * c[1] as f64 + 0.114 * c[2] as f64
 }
 
-fn paint(c: [u8; 3]) -> Paint<'static> {
-    let mut p = Paint::default();
-    p.set_color_rgba8(c[0], c[1], c[2], 255);
-    p.anti_alias = true;
-    p
-}
-
 /// Maps table metres to pixels: x right, y up.
 struct View {
     scale: f32,
@@ -159,18 +120,6 @@ impl View {
             self.ox + x as f32 * self.scale,
             self.oy - y as f32 * self.scale,
         )
-    }
-}
-
-fn circle(p: &mut Pixmap, cx: f32, cy: f32, r: f32, colour: [u8; 3]) {
-    if let Some(path) = PathBuilder::from_circle(cx, cy, r) {
-        p.fill_path(
-            &path,
-            &paint(colour),
-            FillRule::Winding,
-            Transform::identity(),
-            None,
-        );
     }
 }
 
@@ -362,9 +311,9 @@ fn text_width(s: &str, h: f32) -> f32 {
 /// One ball: coloured disc (a band for stripes), outline, number.
 fn draw_ball(p: &mut Pixmap, cx: f32, cy: f32, r: f32, id: &str) {
     let (colour, striped) = ball_colour(id);
-    circle(p, cx, cy, r + 0.8, [20, 20, 20]);
+    fill_circle(p, cx, cy, r + 0.8, [20, 20, 20]);
     if striped {
-        circle(p, cx, cy, r, [250, 250, 245]);
+        fill_circle(p, cx, cy, r, [250, 250, 245]);
         // The band is the disc clipped to |dy| ≤ 0.55 r: clamping the circle's y traces exactly that.
         let band = 0.55 * r;
         let mut pb = PathBuilder::new();
@@ -388,7 +337,7 @@ fn draw_ball(p: &mut Pixmap, cx: f32, cy: f32, r: f32, id: &str) {
             );
         }
     } else {
-        circle(p, cx, cy, r, colour);
+        fill_circle(p, cx, cy, r, colour);
     }
     if id.parse::<u32>().is_ok() {
         let h = (1.25 * r).max(6.0);
@@ -445,14 +394,14 @@ fn frame(
         let x = table.w * i as f64 / 4.0;
         for y in [-cushion - rail / 2.0, table.l + cushion + rail / 2.0] {
             let (cx, cy) = view.px(x, y);
-            circle(&mut p, cx, cy, 1.6, [235, 225, 200]);
+            fill_circle(&mut p, cx, cy, 1.6, [235, 225, 200]);
         }
     }
     for i in 1..8 {
         let y = table.l * i as f64 / 8.0;
         for x in [-cushion - rail / 2.0, table.w + cushion + rail / 2.0] {
             let (cx, cy) = view.px(x, y);
-            circle(&mut p, cx, cy, 1.6, [235, 225, 200]);
+            fill_circle(&mut p, cx, cy, 1.6, [235, 225, 200]);
         }
     }
     // Pockets, clipped to the rail box (pooltool's pocket circles reach past the rails).
@@ -504,7 +453,7 @@ fn frame(
     }
     for jaw in &table.circular {
         let (cx, cy) = view.px(jaw.center[0], jaw.center[1]);
-        circle(&mut p, cx, cy, jaw.radius as f32 * scale, [22, 96, 52]);
+        fill_circle(&mut p, cx, cy, jaw.radius as f32 * scale, [22, 96, 52]);
     }
     // Pocket labels outside the rails, on the side of the pocket.
     for pk in &table.pockets {
@@ -572,22 +521,24 @@ mod tests {
     use crate::envs::Environment;
     use crate::envs::pool::{PoolEnv, Shot};
 
-    #[test]
-    fn renders_a_512_png_and_a_strip() {
+    /// A slow shot on the first seeded rack (seed 3).
+    fn gentle_shot() -> (PoolEnv, Trace) {
         let env = PoolEnv::default();
         let scene = &env.scenes(1, 3).unwrap()[0];
-        let tr = env
-            .simulate(
-                scene,
-                &Shot {
-                    v0: 1.0,
-                    phi: 80.0,
-                    theta: 0.0,
-                    a: 0.0,
-                    b: 0.0,
-                },
-            )
-            .unwrap();
+        let shot = Shot {
+            v0: 1.0,
+            phi: 80.0,
+            theta: 0.0,
+            a: 0.0,
+            b: 0.0,
+        };
+        let tr = env.simulate(scene, &shot).unwrap();
+        (env, tr)
+    }
+
+    #[test]
+    fn renders_a_512_png_and_a_strip() {
+        let (env, tr) = gentle_shot();
         let png = render_png(&tr, &env.config, 0.0, &RenderOptions::default()).unwrap();
         assert_eq!(&png[1..4], b"PNG");
         let img = Pixmap::decode_png(&png).unwrap();
@@ -606,20 +557,7 @@ mod tests {
 
     #[test]
     fn nearest_timestep() {
-        let env = PoolEnv::default();
-        let scene = &env.scenes(1, 3).unwrap()[0];
-        let tr = env
-            .simulate(
-                scene,
-                &Shot {
-                    v0: 1.0,
-                    phi: 80.0,
-                    theta: 0.0,
-                    a: 0.0,
-                    b: 0.0,
-                },
-            )
-            .unwrap();
+        let (_, tr) = gentle_shot();
         assert_eq!(timestep_at(&tr, -1.0).unwrap().index, 0);
         assert_eq!(timestep_at(&tr, 0.026).unwrap().index, 3);
         assert_eq!(
