@@ -157,6 +157,25 @@ pub fn trace_of(result: &EpisodeResult, game: &Game, trace_id: &str) -> Trace {
     }
 }
 
+/// Test fixture: the `support` game with both eliminable blocks removed at 0.5 s, played at 10 fps (a
+/// short episode that ends in success), and its trace named `trace_id`.
+#[cfg(test)]
+pub(super) fn support_episode(trace_id: &str) -> (Game, EpisodeResult, Trace) {
+    use super::action::click_block;
+    use super::game::Games;
+    use super::params::PhysicsParams;
+    use super::step::play;
+    let games = Games::default_games().unwrap();
+    let g = games.get("support").unwrap().clone();
+    let clicks = [
+        click_block(&g, 0, 0.5).unwrap(),
+        click_block(&g, 1, 0.5).unwrap(),
+    ];
+    let r = play(&g, &clicks, &PhysicsParams::with_fps(10.0)).unwrap();
+    let tr = trace_of(&r, &g, trace_id);
+    (g, r, tr)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -167,14 +186,7 @@ mod tests {
 
     #[test]
     fn trace_has_the_iphyre_layout_and_events() {
-        let games = Games::default_games().unwrap();
-        let g = games.get("support").unwrap();
-        let clicks = [
-            click_block(g, 0, 0.5).unwrap(),
-            click_block(g, 1, 0.5).unwrap(),
-        ];
-        let r = play(g, &clicks, &PhysicsParams::with_fps(10.0)).unwrap();
-        let tr = trace_of(&r, g, "support-test");
+        let (_, r, tr) = support_episode("support-test");
         assert_eq!(tr.env, Env::Iphyre);
         assert_eq!(tr.timesteps.len(), r.steps + 1);
         assert_eq!(tr.timesteps[0].objects.len(), 3);
@@ -210,21 +222,7 @@ mod tests {
         ];
         let r = play(g, &clicks, &PhysicsParams::with_fps(10.0)).unwrap();
         let tr = trace_of(&r, g, "pendulum-test");
-        let mut builder = crate::trace::TraceBatchBuilder::new();
-        for ts in &tr.timesteps {
-            builder.push_timestep(ts);
-        }
-        let b = builder
-            .finish(&crate::trace::TraceMeta {
-                trace_id: &tr.trace_id,
-                scene_id: &tr.task_id,
-                task_id: &tr.task_id,
-                events: &tr.events,
-                outcome: &tr.outcome,
-                extra: &tr.extra,
-                source: "test",
-            })
-            .unwrap();
+        let b = crate::trace::TraceBatchBuilder::from_trace(&tr, &tr.task_id, "test").unwrap();
         let objects: usize = tr.timesteps.iter().map(|t| t.objects.len()).sum();
         assert_eq!(b.traces.num_rows(), 1);
         assert_eq!(b.timesteps.num_rows(), tr.timesteps.len());

@@ -217,21 +217,7 @@ mod tests {
         assert_eq!((user.x, user.y, user.diameter), (51.0, 229.0, 22.0));
         assert_eq!(tr.events[0].kind, "user_ball_placed");
         assert_eq!(tr.outcome.metrics["steps_simulated"], json!(r.steps));
-        let mut builder = crate::trace::TraceBatchBuilder::new();
-        for ts in &tr.timesteps {
-            builder.push_timestep(ts);
-        }
-        let b = builder
-            .finish(&crate::trace::TraceMeta {
-                trace_id: &tr.trace_id,
-                scene_id: &tr.task_id,
-                task_id: &tr.task_id,
-                events: &tr.events,
-                outcome: &tr.outcome,
-                extra: &tr.extra,
-                source: "test",
-            })
-            .unwrap();
+        let b = crate::trace::TraceBatchBuilder::from_trace(&tr, &tr.task_id, "test").unwrap();
         assert_eq!(b.frames.num_rows(), tr.frame_rows());
         assert_eq!(b.events.num_rows(), tr.events.len());
         assert_eq!(b.timesteps.num_rows(), tr.timesteps.len());
