@@ -202,11 +202,8 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
             format!("max_time must be > 0, found {t}"),
         ));
     }
-    let work = match (
-        p.get("scene_file").and_then(Value::as_str),
-        p.get("shot").and_then(Value::as_str),
-    ) {
-        (Some(file), Some(shot_text)) => {
+    let work = match replay_pair(p, "scene_file", "shot")? {
+        Some((file, shot_text)) => {
             let path = spec.project_dir.join(file);
             let text = std::fs::read_to_string(&path).map_err(|e| {
                 BuildError::param(
@@ -222,19 +219,7 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
                 shot,
             }
         }
-        (Some(_), None) => {
-            return Err(BuildError::param(
-                "shot",
-                "replay mode needs `shot` with `scene_file`",
-            ));
-        }
-        (None, Some(_)) => {
-            return Err(BuildError::param(
-                "scene_file",
-                "replay mode needs `scene_file` with `shot`",
-            ));
-        }
-        (None, None) => Work::Dataset {
+        None => Work::Dataset {
             scenes: p["scenes"].as_u64().unwrap_or(10),
             shots: p["shots"].as_u64().unwrap_or(1),
             seed: p.get("seed").and_then(Value::as_u64).unwrap_or(spec.seed),
@@ -303,11 +288,16 @@ impl Stage for SimulateStage {
             Work::Dataset { scenes, .. } => *scenes,
             Work::Replay { .. } => 1,
         };
-        self.check_ids_are_new(ctx, total)?;
+        // Trace ids must be new across every environment's traces.
+        check_ids_are_new(ctx, None, (0..total).flat_map(|i| self.trace_ids(i)))?;
         ctx.progress().set_total(ctx.stage_id(), total);
-        let sums = run_shards(total, self.per_shard, |i, lo, hi| {
-            self.run_shard(ctx, i, lo, hi)
-        })?;
+        let sums = run_shards(
+            ctx,
+            Env::Pooltool,
+            total,
+            self.per_shard,
+            |sinks, lo, hi| self.fill_shard(ctx, sinks, lo, hi),
+        )?;
         let (traces, successes) = (sums.count("traces"), sums.count("successes"));
         let (capped, events) = (sums.count("capped"), sums.count("physics_events"));
         let rows = sums.rows;
@@ -353,12 +343,17 @@ impl ShardTotals {
     }
 }
 
-/// Splits `0..total` into shards of `per_shard` items, runs `run_shard(shard, lo, hi)` on them in
-/// parallel (rayon) and sums their records.
+/// Splits `0..total` into shards of `per_shard` items, runs them in parallel (rayon) and sums their
+/// records. A shard an earlier run finished is skipped (its record reused). Otherwise `fill(sinks, lo,
+/// hi)` simulates items `lo..hi` into the shard's files and returns the shard's counts as a JSON
+/// object; the files are then committed and the counts, with the rows written per table (`rows`),
+/// recorded as the shard's record.
 pub(super) fn run_shards(
+    ctx: &StageContext<'_>,
+    env: Env,
     total: u64,
     per_shard: u64,
-    run_shard: impl Fn(usize, u64, u64) -> Result<Value, StageError> + Sync,
+    fill: impl Fn(&mut ShardSinks<'_, '_>, u64, u64) -> Result<Value, StageError> + Sync,
 ) -> Result<ShardTotals, StageError> {
     let per_shard = per_shard.max(1);
     let shards: Vec<(u64, u64)> = (0..total.div_ceil(per_shard))
@@ -367,8 +362,19 @@ pub(super) fn run_shards(
     let records: Vec<Value> = shards
         .par_iter()
         .enumerate()
-        .map(|(i, &(lo, hi))| run_shard(i, lo, hi))
-        .collect::<Result<_, _>>()?;
+        .map(|(i, &(lo, hi))| {
+            let name = format!("{i:05}");
+            if let Some(record) = ctx.finished_shard(&name)? {
+                ctx.progress().advance(ctx.stage_id(), hi - lo);
+                return Ok(record);
+            }
+            let mut sinks = ShardSinks::new(ctx, env, name.clone());
+            let mut record = fill(&mut sinks, lo, hi)?;
+            record["rows"] = json!(sinks.commit()?);
+            ctx.finish_shard(&name, &record)?;
+            Ok(record)
+        })
+        .collect::<Result<_, StageError>>()?;
     let mut totals = ShardTotals::default();
     for r in &records {
         for (k, v) in r.as_object().into_iter().flatten() {
@@ -384,36 +390,97 @@ pub(super) fn run_shards(
     Ok(totals)
 }
 
+/// The two parameters of a replay (`scene_file` and `shot`, `game` and `clicks`, `task` and `action`):
+/// both given, or neither (dataset mode, `None`); one without the other is an error on the missing one.
+pub(super) fn replay_pair<'p>(
+    p: &'p serde_json::Map<String, Value>,
+    first: &'static str,
+    second: &'static str,
+) -> Result<Option<(&'p str, &'p str)>, BuildError> {
+    match (
+        p.get(first).and_then(Value::as_str),
+        p.get(second).and_then(Value::as_str),
+    ) {
+        (Some(a), Some(b)) => Ok(Some((a, b))),
+        (Some(_), None) => Err(BuildError::param(
+            second,
+            format!("replay mode needs `{second}` with `{first}`"),
+        )),
+        (None, Some(_)) => Err(BuildError::param(
+            first,
+            format!("replay mode needs `{first}` with `{second}`"),
+        )),
+        (None, None) => Ok(None),
+    }
+}
+
+/// Fails when a trace id this stage would write (`ids`, walked only when the run holds traces) is
+/// already in the run, written by another stage (e.g. an earlier dataset command with the same seed);
+/// the stage's own earlier output was removed by the runner before a rerun. With `env`, only that
+/// environment's traces count.
+pub(super) fn check_ids_are_new(
+    ctx: &StageContext<'_>,
+    env: Option<Env>,
+    ids: impl IntoIterator<Item = String>,
+) -> Result<(), StageError> {
+    let existing: std::collections::HashSet<String> = crate::store::trace_ids(ctx.run())?
+        .into_iter()
+        .filter(|(e, _)| env.is_none_or(|env| *e == env))
+        .map(|(_, id)| id)
+        .collect();
+    if existing.is_empty() {
+        return Ok(());
+    }
+    if let Some(id) = ids.into_iter().find(|id| existing.contains(id)) {
+        return Err(StageError::Input(format!(
+            "trace id {id:?} is already in the run {} (written by another stage); use another seed or run folder",
+            ctx.run().root().display()
+        )));
+    }
+    Ok(())
+}
+
 /// The open Parquet files of one shard, one per table (also used by the other environments' halves).
 pub(super) struct ShardSinks<'a, 'c> {
     ctx: &'a StageContext<'c>,
     env: Env,
     name: String,
+    /// The tables' `source`: `simulate:<stage id>`.
+    source: String,
+    /// This shard's start order in the run, for the mid-shard fault point.
+    ordinal: usize,
     sinks: BTreeMap<&'static str, ParquetSink>,
     builder: TraceBatchBuilder,
 }
 
 impl<'a, 'c> ShardSinks<'a, 'c> {
-    /// No file open yet; shard `name` of `env`.
-    pub(super) fn new(ctx: &'a StageContext<'c>, env: Env, name: String) -> Self {
+    /// No file open yet; shard `name` of `env`, counted as started.
+    fn new(ctx: &'a StageContext<'c>, env: Env, name: String) -> Self {
+        let ordinal = ctx.shard_started();
         ShardSinks {
             ctx,
             env,
             name,
+            source: format!("simulate:{}", ctx.stage_id()),
+            ordinal,
             sinks: BTreeMap::new(),
             builder: TraceBatchBuilder::new(),
         }
     }
 
-    /// Appends one trace's rows to the `traces`, `timesteps`, `frames` and `events` files. With
-    /// `mid_shard = Some(ordinal)` (the shard's first trace) the mid-shard fault point fires between the
-    /// frames and the events, so a crash test finds some of the shard's files half written.
+    /// The `source` column of the rows this stage writes (`simulate:<stage id>`).
+    pub(super) fn source(&self) -> &str {
+        &self.source
+    }
+
+    /// Appends one trace's rows to the `traces`, `timesteps`, `frames` and `events` files. For the
+    /// shard's first trace (`first`) the mid-shard fault point fires between the frames and the events,
+    /// so a crash test finds some of the shard's files half written.
     pub(super) fn write_trace(
         &mut self,
         trace: &Trace,
         scene_id: &str,
-        source: &str,
-        mid_shard: Option<usize>,
+        first: bool,
     ) -> Result<(), StageError> {
         for ts in &trace.timesteps {
             self.builder.push_timestep(ts);
@@ -425,13 +492,13 @@ impl<'a, 'c> ShardSinks<'a, 'c> {
             events: &trace.events,
             outcome: &trace.outcome,
             extra: &trace.extra,
-            source,
+            source: &self.source,
         })?;
         self.write("traces", &b.traces)?;
         self.write("timesteps", &b.timesteps)?;
         self.write("frames", &b.frames)?;
-        if let Some(ordinal) = mid_shard {
-            self.ctx.checkpoint_mid_shard(ordinal)?;
+        if first {
+            self.ctx.checkpoint_mid_shard(self.ordinal)?;
         }
         self.write("events", &b.events)
     }
@@ -472,37 +539,19 @@ impl<'a, 'c> ShardSinks<'a, 'c> {
 }
 
 impl SimulateStage {
-    /// Fails when a trace id this stage would write is already in the run (written by another stage,
-    /// e.g. an earlier dataset command with the same seed); the stage's own earlier output was removed
-    /// by the runner before a rerun.
-    fn check_ids_are_new(&self, ctx: &StageContext<'_>, scenes: u64) -> Result<(), StageError> {
-        let existing: std::collections::HashSet<String> = crate::store::trace_ids(ctx.run())?
-            .into_iter()
-            .map(|(_, id)| id)
-            .collect();
-        if existing.is_empty() {
-            return Ok(());
+    /// The trace ids of scene `index`.
+    fn trace_ids(&self, index: u64) -> Vec<String> {
+        match &self.work {
+            Work::Dataset { shots, seed, .. } => (0..*shots)
+                .map(|k| format!("pool-{seed}-{index:06}-{k:03}"))
+                .collect(),
+            Work::Replay { .. } => self
+                .scene_work(index)
+                .1
+                .into_iter()
+                .map(|(id, _)| id)
+                .collect(),
         }
-        for index in 0..scenes {
-            let ids: Vec<String> = match &self.work {
-                Work::Dataset { shots, seed, .. } => (0..*shots)
-                    .map(|k| format!("pool-{seed}-{index:06}-{k:03}"))
-                    .collect(),
-                Work::Replay { .. } => self
-                    .scene_work(index)
-                    .1
-                    .into_iter()
-                    .map(|(id, _)| id)
-                    .collect(),
-            };
-            if let Some(id) = ids.iter().find(|id| existing.contains(*id)) {
-                return Err(StageError::Input(format!(
-                    "trace id {id:?} is already in the run {} (written by another stage); use another seed or run folder",
-                    ctx.run().root().display()
-                )));
-            }
-        }
-        Ok(())
     }
 
     /// The (scene, shots) pairs of scenes `lo..hi`.
@@ -536,22 +585,15 @@ impl SimulateStage {
         }
     }
 
-    fn run_shard(
+    /// Simulates items `lo..hi` into one shard's files; the shard's counts.
+    fn fill_shard(
         &self,
         ctx: &StageContext<'_>,
-        shard: usize,
+        sinks: &mut ShardSinks<'_, '_>,
         lo: u64,
         hi: u64,
     ) -> Result<Value, StageError> {
-        let name = format!("{shard:05}");
-        if let Some(record) = ctx.finished_shard(&name)? {
-            ctx.progress().advance(ctx.stage_id(), hi - lo);
-            return Ok(record);
-        }
-        let ordinal = ctx.shard_started();
-        let mut sinks = ShardSinks::new(ctx, Env::Pooltool, name.clone());
         let (mut traces, mut successes, mut capped, mut events) = (0u64, 0u64, 0u64, 0u64);
-        let source = format!("simulate:{}", ctx.stage_id());
         for index in lo..hi {
             let (scene, shots) = self.scene_work(index);
             let system = scene
@@ -563,7 +605,7 @@ impl SimulateStage {
             let batch = scene_batch(
                 &scene.scene_id,
                 &scene.scene_id,
-                &source,
+                sinks.source(),
                 scene.balls.len(),
                 &spec,
             )?;
@@ -579,25 +621,16 @@ impl SimulateStage {
                     "max_events" | "max_time"
                 ));
                 events += sim.events.len() as u64;
-                sinks.write_trace(
-                    &trace,
-                    &scene.scene_id,
-                    &source,
-                    (index == lo).then_some(ordinal),
-                )?;
+                sinks.write_trace(&trace, &scene.scene_id, index == lo)?;
             }
             ctx.progress().advance(ctx.stage_id(), 1);
         }
-        let rows = sinks.commit()?;
-        let record = json!({
+        Ok(json!({
             "traces": traces,
             "successes": successes,
             "capped": capped,
             "physics_events": events,
-            "rows": rows,
-        });
-        ctx.finish_shard(&name, &record)?;
-        Ok(record)
+        }))
     }
 }
 

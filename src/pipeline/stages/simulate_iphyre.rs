@@ -22,7 +22,7 @@
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
-use super::simulate::{ShardSinks, run_shards};
+use super::simulate::{ShardSinks, check_ids_are_new, replay_pair, run_shards};
 use crate::envs::iphyre::{
     Click, Episode, Game, Games, PhysicsParams, click_block, clicks_rng, random_clicks, trace_of,
     validate_clicks,
@@ -63,11 +63,8 @@ pub(super) fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage
         .validate()
         .map_err(|e| BuildError::param("fps", e.to_string()))?;
     let all = Games::default_games().map_err(|e| BuildError::param("games", e.to_string()))?;
-    let work = match (
-        p.get("game").and_then(Value::as_str),
-        p.get("clicks").and_then(Value::as_str),
-    ) {
-        (Some(name), Some(text)) => {
+    let work = match replay_pair(p, "game", "clicks")? {
+        Some((name, text)) => {
             let game = all
                 .get(name)
                 .map_err(|e| BuildError::param("game", format!("`game`: {e}")))?;
@@ -78,19 +75,7 @@ pub(super) fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage
                 clicks,
             }
         }
-        (Some(_), None) => {
-            return Err(BuildError::param(
-                "clicks",
-                "replay mode needs `clicks` with `game`",
-            ));
-        }
-        (None, Some(_)) => {
-            return Err(BuildError::param(
-                "game",
-                "replay mode needs `game` with `clicks`",
-            ));
-        }
-        (None, None) => Work::Dataset {
+        None => Work::Dataset {
             games: select_games(
                 &all,
                 p.get("games").and_then(Value::as_str).unwrap_or("all"),
@@ -223,44 +208,15 @@ impl IphyreSimulateStage {
         }
     }
 
-    /// Fails when a trace id this stage would write was written by another stage of the run.
-    fn check_ids_are_new(&self, ctx: &StageContext<'_>) -> Result<(), StageError> {
-        let existing: std::collections::HashSet<String> = crate::store::trace_ids(ctx.run())?
-            .into_iter()
-            .filter(|(env, _)| *env == Env::Iphyre)
-            .map(|(_, id)| id)
-            .collect();
-        if existing.is_empty() {
-            return Ok(());
-        }
-        for i in 0..self.total() {
-            let (_, _, id, _) = self.item(i);
-            if existing.contains(&id) {
-                return Err(StageError::Input(format!(
-                    "trace id {id:?} is already in the run {} (written by another stage); use another seed or run folder",
-                    ctx.run().root().display()
-                )));
-            }
-        }
-        Ok(())
-    }
-
-    fn run_shard(
+    /// Simulates items `lo..hi` into one shard's files; the shard's counts.
+    fn fill_shard(
         &self,
         ctx: &StageContext<'_>,
-        shard: usize,
+        sinks: &mut ShardSinks<'_, '_>,
         lo: u64,
         hi: u64,
     ) -> Result<Value, StageError> {
-        let name = format!("{shard:05}");
-        if let Some(record) = ctx.finished_shard(&name)? {
-            ctx.progress().advance(ctx.stage_id(), hi - lo);
-            return Ok(record);
-        }
-        let ordinal = ctx.shard_started();
-        let mut sinks = ShardSinks::new(ctx, Env::Iphyre, name.clone());
         let (mut traces, mut successes, mut eliminations, mut reward) = (0u64, 0u64, 0u64, 0.0);
-        let source = format!("simulate:{}", ctx.stage_id());
         for i in lo..hi {
             let (game, sample, trace_id, clicks) = self.item(i);
             let scene_id = format!("iphyre-{}", game.name);
@@ -275,7 +231,13 @@ impl IphyreSimulateStage {
                     "joints": game.joints,
                     "springs": game.springs,
                 });
-                let batch = scene_batch(&scene_id, &game.name, &source, game.objects.len(), &spec)?;
+                let batch = scene_batch(
+                    &scene_id,
+                    &game.name,
+                    sinks.source(),
+                    game.objects.len(),
+                    &spec,
+                )?;
                 sinks.write("scenes", &batch)?;
             }
             let result = Episode::new(game, &clicks, &self.params, true)
@@ -286,19 +248,15 @@ impl IphyreSimulateStage {
             successes += u64::from(result.success);
             eliminations += result.eliminations as u64;
             reward += result.reward;
-            sinks.write_trace(&trace, &scene_id, &source, (i == lo).then_some(ordinal))?;
+            sinks.write_trace(&trace, &scene_id, i == lo)?;
             ctx.progress().advance(ctx.stage_id(), 1);
         }
-        let rows = sinks.commit()?;
-        let record = json!({
+        Ok(json!({
             "traces": traces,
             "successes": successes,
             "eliminations": eliminations,
             "reward": reward,
-            "rows": rows,
-        });
-        ctx.finish_shard(&name, &record)?;
-        Ok(record)
+        }))
     }
 }
 
@@ -330,10 +288,11 @@ impl Stage for IphyreSimulateStage {
 
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
         let total = self.total();
-        self.check_ids_are_new(ctx)?;
+        let ids = (0..total).map(|i| self.item(i).2);
+        check_ids_are_new(ctx, Some(Env::Iphyre), ids)?;
         ctx.progress().set_total(ctx.stage_id(), total);
-        let sums = run_shards(total, self.per_shard, |i, lo, hi| {
-            self.run_shard(ctx, i, lo, hi)
+        let sums = run_shards(ctx, Env::Iphyre, total, self.per_shard, |sinks, lo, hi| {
+            self.fill_shard(ctx, sinks, lo, hi)
         })?;
         let (traces, successes) = (sums.count("traces"), sums.count("successes"));
         let (eliminations, reward) = (sums.count("eliminations"), sums.sum("reward"));

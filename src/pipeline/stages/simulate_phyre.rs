@@ -22,7 +22,7 @@
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
-use super::simulate::{ShardSinks, run_shards};
+use super::simulate::{ShardSinks, check_ids_are_new, replay_pair, run_shards};
 use crate::envs::phyre::{
     BallAction, DEFAULT_STRIDE, DEFAULT_TASKS_GZ, EvalSetup, PhyreEnv, PhysicsParams,
     RecordOptions, Status, Task, TaskSet, action_rng, dataset_tasks, episode, fold,
@@ -67,11 +67,8 @@ pub(super) fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage
     let stride = usize::try_from(stride).unwrap_or(usize::MAX);
     episode::validate_stride(stride)
         .map_err(|e| BuildError::param("stride", format!("`stride`: {e}")))?;
-    let work = match (
-        p.get("task").and_then(Value::as_str),
-        p.get("action").and_then(Value::as_str),
-    ) {
-        (Some(id), Some(text)) => {
+    let work = match replay_pair(p, "task", "action")? {
+        Some((id, text)) => {
             if !set.contains(id) {
                 return Err(BuildError::param(
                     "task",
@@ -88,19 +85,7 @@ pub(super) fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage
                 action,
             }
         }
-        (Some(_), None) => {
-            return Err(BuildError::param(
-                "action",
-                "replay mode needs `action` with `task`",
-            ));
-        }
-        (None, Some(_)) => {
-            return Err(BuildError::param(
-                "task",
-                "replay mode needs `task` with `action`",
-            ));
-        }
-        (None, None) => {
+        None => {
             let only = select_tasks(set, p.get("tasks").and_then(Value::as_str).unwrap_or("all"))
                 .map_err(|m| BuildError::param("tasks", format!("`tasks`: {m}")))?;
             let n = p.get("scenes").and_then(Value::as_u64).unwrap_or(10);
@@ -217,45 +202,16 @@ impl PhyreSimulateStage {
         }
     }
 
-    /// Fails when a trace id this stage would write was written by another stage of the run.
-    fn check_ids_are_new(&self, ctx: &StageContext<'_>) -> Result<(), StageError> {
-        let existing: std::collections::HashSet<String> = crate::store::trace_ids(ctx.run())?
-            .into_iter()
-            .filter(|(env, _)| *env == Env::Phyre)
-            .map(|(_, id)| id)
-            .collect();
-        if existing.is_empty() {
-            return Ok(());
-        }
-        for i in 0..self.total() {
-            let (_, _, id) = self.item(i);
-            if existing.contains(&id) {
-                return Err(StageError::Input(format!(
-                    "trace id {id:?} is already in the run {} (written by another stage); use another seed or run folder",
-                    ctx.run().root().display()
-                )));
-            }
-        }
-        Ok(())
-    }
-
-    fn run_shard(
+    /// Simulates items `lo..hi` into one shard's files; the shard's counts.
+    fn fill_shard(
         &self,
         ctx: &StageContext<'_>,
-        shard: usize,
+        sinks: &mut ShardSinks<'_, '_>,
         lo: u64,
         hi: u64,
     ) -> Result<Value, StageError> {
-        let name = format!("{shard:05}");
-        if let Some(record) = ctx.finished_shard(&name)? {
-            ctx.progress().advance(ctx.stage_id(), hi - lo);
-            return Ok(record);
-        }
         let set = TaskSet::default_tasks().map_err(|e| StageError::Input(e.to_string()))?;
-        let ordinal = ctx.shard_started();
-        let mut sinks = ShardSinks::new(ctx, Env::Phyre, name.clone());
         let (mut traces, mut successes, mut invalid, mut steps) = (0u64, 0u64, 0u64, 0u64);
-        let source = format!("simulate:{}", ctx.stage_id());
         let mut task: Option<Task> = None;
         for i in lo..hi {
             let (task_id, sample, trace_id) = self.item(i);
@@ -275,7 +231,8 @@ impl PhyreSimulateStage {
                     "goal": {"body1": task.body1, "body2": task.body2, "relationships": task.relationships},
                     "bodies": task.bodies.len(),
                 });
-                let batch = scene_batch(&scene_id, task_id, &source, task.bodies.len(), &spec)?;
+                let batch =
+                    scene_batch(&scene_id, task_id, sinks.source(), task.bodies.len(), &spec)?;
                 sinks.write("scenes", &batch)?;
             }
             let action = self.action(task, sample, set)?;
@@ -286,19 +243,15 @@ impl PhyreSimulateStage {
             successes += u64::from(result.status == Status::Solved);
             invalid += u64::from(result.status == Status::InvalidInput);
             steps += result.steps as u64;
-            sinks.write_trace(&trace, &scene_id, &source, (i == lo).then_some(ordinal))?;
+            sinks.write_trace(&trace, &scene_id, i == lo)?;
             ctx.progress().advance(ctx.stage_id(), 1);
         }
-        let rows = sinks.commit()?;
-        let record = json!({
+        Ok(json!({
             "traces": traces,
             "successes": successes,
             "invalid": invalid,
             "steps": steps,
-            "rows": rows,
-        });
-        ctx.finish_shard(&name, &record)?;
-        Ok(record)
+        }))
     }
 }
 
@@ -328,10 +281,11 @@ impl Stage for PhyreSimulateStage {
 
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
         let total = self.total();
-        self.check_ids_are_new(ctx)?;
+        let ids = (0..total).map(|i| self.item(i).2);
+        check_ids_are_new(ctx, Some(Env::Phyre), ids)?;
         ctx.progress().set_total(ctx.stage_id(), total);
-        let sums = run_shards(total, self.per_shard, |i, lo, hi| {
-            self.run_shard(ctx, i, lo, hi)
+        let sums = run_shards(ctx, Env::Phyre, total, self.per_shard, |sinks, lo, hi| {
+            self.fill_shard(ctx, sinks, lo, hi)
         })?;
         let (traces, successes) = (sums.count("traces"), sums.count("successes"));
         let (invalid, steps) = (sums.count("invalid"), sums.count("steps"));
