@@ -91,7 +91,7 @@ struct OneStage {
     stage: Vec<SimulateStage>,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, Default)]
 struct SimulateStage {
     id: String,
     kind: &'static str,
@@ -131,6 +131,20 @@ struct SimulateStage {
     stride: Option<u64>,
 }
 
+impl SimulateStage {
+    /// The parameters every environment takes from the same flags; the rest unset.
+    fn common(args: &Args) -> Self {
+        SimulateStage {
+            kind: "simulate",
+            env: args.env.clone(),
+            dt: args.dt,
+            max_events: args.max_events,
+            scenes_per_shard: args.scenes_per_shard.max(1),
+            ..SimulateStage::default()
+        }
+    }
+}
+
 fn absolute(p: &Path, what: &str) -> Result<String, CliError> {
     let abs = std::path::absolute(p)
         .with_context(|| format!("resolving {}", p.display()))
@@ -163,9 +177,6 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
     }
     let replay = args.scene.is_some();
     let stage = SimulateStage {
-        id: String::new(),
-        kind: "simulate",
-        env: args.env.clone(),
         scenes: (!replay).then_some(args.scenes),
         shots: (!replay).then_some(args.shots),
         seed: (!replay).then_some(args.seed),
@@ -180,18 +191,8 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
             .as_deref()
             .map(|p| absolute(p, "table file"))
             .transpose()?,
-        dt: args.dt,
-        max_events: args.max_events,
         max_time: args.max_time,
-        scenes_per_shard: args.scenes_per_shard.max(1),
-        games: None,
-        fps: None,
-        game: None,
-        clicks: None,
-        tasks: None,
-        task: None,
-        action: None,
-        stride: None,
+        ..SimulateStage::common(&args)
     };
     run_stage(stage, &args, quiet)
 }
@@ -205,27 +206,13 @@ fn run_iphyre(args: Args, quiet: bool) -> CliResult {
     }
     let replay = args.game.is_some();
     let stage = SimulateStage {
-        id: String::new(),
-        kind: "simulate",
-        env: args.env.clone(),
-        scenes: None,
         shots: (!replay).then_some(args.shots),
         seed: (!replay).then_some(args.seed),
-        scene_file: None,
-        shot: None,
-        table: None,
-        dt: args.dt,
-        max_events: args.max_events,
-        max_time: None,
-        scenes_per_shard: args.scenes_per_shard.max(1),
         games: (!replay).then(|| args.games.clone()),
         fps: Some(if args.fps == "10" { 10.0 } else { 60.0 }),
         game: args.game.clone(),
         clicks: args.clicks.clone(),
-        tasks: None,
-        task: None,
-        action: None,
-        stride: None,
+        ..SimulateStage::common(&args)
     };
     run_stage(stage, &args, quiet)
 }
@@ -239,27 +226,14 @@ fn run_phyre(args: Args, quiet: bool) -> CliResult {
     }
     let replay = args.task.is_some();
     let stage = SimulateStage {
-        id: String::new(),
-        kind: "simulate",
-        env: args.env.clone(),
         scenes: (!replay).then_some(args.scenes),
         shots: (!replay).then_some(args.shots),
         seed: (!replay).then_some(args.seed),
-        scene_file: None,
-        shot: None,
-        table: None,
-        dt: args.dt,
-        max_events: args.max_events,
-        max_time: None,
-        scenes_per_shard: args.scenes_per_shard.max(1),
-        games: None,
-        fps: None,
-        game: None,
-        clicks: None,
         tasks: (!replay).then(|| args.tasks.clone()),
         task: args.task.clone(),
         action: args.action.clone(),
         stride: Some(args.stride),
+        ..SimulateStage::common(&args)
     };
     run_stage(stage, &args, quiet)
 }
