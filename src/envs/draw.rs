@@ -6,7 +6,7 @@
 //! `x = i·size`). **Does not:** know any scene, palette, font or layout: each environment's `render.rs`
 //! (`pool`, `phyre`, `iphyre`) draws its own frames with these helpers.
 
-use tiny_skia::{FillRule, Paint, PathBuilder, Pixmap, PixmapPaint, Transform};
+use tiny_skia::{FillRule, Paint, Path, PathBuilder, Pixmap, PixmapPaint, Transform};
 
 use super::EnvError;
 
@@ -31,9 +31,9 @@ pub(crate) fn encode_png(p: &Pixmap) -> Result<Vec<u8>, EnvError> {
     p.encode_png().map_err(|e| EnvError::Render(e.to_string()))
 }
 
-/// Fills the disc of radius `r` around (`cx`, `cy`) with `colour` (nothing for a degenerate radius).
-pub(crate) fn fill_circle(p: &mut Pixmap, cx: f32, cy: f32, r: f32, colour: [u8; 3]) {
-    if let Some(path) = PathBuilder::from_circle(cx, cy, r) {
+/// Fills `path` (non-zero winding) with `colour`; nothing when the path could not be built.
+pub(crate) fn fill_path(p: &mut Pixmap, path: Option<Path>, colour: [u8; 3]) {
+    if let Some(path) = path {
         p.fill_path(
             &path,
             &paint(colour),
@@ -42,6 +42,11 @@ pub(crate) fn fill_circle(p: &mut Pixmap, cx: f32, cy: f32, r: f32, colour: [u8;
             None,
         );
     }
+}
+
+/// Fills the disc of radius `r` around (`cx`, `cy`) with `colour` (nothing for a degenerate radius).
+pub(crate) fn fill_circle(p: &mut Pixmap, cx: f32, cy: f32, r: f32, colour: [u8; 3]) {
+    fill_path(p, PathBuilder::from_circle(cx, cy, r), colour);
 }
 
 /// `frames` frames of `size` pixels side by side, left to right (`size·frames` × `size` pixels): frame

@@ -8,13 +8,11 @@
 //! row by row from the top-left — the picture a VLM gets before answering `Cell: N, Radius: R`. The time
 //! is printed in the top-left corner. Text uses a tiny built-in segment font (digits, `.`, `t`, `s`).
 
-use tiny_skia::{
-    Color as SkColor, FillRule, LineCap, LineJoin, PathBuilder, Pixmap, Stroke, Transform,
-};
+use tiny_skia::{Color as SkColor, LineCap, LineJoin, PathBuilder, Pixmap, Stroke, Transform};
 
 use super::task::{Color, Shape, Task};
 use crate::envs::EnvError;
-use crate::envs::draw::{self, encode_png, new_pixmap, paint};
+use crate::envs::draw::{self, encode_png, fill_path, new_pixmap, paint};
 use crate::envs::pool::render::timestep_at;
 use crate::trace::{Body, Trace};
 
@@ -195,15 +193,7 @@ fn draw(
                     pb.finish()
                 }
             };
-            if let Some(path) = path {
-                p.fill_path(
-                    &path,
-                    &paint(pose.color),
-                    FillRule::Winding,
-                    Transform::identity(),
-                    None,
-                );
-            }
+            fill_path(&mut p, path, pose.color);
         }
     }
     if opts.grid {

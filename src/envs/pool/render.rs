@@ -16,7 +16,7 @@ use tiny_skia::{
 
 use super::config::PoolConfig;
 use crate::envs::EnvError;
-use crate::envs::draw::{self, encode_png, fill_circle, new_pixmap, paint};
+use crate::envs::draw::{self, encode_png, fill_circle, fill_path, new_pixmap, paint};
 use crate::trace::{Body, PoolBall, Timestep, Trace};
 
 /// Picture options.
@@ -327,15 +327,7 @@ fn draw_ball(p: &mut Pixmap, cx: f32, cy: f32, r: f32, id: &str) {
             }
         }
         pb.close();
-        if let Some(path) = pb.finish() {
-            p.fill_path(
-                &path,
-                &paint(colour),
-                FillRule::Winding,
-                Transform::identity(),
-                None,
-            );
-        }
+        fill_path(p, pb.finish(), colour);
     } else {
         fill_circle(p, cx, cy, r, colour);
     }
