@@ -301,7 +301,7 @@ impl WorkerPool {
         trace: &Trace,
         shared: &Shared,
         stats: &mut RunStats,
-        (prev, store): (&mut Option<Unsettled>, &dyn Fn((usize, Vec<CallResult>))),
+        (prev, store): (&mut Option<Unsettled>, &Store),
     ) -> Unsettled {
         let mut settle_prev = || {
             if let Some(p) = prev.take() {
@@ -582,6 +582,9 @@ impl WorkerPool {
         }
     }
 }
+
+/// Where settled results go: (trace, results by detector).
+type Store<'a> = dyn Fn((usize, Vec<CallResult>)) + 'a;
 
 /// How long a worker may hold finished replies before writing them (checked before each call starts).
 const BATCH_FLUSH: Duration = Duration::from_millis(20);
