@@ -44,17 +44,6 @@ fn chunk(config: &PoolConfig, lo: usize, hi: usize) -> Vec<Trace> {
         .collect()
 }
 
-fn add(total: &mut RunStats, s: &RunStats) {
-    total.traces_loaded += s.traces_loaded;
-    total.convert_s += s.convert_s;
-    total.load_s += s.load_s;
-    total.compile_s += s.compile_s;
-    total.calls += s.calls;
-    total.detector_wall_s += s.detector_wall_s;
-    total.round_trip_s += s.round_trip_s;
-    total.restarts += s.restarts;
-}
-
 fn main() {
     // Accept and ignore the arguments cargo bench passes (`--bench`, filters).
     let n: usize = std::env::var("DETECT_BENCH_TRACES")
@@ -103,7 +92,7 @@ fn main() {
                 .iter()
                 .filter(|r| r.status.error().is_some())
                 .count();
-            add(&mut total, &batch.stats);
+            total.add(&batch.stats);
         }
         (frames, steps) = (f, s);
         // Steady state of a search: the same traces again, still cached in the workers (the last chunk's
@@ -113,7 +102,7 @@ fn main() {
         let t0 = Instant::now();
         let mut c = RunStats::default();
         for _ in 0..CACHED_PASSES {
-            add(&mut c, &pool.run(&lib.detectors, &last).stats);
+            c.add(&pool.run(&lib.detectors, &last).stats);
         }
         let cached_wall = t0.elapsed().as_secs_f64();
         let speedup = base.map_or(1.0, |b: f64| b / wall);
@@ -127,7 +116,7 @@ fn main() {
             total.calls as f64 / wall,
         );
         println!(
-            "    detector time {:.2} s ({:.3} ms/call); overhead {:.1}% of it: convert {:.2} s, load {:.2} s, compile {:.2} s, protocol+validation {:.2} s",
+            "    detector time {:.2} s ({:.3} ms/call); overhead {:.1}% of it: convert {:.2} s, load {:.2} s, compile {:.2} s, protocol+validation {:.2} s; decoding in Rust (overlapped) {:.2} s",
             total.detector_wall_s,
             1000.0 * total.detector_wall_s / total.calls.max(1) as f64,
             100.0 * over,
@@ -135,13 +124,15 @@ fn main() {
             total.load_s,
             total.compile_s,
             total.round_trip_s - total.detector_wall_s,
+            total.decode_s,
         );
         println!(
-            "    cached re-run of {} traces ×{CACHED_PASSES}: {cached_wall:.3} s wall, {} trace load(s), detector time {:.3} s, protocol+validation {:.1}% of it",
+            "    cached re-run of {} traces ×{CACHED_PASSES}: {cached_wall:.3} s wall, {} trace load(s), detector time {:.3} s, protocol+validation {:.1}% of it, decoding {:.3} s",
             last.len(),
             c.traces_loaded,
             c.detector_wall_s,
             100.0 * (c.round_trip_s - c.detector_wall_s) / c.detector_wall_s.max(1e-9),
+            c.decode_s,
         );
     }
     println!("  ({steps} timesteps, {frames} frame rows in all)");

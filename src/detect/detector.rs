@@ -80,6 +80,9 @@ impl Detector {
     /// Whether `label` names this detector's label: equal ignoring case and treating `_`, `-` and runs
     /// of spaces alike, or one of its aliases.
     pub fn accepts_label(&self, label: &str) -> bool {
+        if label == self.label {
+            return true;
+        }
         let l = normalise_label(label);
         normalise_label(&self.label) == l || self.aliases.iter().any(|a| normalise_label(a) == l)
     }

@@ -36,6 +36,7 @@ pub fn decode(bytes: &[u8], budget: usize) -> Result<Value, OutputError> {
         bytes,
         pos: 0,
         refs: Vec::new(),
+        replay: 0,
         budget,
         limit: budget,
     };
@@ -68,6 +69,18 @@ const SHORT_ASCII: u8 = b'z';
 const SHORT_ASCII_INTERNED: u8 = b'Z';
 const FLAG_REF: u8 = 0x80;
 
+/// A value flagged for sharing. Scalars and strings are kept; a container is kept as the position of
+/// its type byte and read again for each reference, so that the common case (the writer flags the
+/// whole output, which its caller also holds) costs nothing.
+enum Shared {
+    /// A container still being read (a reference to it is a cycle).
+    Open,
+    /// A container, read again from this byte offset.
+    At(usize),
+    /// A scalar or string.
+    Value(Value),
+}
+
 /// One step of a JSON path.
 enum Seg {
     Index(usize),
@@ -77,8 +90,10 @@ enum Seg {
 struct Reader<'a> {
     bytes: &'a [u8],
     pos: usize,
-    /// Values flagged for sharing, by reference index (`None` while a container is being read).
-    refs: Vec<Option<Value>>,
+    /// Values flagged for sharing, by reference index.
+    refs: Vec<Shared>,
+    /// Above zero while a shared container is read again for a reference: nothing is registered then.
+    replay: usize,
     budget: usize,
     limit: usize,
 }
@@ -184,12 +199,13 @@ impl Reader<'_> {
                 format!("the output is nested deeper than {MAX_DEPTH} levels"),
             ));
         }
+        let at = self.pos;
         let code = self.u8(path)?;
-        let flagged = code & FLAG_REF != 0;
+        let flagged = code & FLAG_REF != 0 && self.replay == 0;
         let code = code & !FLAG_REF;
         // A container's reference index is taken before its items are read, as the writer assigns it.
         let slot = if flagged && matches!(code, TUPLE | SMALL_TUPLE | LIST | DICT) {
-            self.refs.push(None);
+            self.refs.push(Shared::Open);
             Some(self.refs.len() - 1)
         } else {
             None
@@ -260,16 +276,27 @@ impl Reader<'_> {
             }
             REF => {
                 let i = self.len(path)?;
-                // Each reference stands for a full copy in JSON: charge its size before copying it.
-                let n = match self.refs.get(i) {
-                    Some(Some(v)) => size(v, self.budget.saturating_add(1)),
-                    Some(None) => {
-                        return Err(self.fail(path, "the output contains itself (a cycle)"));
+                // Each reference stands for a full copy in JSON, charged as it is produced.
+                return match self.refs.get(i) {
+                    Some(Shared::Value(v)) => {
+                        let v = v.clone();
+                        self.charge(size(&v, self.budget.saturating_add(1)))?;
+                        Ok(v)
                     }
-                    None => return Err(self.fail(path, "a reference to nothing (corrupt message)")),
+                    Some(&Shared::At(start)) => {
+                        let resume = self.pos;
+                        self.pos = start;
+                        self.replay += 1;
+                        let v = self.value(depth, path);
+                        self.replay -= 1;
+                        self.pos = resume;
+                        v
+                    }
+                    Some(Shared::Open) => {
+                        Err(self.fail(path, "the output contains itself (a cycle)"))
+                    }
+                    None => Err(self.fail(path, "a reference to nothing (corrupt message)")),
                 };
-                self.charge(n)?;
-                return Ok(self.refs[i].clone().expect("checked above"));
             }
             other => {
                 return Err(self.fail(
@@ -282,8 +309,8 @@ impl Reader<'_> {
             }
         };
         match slot {
-            Some(i) => self.refs[i] = Some(v.clone()),
-            None if flagged => self.refs.push(Some(v.clone())),
+            Some(i) => self.refs[i] = Shared::At(at),
+            None if flagged => self.refs.push(Shared::Value(v.clone())),
             None => {}
         }
         Ok(v)
@@ -350,6 +377,12 @@ impl Reader<'_> {
 
 /// The size [`decode`] charges for `v`, counted no further than `cap`.
 fn size(v: &Value, cap: usize) -> usize {
+    // Most shared values are strings (dict keys, labels) and numbers: no walk for those.
+    match v {
+        Value::String(s) => return (1 + s.len()).min(cap),
+        Value::Array(_) | Value::Object(_) => {}
+        _ => return 1.min(cap),
+    }
     let mut used = 0usize;
     let mut stack = vec![v];
     while let Some(v) = stack.pop() {
@@ -468,6 +501,51 @@ mod tests {
         let e = decode(&bytes, 12).unwrap_err();
         assert_eq!(e.path, "$");
         assert!(e.message.contains("limit 12"), "{}", e.message);
+    }
+
+    #[test]
+    fn shared_containers_are_read_again_and_cycles_refused() {
+        // [inner, inner] where inner = [1, "a"] is flagged (index 0), then referenced.
+        let mut inner = list(&[int(1), ascii("a")]);
+        inner[0] |= FLAG_REF;
+        let mut r = vec![REF];
+        r.extend_from_slice(&0i32.to_le_bytes());
+        assert_eq!(
+            decode(&list(&[inner, r.clone()]), 1000).unwrap(),
+            json!([[1, "a"], [1, "a"]])
+        );
+        // A list that holds itself (index 0 referenced from inside).
+        let mut cyclic = list(&[r]);
+        cyclic[0] |= FLAG_REF;
+        let e = decode(&cyclic, 1000).unwrap_err();
+        assert!(e.message.contains("cycle"), "{}", e.message);
+        // Nested sharing that doubles at every level: level k = [level k+1, ref(level k+1)], the
+        // innermost [None, None]; 2^40 values as JSON, refused once the budget is spent.
+        let depth = 40;
+        let mut bytes = Vec::new();
+        for _ in 0..depth {
+            bytes.extend_from_slice(&[LIST | FLAG_REF, 2, 0, 0, 0]);
+        }
+        bytes.extend_from_slice(&[NONE, NONE]);
+        for level in (0..depth - 1).rev() {
+            bytes.push(REF);
+            bytes.extend_from_slice(&(level as i32 + 1).to_le_bytes());
+        }
+        let e = decode(&bytes, 1 << 16).unwrap_err();
+        assert!(e.message.contains("limit"), "{}", e.message);
+        // The same with three levels fits: [[[None, None], [None, None]], ...].
+        let mut small = Vec::new();
+        for _ in 0..3 {
+            small.extend_from_slice(&[LIST | FLAG_REF, 2, 0, 0, 0]);
+        }
+        small.extend_from_slice(&[NONE, NONE]);
+        for level in (0..2).rev() {
+            small.push(REF);
+            small.extend_from_slice(&(level as i32 + 1).to_le_bytes());
+        }
+        let pair = json!([null, null]);
+        let two = json!([pair.clone(), pair]);
+        assert_eq!(decode(&small, 1 << 16).unwrap(), json!([two.clone(), two]));
     }
 
     #[test]

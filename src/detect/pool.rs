@@ -63,10 +63,14 @@ pub struct RunStats {
     pub round_trip_s: f64,
     /// Workers replaced after a timeout, memory error or crash.
     pub restarts: usize,
+    /// Time spent decoding and validating patterns in Rust (s, summed over threads). Not part of
+    /// [`RunStats::overhead`]: it overlaps the workers' next calls.
+    pub decode_s: f64,
 }
 
 impl RunStats {
-    fn add(&mut self, o: &RunStats) {
+    /// Adds another run's totals to these.
+    pub fn add(&mut self, o: &RunStats) {
         self.traces_loaded += o.traces_loaded;
         self.convert_s += o.convert_s;
         self.load_s += o.load_s;
@@ -75,6 +79,7 @@ impl RunStats {
         self.detector_wall_s += o.detector_wall_s;
         self.round_trip_s += o.round_trip_s;
         self.restarts += o.restarts;
+        self.decode_s += o.decode_s;
     }
 
     /// Protocol, conversion, loading and compilation time as a fraction of detector time.
@@ -234,7 +239,9 @@ impl WorkerPool {
                         unsettled = Some(next);
                     }
                     if let Some(u) = unsettled.take() {
+                        let d0 = Instant::now();
                         store(u.settle(detectors, &self.limits));
+                        local.decode_s += d0.elapsed().as_secs_f64();
                     }
                     stats.lock().unwrap_or_else(|p| p.into_inner()).add(&local);
                 });
@@ -303,9 +310,12 @@ impl WorkerPool {
         stats: &mut RunStats,
         (prev, store): (&mut Option<Unsettled>, &Store),
     ) -> Unsettled {
+        let mut decode_s = 0.0;
         let mut settle_prev = || {
             if let Some(p) = prev.take() {
+                let d0 = Instant::now();
                 store(p.settle(detectors, &self.limits));
+                decode_s += d0.elapsed().as_secs_f64();
             }
         };
         let mut frames: Vec<(usize, Vec<u8>)> = Vec::new();
@@ -496,6 +506,7 @@ impl WorkerPool {
             pending = ready[settled..].to_vec();
         }
         settle_prev();
+        stats.decode_s += decode_s;
         Unsettled {
             trace: t,
             steps,

@@ -235,7 +235,8 @@ impl Stage for AnnotateStage {
                 "layers": pool.layers(),
                 "stats": {"read_s": read_s, "batch_s": batch_s, "calls": s.calls, "detector_wall_s": s.detector_wall_s,
                           "round_trip_s": s.round_trip_s, "convert_s": s.convert_s,
-                          "load_s": s.load_s, "compile_s": s.compile_s, "restarts": s.restarts},
+                          "load_s": s.load_s, "compile_s": s.compile_s, "decode_s": s.decode_s,
+                          "restarts": s.restarts},
             });
             ctx.finish_shard(&shard, &record)?;
             records.push(record);
