@@ -529,7 +529,7 @@ mod tests {
         bytes.extend_from_slice(&[NONE, NONE]);
         for level in (0..depth - 1).rev() {
             bytes.push(REF);
-            bytes.extend_from_slice(&(level as i32 + 1).to_le_bytes());
+            bytes.extend_from_slice(&(level + 1).to_le_bytes());
         }
         let e = decode(&bytes, 1 << 16).unwrap_err();
         assert!(e.message.contains("limit"), "{}", e.message);
@@ -541,7 +541,7 @@ mod tests {
         small.extend_from_slice(&[NONE, NONE]);
         for level in (0..2).rev() {
             small.push(REF);
-            small.extend_from_slice(&(level as i32 + 1).to_le_bytes());
+            small.extend_from_slice(&(level + 1).to_le_bytes());
         }
         let pair = json!([null, null]);
         let two = json!([pair.clone(), pair]);
