@@ -521,7 +521,7 @@ mod tests {
         assert!(e.message.contains("cycle"), "{}", e.message);
         // Nested sharing that doubles at every level: level k = [level k+1, ref(level k+1)], the
         // innermost [None, None]; 2^40 values as JSON, refused once the budget is spent.
-        let depth = 40;
+        let depth: i32 = 40;
         let mut bytes = Vec::new();
         for _ in 0..depth {
             bytes.extend_from_slice(&[LIST | FLAG_REF, 2, 0, 0, 0]);
@@ -539,7 +539,7 @@ mod tests {
             small.extend_from_slice(&[LIST | FLAG_REF, 2, 0, 0, 0]);
         }
         small.extend_from_slice(&[NONE, NONE]);
-        for level in (0..2).rev() {
+        for level in (0..2i32).rev() {
             small.push(REF);
             small.extend_from_slice(&(level + 1).to_le_bytes());
         }
