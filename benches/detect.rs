@@ -131,12 +131,13 @@ fn main() {
             r.failed,
         );
         println!(
-            "    detector time {:.2} s ({:.3} ms/call); overhead {:.1}% of it: convert {:.2} s, load {:.2} s, compile {:.2} s, protocol+validation {:.2} s; decoding in Rust (overlapped) {:.2} s",
+            "    detector time {:.2} s ({:.3} ms/call); overhead {:.1}% of it: convert {:.2} s, load {:.2} s (building dicts {:.2} s), compile {:.2} s, protocol+validation {:.2} s; decoding in Rust (overlapped) {:.2} s",
             total.detector_wall_s,
             1000.0 * total.detector_wall_s / total.calls.max(1) as f64,
             100.0 * total.overhead(),
             total.convert_s,
             total.load_s,
+            total.build_s,
             total.compile_s,
             total.round_trip_s - total.detector_wall_s,
             total.decode_s,

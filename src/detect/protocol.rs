@@ -4,7 +4,8 @@
 //! type (`T` load trace, `P` load a pooltool trace by columns, `E` evict traces, `C` compile, `R` run)
 //! and the rest JSON (or columns, for `P`). Replies are JSON, except a run reply whose patterns travel in
 //! CPython's `marshal` format (`M`, read by `marshal.rs`). A run request gets one reply per detector, in
-//! order; every other request gets one reply, so the worker is idle when a request is written.
+//! order; an evict request gets none (it is sent behind a run request); every other request gets one
+//! reply.
 
 use std::io::{self, Write};
 

@@ -12,10 +12,10 @@
 #
 # Protocol (see protocol.rs): frames of a 4-byte little-endian length and a payload whose first byte is the
 # message type and the rest JSON. One reply per request, in order.
-#   b"T" {"id", "trace"}            load a trace (the paper's dict), cached read-only   -> {"ok": true}
+#   b"T" {"id", "trace"}            load a trace (the paper's dict), cached read-only   -> {"ok": true, "build": s}
 #   b"P" <u32 n><header JSON, n bytes><f64 LE block>  load a pooltool trace sent by columns (the same
-#                                   dict, built from columns: floats travel as raw doubles) -> {"ok": true}
-#   b"E" {"ids": [...]}             evict traces                                        -> {"ok": true}
+#                                   dict, built from columns: floats travel as raw doubles) -> {"ok": true, "build": s}
+#   b"E" {"ids": [...]}             evict traces                                        -> no reply
 #   b"C" {"id", "code"}             check and compile a detector                        -> {"ok": true} | error
 #   b"R" {"detectors", "trace", "flush"}  run each detector in turn -> one reply per detector: patterns | error
 #                                   (written as each call ends, or with "flush" > 0 gathered and written
@@ -588,6 +588,7 @@ def serve():
         _set_cpu_limit(CPU_SECONDS)
         try:
             if kind == b"T" or kind == b"P":
+                b0 = time.perf_counter()
                 gc.disable()
                 try:
                     if kind == b"P":
@@ -602,14 +603,14 @@ def serve():
                     gc.enable()
                 # The cached trace never holds cycles: keep it out of every later collection.
                 gc.freeze()
-                _reply({"ok": True})
+                _reply({"ok": True, "build": time.perf_counter() - b0})
             elif kind == b"E":
                 msg = json.loads(frame[1:])
                 # Traces hold no cycles: dropping the last reference frees them, frozen or not, with
                 # no collection over the other cached traces.
                 for i in msg.get("ids", []):
                     TRACES.pop(i, None)
-                _reply({"ok": True})
+                # No reply: the Rust side sends this behind a run request and does not wait for it.
             elif kind == b"C":
                 _reply(compile_detector(json.loads(frame[1:])))
             elif kind == b"R":

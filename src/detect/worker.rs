@@ -99,6 +99,8 @@ pub(crate) struct Worker {
     stderr: Arc<Mutex<VecDeque<u8>>>,
     /// Trace keys loaded, least recently used first.
     pub traces: VecDeque<String>,
+    /// Trace keys to drop with the next [`Worker::send_evictions`] (no longer in `traces`).
+    pub evict: Vec<String>,
     /// Detector ids compiled.
     pub detectors: HashSet<String>,
     /// The layers it reported.
@@ -144,6 +146,7 @@ impl Worker {
             replies,
             stderr,
             traces: VecDeque::new(),
+            evict: Vec::new(),
             detectors: HashSet::new(),
             layers: SandboxLayers::default(),
         };
@@ -182,6 +185,16 @@ impl Worker {
             Ok(()) => self.wait_reply(timeout),
             Err(death) => Reply::Died(death),
         }
+    }
+
+    /// Tells the worker to drop the traces in `evict` (a request without a reply).
+    pub fn send_evictions(&mut self) -> Result<(), Death> {
+        if self.evict.is_empty() {
+            return Ok(());
+        }
+        let body = protocol::evict_body(&self.evict);
+        self.evict.clear();
+        self.send(protocol::EVICT, &body)
     }
 
     /// Sends a request without waiting for its reply (collect it with [`Worker::wait`]).
