@@ -764,7 +764,7 @@ mod tests {
         })
         .unwrap();
         let traces: Vec<Trace> = (0..6)
-            .map(|i| synthetic_trace(Env::Pooltool, i, 4 + i as usize, 2))
+            .map(|i| synthetic_trace(Env::Pooltool, i, 4 + i, 2))
             .collect();
         // Reports the trace's last step, so a wrong (evicted or stale) trace shows.
         let d = Detector::new(

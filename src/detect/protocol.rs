@@ -33,16 +33,34 @@ pub(crate) fn write_frame(out: &mut impl Write, kind: u8, body: &[u8]) -> io::Re
     out.flush()
 }
 
-/// The body of a load request: `{"id": key, "trace": <the paper's dict>}`.
+/// The body of a load request: `{"id": key, "trace": <the paper's dict without its timesteps>, "steps":
+/// [...]}`, the timesteps written with repeated objects as `0` (see
+/// [`write_steps_sharing_repeats`](crate::trace::json::write_steps_sharing_repeats)).
 pub(crate) fn load_body(key: &str, trace: &Trace) -> Vec<u8> {
-    let mut buf = Vec::with_capacity(64 + trace.frame_rows() * 256);
+    let mut buf = Vec::with_capacity(64 + trace.frame_rows() * 128);
     buf.extend_from_slice(b"{\"id\":");
     serde_json::to_writer(&mut buf, key).expect("a string serialises");
     buf.extend_from_slice(b",\"trace\":");
-    // Streamed in the paper's layout, without building a JSON tree first.
-    crate::trace::json::write_trace(&mut buf, trace, false).expect("a trace always serialises");
+    crate::trace::json::write_trace(&mut buf, &shell_of(trace), false)
+        .expect("a trace always serialises");
+    buf.extend_from_slice(b",\"steps\":");
+    crate::trace::json::write_steps_sharing_repeats(&mut buf, &trace.timesteps)
+        .expect("a trace always serialises");
     buf.push(b'}');
     buf
+}
+
+/// The trace without its timesteps (they travel separately).
+fn shell_of(trace: &Trace) -> Trace {
+    Trace {
+        trace_id: trace.trace_id.clone(),
+        env: trace.env,
+        task_id: trace.task_id.clone(),
+        timesteps: Vec::new(),
+        events: trace.events.clone(),
+        outcome: trace.outcome.clone(),
+        extra: trace.extra.clone(),
+    }
 }
 
 /// The request that loads `trace` under `key`: by columns for a pooltool trace whose objects carry no
@@ -144,15 +162,7 @@ fn pool_columns(key: &str, trace: &Trace) -> Option<Vec<u8>> {
         .iter()
         .any(|t| !t.extra.is_empty())
         .then(|| trace.timesteps.iter().map(|t| &t.extra).collect());
-    let shell = Trace {
-        trace_id: trace.trace_id.clone(),
-        env: trace.env,
-        task_id: trace.task_id.clone(),
-        timesteps: Vec::new(),
-        events: trace.events.clone(),
-        outcome: trace.outcome.clone(),
-        extra: trace.extra.clone(),
-    };
+    let shell = shell_of(trace);
     let mut header = Vec::with_capacity(4096 + 4 * proto.len());
     header.extend_from_slice(b"{\"id\":");
     serde_json::to_writer(&mut header, key).ok()?;

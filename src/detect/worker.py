@@ -12,7 +12,8 @@
 #
 # Protocol (see protocol.rs): frames of a 4-byte little-endian length and a payload whose first byte is the
 # message type and the rest JSON. One reply per request, in order.
-#   b"T" {"id", "trace"}            load a trace (the paper's dict), cached read-only   -> {"ok": true, "build": s}
+#   b"T" {"id", "trace", "steps"}   load a trace (the paper's dict, its timesteps apart, an object repeated
+#                                   from the step before as 0), cached read-only        -> {"ok": true, "build": s}
 #   b"P" <u32 n><header JSON, n bytes><f64 LE block>  load a pooltool trace sent by columns (the same
 #                                   dict, built from columns: floats travel as raw doubles) -> {"ok": true, "build": s}
 #   b"E" {"ids": [...]}             evict traces                                        -> no reply
@@ -399,6 +400,23 @@ def load_pool_columns(frame):
     return head["id"], fd((key, tuple(steps) if key == "timesteps" else v) for key, v in shell.items())
 
 
+def load_steps(frame):
+    """Rebuilds a trace sent as JSON: the trace without its timesteps, then the timesteps, where an
+    object written as 0 repeats the previous step's object in the same slot (that read-only dict is
+    reused)."""
+    msg = json.loads(frame[1:], object_hook=_freeze)
+    steps = msg["steps"]
+    prev = ()
+    for step in steps:
+        objs = step["objects"]
+        if 0 in objs:
+            objs = tuple(prev[j] if type(o) is int else o for j, o in enumerate(objs))
+            dict.__setitem__(step, "objects", objs)
+        prev = objs
+    shell = msg["trace"]
+    return msg["id"], FrozenDict((key, steps if key == "timesteps" else v) for key, v in shell.items())
+
+
 def _error(category, message, line=None, column=None, **extra):
     e = {"category": category, "message": message}
     if line is not None:
@@ -596,9 +614,9 @@ def serve():
                         TRACES[key] = trace
                         del trace
                     else:
-                        msg = json.loads(frame[1:], object_hook=_freeze)
-                        TRACES[msg["id"]] = msg["trace"]
-                        del msg
+                        key, trace = load_steps(frame)
+                        TRACES[key] = trace
+                        del trace
                 finally:
                     gc.enable()
                 # The cached trace never holds cycles: keep it out of every later collection.

@@ -242,8 +242,8 @@ fn a_library_that_is_not_there_is_an_input_error() {
 
 #[test]
 fn detectors_see_the_paper_dict_whichever_way_the_trace_travels() {
-    // A pooltool trace goes to the worker by columns; one with an unknown object field as JSON. Both
-    // must arrive as exactly the paper's dict (values and key order).
+    // A pooltool trace goes to the worker by columns; one with an unknown object field as JSON, as do
+    // other environments' traces. All must arrive as exactly the paper's dict (values and key order).
     let plain = straight_pot(2.5, 0.3, 0.1);
     let mut odd = plain.clone();
     odd.trace_id = "odd".into();
@@ -272,7 +272,19 @@ fn detectors_see_the_paper_dict_whichever_way_the_trace_travels() {
     // Only a timestep field: still by columns, with the field in place.
     let mut stepped = traces_base_clone(&odd);
     stepped.trace_id = "stepped".into();
-    let traces = [plain, odd, stepped];
+    // PHYRE and I-PHYRE traces travel as JSON with repeated objects (static bodies) sent once.
+    let example = |file: &str, env: annotrace::trace::Env| {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("data/examples")
+            .join(file);
+        let text = std::fs::read_to_string(&path).unwrap();
+        annotrace::trace::json::read_str(file, &text, env)
+            .remove(0)
+            .unwrap()
+    };
+    let phyre = example("phyre_drop.json", annotrace::trace::Env::Phyre);
+    let iphyre = example("iphyre_support.json", annotrace::trace::Env::Iphyre);
+    let traces = [plain, odd, stepped, phyre, iphyre];
     let batch = pool.run(&[echo], &traces);
     for (r, t) in batch.results.iter().zip(&traces) {
         assert_eq!(r.status, CandidateStatus::Ok, "{r:?}");

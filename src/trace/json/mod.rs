@@ -25,4 +25,6 @@ pub use read::{
     SourceError, SourceKind, TraceConsumer, TraceHeader, default_trace_id, expand_paths, read_file,
     read_path, read_str,
 };
-pub use write::{PaperTrace, timestep_to_value, to_value, write_trace};
+pub use write::{
+    PaperTrace, timestep_to_value, to_value, write_steps_sharing_repeats, write_trace,
+};

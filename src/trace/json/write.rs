@@ -35,6 +35,61 @@ pub fn timestep_to_value(ts: &Timestep) -> Value {
     serde_json::to_value(StepJson(ts)).expect("a timestep always serialises: its floats are finite")
 }
 
+/// Writes a trace's timesteps as a JSON array in the paper's layout, except that an object whose JSON
+/// is byte-for-byte the previous step's object in the same slot is written as `0`. This is how traces
+/// other than pooltool's travel to a detector worker: static bodies (walls, bars, resting blocks) are
+/// sent once, and the worker reuses the previous step's read-only dict for each `0`
+/// (`load_steps` in `detect/worker.py`).
+pub fn write_steps_sharing_repeats(
+    out: &mut impl Write,
+    steps: &[Timestep],
+) -> serde_json::Result<()> {
+    // Each object's JSON, for this step and the one before; the buffers are reused from step to step,
+    // so only `prev[..prev_len]` is the previous step's.
+    let mut prev: Vec<Vec<u8>> = Vec::new();
+    let mut cur: Vec<Vec<u8>> = Vec::new();
+    let mut prev_len = 0;
+    out.write_all(b"[").map_err(serde_json::Error::io)?;
+    for (i, ts) in steps.iter().enumerate() {
+        let mut head = Vec::with_capacity(64);
+        if i > 0 {
+            head.push(b',');
+        }
+        head.extend_from_slice(b"{\"index\":");
+        serde_json::to_writer(&mut head, &ts.index)?;
+        head.extend_from_slice(b",\"t\":");
+        serde_json::to_writer(&mut head, &ts.t)?;
+        head.extend_from_slice(b",\"objects\":[");
+        out.write_all(&head).map_err(serde_json::Error::io)?;
+        for (j, o) in ts.objects.iter().enumerate() {
+            if cur.len() <= j {
+                cur.push(Vec::new());
+            }
+            let json = &mut cur[j];
+            json.clear();
+            serde_json::to_writer(&mut *json, &ObjectJson(o))?;
+            let sep: &[u8] = if j > 0 { b"," } else { b"" };
+            out.write_all(sep).map_err(serde_json::Error::io)?;
+            if j < prev_len && prev[j] == *json {
+                out.write_all(b"0").map_err(serde_json::Error::io)?;
+            } else {
+                out.write_all(json).map_err(serde_json::Error::io)?;
+            }
+        }
+        out.write_all(b"]").map_err(serde_json::Error::io)?;
+        for (k, v) in &ts.extra {
+            out.write_all(b",").map_err(serde_json::Error::io)?;
+            serde_json::to_writer(&mut *out, k)?;
+            out.write_all(b":").map_err(serde_json::Error::io)?;
+            serde_json::to_writer(&mut *out, v)?;
+        }
+        out.write_all(b"}").map_err(serde_json::Error::io)?;
+        std::mem::swap(&mut prev, &mut cur);
+        prev_len = ts.objects.len();
+    }
+    out.write_all(b"]").map_err(serde_json::Error::io)
+}
+
 fn extras<M: SerializeMap>(m: &mut M, extra: &JsonMap) -> Result<(), M::Error> {
     for (k, v) in extra {
         m.serialize_entry(k, v)?;
@@ -187,5 +242,39 @@ impl Serialize for OutcomeJson<'_> {
         m.serialize_entry("metrics", &o.metrics)?;
         extras(&mut m, &o.extra)?;
         m.end()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testutil::synthetic_trace;
+    use crate::trace::Env;
+
+    #[test]
+    fn repeated_objects_are_written_once_and_only_against_the_step_before() {
+        let mut t = synthetic_trace(Env::Phyre, 0, 4, 3);
+        // Step 1 repeats step 0; step 2 keeps one object; step 3 repeats step 1 (not step 2) in full.
+        t.timesteps[1].objects = t.timesteps[0].objects.clone();
+        t.timesteps[2].objects = t.timesteps[1].objects[..1].to_vec();
+        t.timesteps[3].objects = t.timesteps[1].objects.clone();
+        let mut out = Vec::new();
+        write_steps_sharing_repeats(&mut out, &t.timesteps).unwrap();
+        let steps: Value = serde_json::from_slice(&out).unwrap();
+        let objects = |s: usize| steps[s]["objects"].as_array().unwrap().clone();
+        assert!(objects(0).iter().all(Value::is_object));
+        assert!(objects(1).iter().all(|o| o == &Value::from(0)));
+        assert_eq!(objects(2), vec![Value::from(0)]);
+        // Slot 0 repeats step 2's object; slots 1 and 2 had no object in step 2, so they are written.
+        let s3 = objects(3);
+        assert_eq!(s3[0], Value::from(0));
+        assert!(s3[1].is_object() && s3[2].is_object());
+        // Everything else is the paper's layout.
+        let full = to_value(&t);
+        for (s, step) in steps.as_array().unwrap().iter().enumerate() {
+            assert_eq!(step["index"], full["timesteps"][s]["index"]);
+            assert_eq!(step["t"], full["timesteps"][s]["t"]);
+        }
+        assert_eq!(s3[1], full["timesteps"][3]["objects"][1]);
     }
 }
