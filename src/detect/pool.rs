@@ -484,11 +484,7 @@ impl WorkerPool {
                         res.cpu_s = v["cpu"].as_f64().unwrap_or(0.0);
                         stats.detector_wall_s += res.wall_s;
                         if v["ok"] == Value::Bool(true) {
-                            res.printed = v["printed"].as_str().unwrap_or_default().to_string();
-                            match validate(v["patterns"].take(), det, steps) {
-                                Ok(p) => res.patterns = p,
-                                Err(e) => res.status = CandidateStatus::Failed(e),
-                            }
+                            accept(res, &mut v, det, steps);
                         } else {
                             let e = error_of(&v["error"], &self.limits);
                             if error_is_fatal_for_worker(&v["error"]) {
@@ -632,11 +628,7 @@ impl Unsettled {
             let res = &mut self.out[d];
             match protocol::parse_reply(&frame, limits.max_output_bytes) {
                 Ok(mut v) if v["ok"] == Value::Bool(true) => {
-                    res.printed = v["printed"].as_str().unwrap_or_default().to_string();
-                    match validate(v["patterns"].take(), &detectors[d], self.steps) {
-                        Ok(p) => res.patterns = p,
-                        Err(e) => res.status = CandidateStatus::Failed(e),
-                    }
+                    accept(res, &mut v, &detectors[d], self.steps)
                 }
                 Ok(v) => res.status = CandidateStatus::Failed(error_of(&v["error"], limits)),
                 Err(message) => {
@@ -645,6 +637,15 @@ impl Unsettled {
             }
         }
         (self.trace, self.out)
+    }
+}
+
+/// Takes a successful reply's printed text and validated patterns into `res`.
+fn accept(res: &mut CallResult, v: &mut Value, det: &Detector, steps: Option<(i64, i64)>) {
+    res.printed = v["printed"].as_str().unwrap_or_default().to_string();
+    match validate(v["patterns"].take(), det, steps) {
+        Ok(p) => res.patterns = p,
+        Err(e) => res.status = CandidateStatus::Failed(e),
     }
 }
 
