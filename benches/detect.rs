@@ -16,9 +16,7 @@
 use std::time::{Duration, Instant};
 
 use annotrace::detect::{Library, RunStats, SandboxLimits, WorkerPool};
-use annotrace::envs::pool::{
-    PoolConfig, Scene, SimOptions, TraceOptions, rack, simulate, trace_of,
-};
+use annotrace::envs::pool::{PoolConfig, TraceOptions, dataset_trace};
 use annotrace::trace::Trace;
 
 const SEED: u64 = 7;
@@ -28,19 +26,8 @@ const CACHED_PASSES: usize = 5;
 fn chunk(config: &PoolConfig, lo: usize, hi: usize) -> Vec<Trace> {
     (lo..hi)
         .map(|i| {
-            let mut scene = Scene::nine_ball(config, rack::scene_seed(SEED, i as u64));
-            scene.scene_id = format!("pool-{SEED}-{i:06}");
-            let shot = rack::dataset_shot(&scene, &mut rack::shot_rng(SEED, i as u64, 0));
-            let system = scene.system(config).expect("a rack is a valid scene");
-            let sim =
-                simulate(&system, &shot, &SimOptions::default()).expect("a dataset shot simulates");
-            trace_of(
-                &sim,
-                &scene,
-                &shot,
-                &format!("{}-000", scene.scene_id),
-                &TraceOptions::default(),
-            )
+            dataset_trace(config, SEED, i as u64, &TraceOptions::default())
+                .expect("a dataset shot simulates")
         })
         .collect()
 }

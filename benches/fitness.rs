@@ -14,9 +14,7 @@ use std::collections::HashMap;
 use std::time::Instant;
 
 use annotrace::detect::{Detector, Library, SandboxLimits, WorkerPool};
-use annotrace::envs::pool::{
-    PoolConfig, Scene, SimOptions, TraceOptions, rack, simulate, trace_of,
-};
+use annotrace::envs::pool::{PoolConfig, TraceOptions, dataset_trace};
 use annotrace::fitness::DistanceMatrix;
 use annotrace::search::count_lines;
 use annotrace::search::evaluator::{EvalSettings, Evaluation, Evaluator, library_view};
@@ -27,19 +25,8 @@ const SEED: u64 = 7;
 fn traces(config: &PoolConfig, n: usize, dt: f64) -> Vec<Trace> {
     (0..n)
         .map(|i| {
-            let mut scene = Scene::nine_ball(config, rack::scene_seed(SEED, i as u64));
-            scene.scene_id = format!("pool-{SEED}-{i:06}");
-            let shot = rack::dataset_shot(&scene, &mut rack::shot_rng(SEED, i as u64, 0));
-            let system = scene.system(config).expect("a rack is a valid scene");
-            let sim =
-                simulate(&system, &shot, &SimOptions::default()).expect("a dataset shot simulates");
-            trace_of(
-                &sim,
-                &scene,
-                &shot,
-                &format!("{}-000", scene.scene_id),
-                &TraceOptions { dt },
-            )
+            dataset_trace(config, SEED, i as u64, &TraceOptions { dt })
+                .expect("a dataset shot simulates")
         })
         .collect()
 }

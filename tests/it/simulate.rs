@@ -338,3 +338,17 @@ fn a_second_dataset_with_the_same_seed_is_refused() {
     let csv = t.csv("r", "SELECT count(*) FROM traces");
     assert_eq!(csv.lines().nth(1), Some("5"));
 }
+
+/// `envs::pool::dataset_trace` (what the benches use) is the trace `annotrace simulate --seed` writes.
+#[test]
+fn dataset_trace_is_what_simulate_writes() {
+    use annotrace::envs::pool::{PoolConfig, TraceOptions, dataset_trace};
+    let t = TestRun::new();
+    t.run(&["simulate", "--run", "r", "--scenes", "2", "--seed", "7"])
+        .ok();
+    let exported = t.run(&["export", "--run", "r", "--trace", "pool-7-000001-000"]);
+    exported.ok();
+    let from_cli: Value = serde_json::from_str(&exported.stdout).unwrap();
+    let trace = dataset_trace(&PoolConfig::default_7ft(), 7, 1, &TraceOptions::default()).unwrap();
+    assert_eq!(from_cli, annotrace::trace::json::to_value(&trace));
+}

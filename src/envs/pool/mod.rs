@@ -58,5 +58,5 @@ pub use simulate::{SimOptions, Simulation, Status, simulate, state_at};
 pub use state::{Ball, BallState, MotionState};
 pub use system::System;
 pub use table::{CircularCushion, CushionDirection, LinearCushion, Pocket, Table};
-pub use to_trace::{TraceOptions, outcome, trace_of};
+pub use to_trace::{TraceOptions, dataset_trace, outcome, trace_of};
 pub use vec3::V3;

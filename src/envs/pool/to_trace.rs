@@ -15,11 +15,13 @@
 
 use serde_json::{Value, json};
 
+use super::config::PoolConfig;
 use super::events::{Agent, EventKind};
+use super::rack;
 use super::sample::resample;
 use super::scene::Scene;
 use super::shot::Shot;
-use super::simulate::{Simulation, Status};
+use super::simulate::{SimOptions, Simulation, Status, simulate};
 use crate::trace::{Body, Env, Event, JsonMap, Object, Outcome, PoolBall, Timestep, Trace};
 
 /// Options of the conversion.
@@ -50,6 +52,23 @@ fn map(v: Value) -> JsonMap {
         Value::Object(m) => m,
         _ => JsonMap::new(),
     }
+}
+
+/// Trace `pool-{seed}-{index:06}-000` of a random 9-ball dataset: scene `index` and its first shot as
+/// `annotrace simulate --seed SEED` draws them, simulated with the default options (benches and tests
+/// that need the CLI's traces without a run folder).
+pub fn dataset_trace(
+    config: &PoolConfig,
+    seed: u64,
+    index: u64,
+    opts: &TraceOptions,
+) -> super::Result<Trace> {
+    let mut scene = Scene::nine_ball(config, rack::scene_seed(seed, index));
+    scene.scene_id = format!("pool-{seed}-{index:06}");
+    let shot = rack::dataset_shot(&scene, &mut rack::shot_rng(seed, index, 0));
+    let sim = simulate(&scene.system(config)?, &shot, &SimOptions::default())?;
+    let id = format!("{}-000", scene.scene_id);
+    Ok(trace_of(&sim, &scene, &shot, &id, opts))
 }
 
 /// The trace of `sim`, which simulated `shot` on `scene`. `trace_id` names it; `task_id` is the scene id.
