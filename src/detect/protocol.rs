@@ -233,11 +233,7 @@ pub(crate) fn parse_reply(bytes: &[u8], max_output_bytes: usize) -> Result<Value
             .map_err(|e| format!("unreadable reply from the worker: {e}"));
     }
     let bad = || "unreadable reply from the worker: a truncated marshal frame".to_string();
-    let f64_at = |i: usize| -> Result<f64, String> {
-        let b = bytes.get(i..i + 8).ok_or_else(bad)?;
-        Ok(f64::from_le_bytes(b.try_into().expect("8 bytes")))
-    };
-    let (wall, cpu) = (f64_at(1)?, f64_at(9)?);
+    let (wall, cpu) = marshal_times(bytes).ok_or_else(bad)?;
     let n = bytes
         .get(17..21)
         .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize)
