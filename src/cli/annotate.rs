@@ -4,110 +4,89 @@
 //! reruns (the run's traces may have changed since), replacing that stage's earlier tables. Prints one
 //! line per detector (label, calls by status, annotations, mean time per trace) and the sandbox layers.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use annotrace::pipeline::{PipelineSpec, RunOptions, StageReport, hex, run as run_pipeline};
+use annotrace::pipeline::hex;
+use annotrace::pipeline::stages::annotate::KIND;
+use annotrace::pipeline::stages::detector_setup::SandboxParams;
 use annotrace::query::{Format, RenderOptions, render_string};
-use anyhow::Context;
+use annotrace::trace::Env;
 use sha2::{Digest, Sha256};
 
-use super::progress::Terminal;
-use super::{CliError, CliResult, fault_from_env, open_query, run_error};
+use super::one_stage::{OneStage, absolute, existing_run};
+use super::{CliError, CliResult, open_query};
 
+/// The flags of the commands that run detectors (`annotate`, `accuracy`).
 #[derive(clap::Args, Debug)]
-pub struct Args {
+pub(crate) struct SandboxArgs {
     /// Run folder holding the traces.
     #[arg(long)]
-    run: PathBuf,
+    pub run: PathBuf,
     /// Library folder (library.toml + one .py per detector); default: data/libraries/<env>.
     #[arg(long)]
-    library: Option<PathBuf>,
-    /// Environment whose traces are annotated.
-    #[arg(long, default_value = "pooltool", value_parser = ["pooltool", "phyre", "iphyre"])]
-    env: String,
+    pub library: Option<PathBuf>,
+    /// Environment of the traces: pooltool, phyre or iphyre.
+    #[arg(long, default_value = "pooltool")]
+    pub env: Env,
     /// Python worker processes (0 = one per core).
-    #[arg(long, default_value_t = 0)]
-    workers: u64,
-    /// Wall-clock limit of one detector call (s).
-    #[arg(long, default_value_t = 10.0)]
-    timeout: f64,
-    /// Address-space limit of a worker (MiB).
-    #[arg(long, default_value_t = 2048)]
-    memory_mb: u64,
-}
-
-/// Settings shared by `annotate` and `accuracy`.
-pub(crate) struct DetectArgs<'a> {
-    pub run: &'a Path,
-    pub library: Option<&'a Path>,
-    pub env: &'a str,
+    #[arg(long, default_value_t = SandboxParams::default().workers)]
     pub workers: u64,
+    /// Wall-clock limit of one detector call (s).
+    #[arg(long, default_value_t = SandboxParams::default().timeout)]
     pub timeout: f64,
+    /// Address-space limit of a worker (MiB).
+    #[arg(long, default_value_t = SandboxParams::default().memory_mb)]
     pub memory_mb: u64,
 }
 
-/// Runs one stage of `kind` with the detector settings plus `extra` parameters; returns its report.
-pub(crate) fn run_one(
-    kind: &str,
-    a: &DetectArgs<'_>,
-    extra: toml::Table,
-    quiet: bool,
-) -> Result<StageReport, CliError> {
-    if !a.run.is_dir() {
-        return Err(CliError::input(anyhow::anyhow!(
-            "{}: no such run folder",
-            a.run.display()
-        )));
+impl SandboxArgs {
+    /// The stage's sandbox parameters.
+    pub(crate) fn params(&self) -> Result<SandboxParams, CliError> {
+        Ok(SandboxParams {
+            env: self.env,
+            library: self.library.as_deref().map(absolute).transpose()?,
+            workers: self.workers,
+            timeout: self.timeout,
+            memory_mb: self.memory_mb,
+        })
     }
-    let mut stage = toml::Table::new();
-    stage.insert("kind".into(), kind.into());
-    stage.insert("env".into(), a.env.into());
-    if let Some(lib) = a.library {
-        let abs = std::path::absolute(lib)
-            .with_context(|| format!("resolving {}", lib.display()))
-            .map_err(CliError::input)?;
-        stage.insert("library".into(), abs.to_string_lossy().into_owned().into());
+
+    /// The stage's one-stage runner: recorded as `<kind>-<hash of env and library>` and always rerun
+    /// (the run's traces may have changed since), replacing that stage's earlier tables.
+    pub(crate) fn one_stage(
+        &self,
+        kind: &str,
+        p: &SandboxParams,
+    ) -> Result<OneStage<'_>, CliError> {
+        existing_run(&self.run)?;
+        // The key is kept from earlier versions (the library as TOML's debug form), so reruns replace
+        // the same stage of runs made before.
+        let library = match &p.library {
+            Some(l) => format!("Some(String({l:?}))"),
+            None => "None".to_string(),
+        };
+        let key = format!("{kind}\u{1}{}\u{1}{library}", p.env);
+        Ok(OneStage {
+            run: &self.run,
+            id: format!("{kind}-{}", &hex(&Sha256::digest(key.as_bytes()))[..10]),
+            force: true,
+            remove_new_run_on_failure: false,
+        })
     }
-    let key = format!("{kind}\u{1}{}\u{1}{:?}", a.env, stage.get("library"));
-    let id = format!("{kind}-{}", &hex(&Sha256::digest(key.as_bytes()))[..10]);
-    stage.insert("id".into(), id.clone().into());
-    stage.insert("workers".into(), toml::Value::Integer(a.workers as i64));
-    stage.insert("timeout".into(), toml::Value::Float(a.timeout));
-    stage.insert("memory_mb".into(), toml::Value::Integer(a.memory_mb as i64));
-    stage.extend(extra);
-    let mut doc = toml::Table::new();
-    doc.insert(
-        "stage".into(),
-        toml::Value::Array(vec![toml::Value::Table(stage)]),
-    );
-    let text = toml::to_string(&doc)
-        .map_err(|e| CliError::failed(anyhow::anyhow!("internal error: {e}")))?;
-    let spec = PipelineSpec::from_toml(Path::new(&format!("annotrace-{kind}.toml")), &text)
-        .map_err(CliError::input)?;
-    let opts = RunOptions {
-        run_dir: Some(a.run.to_path_buf()),
-        force: Some(id),
-        fault: fault_from_env()?,
-        ..RunOptions::default()
-    };
-    let report = run_pipeline(&spec, &opts, &Terminal::new(quiet)).map_err(run_error)?;
-    report
-        .stages
-        .into_iter()
-        .next()
-        .ok_or_else(|| CliError::failed(anyhow::anyhow!("internal error: the stage did not run")))
+}
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    #[command(flatten)]
+    sandbox: SandboxArgs,
 }
 
 pub fn run(args: Args, quiet: bool) -> CliResult {
-    let a = DetectArgs {
-        run: &args.run,
-        library: args.library.as_deref(),
-        env: &args.env,
-        workers: args.workers,
-        timeout: args.timeout,
-        memory_mb: args.memory_mb,
-    };
-    let stage = run_one("annotate", &a, toml::Table::new(), quiet)?;
+    let args = args.sandbox;
+    let params = args.params()?;
+    let stage = args
+        .one_stage("annotate", &params)?
+        .run(&KIND, &params, quiet)?;
     let s = &stage.summary;
     println!(
         "annotated {} {} trace(s) with {} detector(s) of {}: {} annotation(s); calls: {}",

@@ -6,23 +6,28 @@
 //! finished prints the recorded result; `--force` starts over. Prints one line per label (seed ν → best
 //! ν, accepted or not), the share of wall time spent outside the proposer and the grown library's folder.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use annotrace::pipeline::{PipelineSpec, RunOptions, hex, run as run_pipeline};
-use anyhow::Context;
-use sha2::{Digest, Sha256};
+use annotrace::llm::LlmSettings;
+use annotrace::pipeline::stages::evolve::{EvolveParams, EvolveSummary, KIND, ProposerChoice};
+use annotrace::search::Strategy;
+use annotrace::trace::Env;
 
-use super::progress::Terminal;
-use super::{CliError, CliResult, fault_from_env, run_error};
+use super::llm_args::LlmArgs;
+use super::one_stage::{OneStage, absolute, existing_run, params_id};
+use super::{CliError, CliResult};
+
+/// The stage's defaults, shown by `--help`.
+const D: EvolveParams = EvolveParams::DEFAULT;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Run folder holding the traces (tables are added to it).
     #[arg(long)]
     run: PathBuf,
-    /// Environment whose traces are used.
-    #[arg(long, default_value = "pooltool", value_parser = ["pooltool", "phyre", "iphyre"])]
-    env: String,
+    /// Environment whose traces are used: pooltool, phyre or iphyre.
+    #[arg(long, default_value = "pooltool")]
+    env: Env,
     /// Starting library folder; default: data/libraries/<env>.
     #[arg(long)]
     library: Option<PathBuf>,
@@ -37,49 +42,49 @@ pub struct Args {
     #[arg(long, default_value = "auto", value_parser = ["auto", "mutate", "llm"])]
     proposer: String,
     /// Proposals per label.
-    #[arg(long, default_value_t = 200)]
+    #[arg(long, default_value_t = D.budget)]
     budget: u64,
     /// Islands I.
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = D.islands)]
     islands: u64,
     /// Parents per proposal s.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = D.prompt_size)]
     prompt_size: u64,
     /// Reset the weaker half of the islands every T_r steps (0: never).
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = D.reset_period)]
     reset_period: u64,
     /// Acceptance threshold δ on ν.
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = D.delta, allow_hyphen_values = true)]
     delta: f64,
     /// Proposals requested at once.
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = D.parallel)]
     parallel: u64,
     /// Repair requests per failed child (proposers that repair).
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = D.repair_attempts)]
     repair_attempts: u64,
     /// Training traces at most (and held-out traces at most).
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = D.max_traces)]
     max_traces: u64,
     /// Fraction of traces held out for the convergence statistics.
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, default_value_t = D.holdout)]
     holdout: f64,
     /// Training traces in the probe set.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = D.probe)]
     probe: u64,
     /// Time bins b of the annotation histograms.
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = D.bins)]
     bins: u64,
     /// Normalised-time samples per trace for d_x.
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = D.samples)]
     samples: u64,
     /// Leave out the time penalty ψ (scores then do not depend on machine load: reproducible runs).
     #[arg(long)]
     no_time_penalty: bool,
     /// Detectors per 10 % bin compared on held-out traces (0: skip).
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = D.convergence_per_bin)]
     convergence_per_bin: u64,
     /// mutate proposer: edits per child at most.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = D.max_edits)]
     max_edits: u64,
     /// Search seed.
     #[arg(long, default_value_t = 0)]
@@ -88,195 +93,123 @@ pub struct Args {
     #[arg(long)]
     output: Option<PathBuf>,
     /// Python worker processes (0 = one per core).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = D.workers)]
     workers: u64,
     /// Wall-clock limit of one detector call (s).
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = D.timeout)]
     timeout: f64,
     /// Address-space limit of a worker (MiB).
-    #[arg(long, default_value_t = 2048)]
+    #[arg(long, default_value_t = D.memory_mb)]
     memory_mb: u64,
     /// Start over instead of resuming or reusing an earlier identical search.
     #[arg(long)]
     force: bool,
     #[command(flatten)]
-    llm: super::suggest_labels::LlmArgs,
+    llm: LlmArgs,
 }
 
-/// The LLM flags as the stage's `llm` table (only those given), and `--prompts`.
-fn llm_table(a: &super::suggest_labels::LlmArgs) -> Result<toml::Table, CliError> {
-    let s = a.settings();
-    let mut t = toml::Table::new();
-    if let Some(v) = s.base_url {
-        t.insert("base_url".into(), v.into());
+/// The LLM flags as the stage's `llm` settings (only those given; paths made absolute).
+fn llm_settings(a: &LlmArgs) -> Result<Option<LlmSettings>, CliError> {
+    let mut s = a.settings();
+    if let Some(r) = &s.replay {
+        s.replay = Some(PathBuf::from(absolute(r)?));
     }
-    if let Some(v) = s.model {
-        t.insert("model".into(), v.into());
-    }
-    if let Some(v) = s.timeout_s {
-        t.insert("timeout_s".into(), toml::Value::Float(v));
-    }
-    if let Some(v) = s.max_retries {
-        t.insert("max_retries".into(), toml::Value::Integer(i64::from(v)));
-    }
-    if let Some(v) = s.parallel {
-        t.insert("parallel".into(), toml::Value::Integer(v as i64));
-    }
-    if let Some(v) = s.max_calls {
-        t.insert(
-            "max_calls".into(),
-            toml::Value::Integer(v.min(i64::MAX as u64) as i64),
-        );
-    }
-    if let Some(v) = s.max_tokens {
-        t.insert(
-            "max_tokens".into(),
-            toml::Value::Integer(v.min(i64::MAX as u64) as i64),
-        );
-    }
-    if let Some(v) = &s.replay {
-        t.insert("replay".into(), abs(v)?.into());
-    }
-    if let Some(v) = s.strict_replay {
-        t.insert("strict_replay".into(), toml::Value::Boolean(v));
-    }
-    Ok(t)
-}
-
-fn abs(p: &Path) -> Result<String, CliError> {
-    Ok(std::path::absolute(p)
-        .with_context(|| format!("resolving {}", p.display()))
-        .map_err(CliError::input)?
-        .to_string_lossy()
-        .into_owned())
+    Ok((s != LlmSettings::default()).then_some(s))
 }
 
 pub fn run(a: Args, quiet: bool) -> CliResult {
-    if !a.run.is_dir() {
-        return Err(CliError::input(anyhow::anyhow!(
-            "{}: no such run folder",
-            a.run.display()
-        )));
-    }
-    let int = |v: u64| toml::Value::Integer(v.min(i64::MAX as u64) as i64);
-    let mut stage = toml::Table::new();
-    stage.insert("kind".into(), "evolve".into());
-    stage.insert("env".into(), a.env.clone().into());
-    if let Some(lib) = &a.library {
-        stage.insert("library".into(), abs(lib)?.into());
-    }
-    if !a.labels.is_empty() {
-        let labels: Vec<toml::Value> = a
-            .labels
-            .iter()
-            .map(|l| l.trim().to_string())
-            .filter(|l| !l.is_empty())
-            .map(toml::Value::from)
-            .collect();
-        stage.insert("labels".into(), toml::Value::Array(labels));
-    }
-    stage.insert("strategy".into(), a.strategy.clone().into());
-    stage.insert("proposer".into(), a.proposer.clone().into());
-    for (k, v) in [
-        ("budget", a.budget),
-        ("islands", a.islands),
-        ("prompt_size", a.prompt_size),
-        ("reset_period", a.reset_period),
-        ("parallel", a.parallel),
-        ("repair_attempts", a.repair_attempts),
-        ("max_traces", a.max_traces),
-        ("probe", a.probe),
-        ("bins", a.bins),
-        ("samples", a.samples),
-        ("convergence_per_bin", a.convergence_per_bin),
-        ("max_edits", a.max_edits),
-        ("seed", a.seed),
-        ("workers", a.workers),
-        ("memory_mb", a.memory_mb),
-    ] {
-        stage.insert(k.into(), int(v));
-    }
-    stage.insert("delta".into(), toml::Value::Float(a.delta));
-    stage.insert("holdout".into(), toml::Value::Float(a.holdout));
-    stage.insert("timeout".into(), toml::Value::Float(a.timeout));
-    stage.insert(
-        "time_penalty".into(),
-        toml::Value::Boolean(!a.no_time_penalty),
-    );
-    if let Some(o) = &a.output {
-        stage.insert("output".into(), abs(o)?.into());
-    }
-    let llm = llm_table(&a.llm)?;
-    if !llm.is_empty() {
-        stage.insert("llm".into(), toml::Value::Table(llm));
-    }
-    if let Some(p) = &a.llm.prompts {
-        stage.insert("prompts".into(), abs(p)?.into());
-    }
-    let key = toml::to_string(&stage).unwrap_or_default();
-    let id = format!("evolve-{}", &hex(&Sha256::digest(key.as_bytes()))[..10]);
-    stage.insert("id".into(), id.clone().into());
-    let mut doc = toml::Table::new();
-    doc.insert(
-        "stage".into(),
-        toml::Value::Array(vec![toml::Value::Table(stage)]),
-    );
-    let text = toml::to_string(&doc)
-        .map_err(|e| CliError::failed(anyhow::anyhow!("internal error: {e}")))?;
-    let spec = PipelineSpec::from_toml(Path::new("annotrace-evolve.toml"), &text)
-        .map_err(CliError::input)?;
-    let opts = RunOptions {
-        run_dir: Some(a.run.clone()),
-        force: a.force.then(|| id.clone()),
-        fault: fault_from_env()?,
-        ..RunOptions::default()
+    existing_run(&a.run)?;
+    let strategy: Strategy = a
+        .strategy
+        .parse()
+        .map_err(|e: String| CliError::input(anyhow::anyhow!("--strategy: {e}")))?;
+    let proposer = match a.proposer.as_str() {
+        "mutate" => ProposerChoice::Mutate,
+        "llm" => ProposerChoice::Llm,
+        _ => ProposerChoice::Auto,
     };
-    let report = run_pipeline(&spec, &opts, &Terminal::new(quiet)).map_err(run_error)?;
-    let stage = report.stages.into_iter().next().ok_or_else(|| {
-        CliError::failed(anyhow::anyhow!("internal error: the stage did not run"))
-    })?;
-    let s = &stage.summary;
+    let labels: Vec<String> = a
+        .labels
+        .iter()
+        .map(|l| l.trim().to_string())
+        .filter(|l| !l.is_empty())
+        .collect();
+    let params = EvolveParams {
+        env: a.env,
+        library: a.library.as_deref().map(absolute).transpose()?,
+        labels: (!a.labels.is_empty()).then_some(labels),
+        strategy,
+        proposer,
+        llm: llm_settings(&a.llm)?,
+        prompts: a.llm.prompts.as_deref().map(absolute).transpose()?,
+        budget: a.budget,
+        islands: a.islands,
+        prompt_size: a.prompt_size,
+        reset_period: a.reset_period,
+        delta: a.delta,
+        parallel: a.parallel,
+        repair_attempts: a.repair_attempts,
+        max_traces: a.max_traces,
+        holdout: a.holdout,
+        probe: a.probe,
+        bins: a.bins,
+        samples: a.samples,
+        time_penalty: !a.no_time_penalty,
+        convergence_per_bin: a.convergence_per_bin,
+        max_edits: a.max_edits,
+        seed: Some(a.seed),
+        output: a.output.as_deref().map(absolute).transpose()?,
+        workers: a.workers,
+        timeout: a.timeout,
+        memory_mb: a.memory_mb,
+    };
+    let id = params_id("evolve", &params);
+    let stage = OneStage {
+        run: &a.run,
+        id: id.clone(),
+        force: a.force,
+        remove_new_run_on_failure: false,
+    }
+    .run(&KIND, &params, quiet)?;
+    let s: EvolveSummary = serde_json::from_value(stage.summary.clone())
+        .map_err(|e| CliError::failed(anyhow::anyhow!("internal error: evolve summary: {e}")))?;
     println!(
         "evolve {} ({} strategy, {} proposer, seed {}, budget {} per label){}: {} training / {} held-out trace(s)",
         id,
-        s["strategy"].as_str().unwrap_or("?"),
-        s["proposer"].as_str().unwrap_or("?"),
-        s["seed"],
-        s["budget"],
+        s.strategy.as_str(),
+        s.proposer,
+        s.seed,
+        s.budget,
         if stage.cached {
             " [recorded result]"
         } else {
             ""
         },
-        s["train"],
-        s["holdout"],
+        s.train,
+        s.holdout,
     );
-    for l in s["labels"].as_array().into_iter().flatten() {
-        let t = &l["best_terms"];
+    for l in &s.labels {
+        let t = &l.best_terms;
         println!(
             "  {:<28} ν {:>8.4} → {:>8.4}  (ρ {:.4}, η {:.4}, λ {:.4}, ψ {:.4})  {} candidates  {}",
-            l["label"].as_str().unwrap_or("?"),
-            l["seed_nu"].as_f64().unwrap_or(f64::NAN),
-            l["best_nu"].as_f64().unwrap_or(f64::NAN),
-            t["rho"].as_f64().unwrap_or(f64::NAN),
-            t["eta"].as_f64().unwrap_or(f64::NAN),
-            t["lambda"].as_f64().unwrap_or(f64::NAN),
-            t["psi"].as_f64().unwrap_or(f64::NAN),
-            l["candidates"],
-            if l["accepted"].as_bool() == Some(true) {
-                "accepted"
-            } else {
-                "rejected"
-            }
+            l.label,
+            l.seed_nu,
+            l.best_nu,
+            t.rho,
+            t.eta,
+            t.lambda,
+            t.psi,
+            l.candidates,
+            if l.accepted { "accepted" } else { "rejected" }
         );
     }
     println!(
         "wall time outside the proposer: {:.1} %",
-        100.0 * s["outside_proposer_share"].as_f64().unwrap_or(0.0)
+        100.0 * s.outside_proposer_share
     );
     println!(
         "library: {} (use it with: annotrace annotate --library <that folder>)",
-        s["library"].as_str().unwrap_or("?")
+        s.library
     );
     Ok(0)
 }

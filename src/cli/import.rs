@@ -3,19 +3,18 @@
 //! The import is recorded in the run's manifest as stage `import-<hash of its arguments>`, so running
 //! the same import again is a no-op and an interrupted one resumes.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use annotrace::pipeline::{PipelineSpec, RunOptions, hex, run as run_pipeline};
+use annotrace::pipeline::hex;
+use annotrace::pipeline::stages::import::{ImportParams, KIND};
 use annotrace::query::{Format, RenderOptions, render_string};
 use annotrace::trace::Env;
-use anyhow::Context;
 use arrow::array::{RecordBatch, StringArray};
 use arrow::datatypes::{DataType, Field, Schema};
-use serde::Serialize;
 use sha2::{Digest, Sha256};
 
-use super::progress::Terminal;
-use super::{CliError, CliResult, fault_from_env, run_error};
+use super::one_stage::{OneStage, absolute};
+use super::{CliError, CliResult};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -41,35 +40,19 @@ fn parse_env(s: &str) -> Result<Env, String> {
         .map_err(|e: annotrace::trace::UnknownEnv| e.to_string())
 }
 
-#[derive(Serialize)]
-struct OneStage {
-    stage: Vec<ImportStage>,
-}
-
-#[derive(Serialize)]
-struct ImportStage {
-    id: String,
-    kind: &'static str,
-    env: String,
-    paths: Vec<String>,
-    skip_invalid: bool,
-    traces_per_shard: u64,
-}
-
 pub fn run(args: Args, quiet: bool) -> CliResult {
     let mut paths = Vec::new();
     for p in &args.paths {
-        let abs = std::path::absolute(p)
-            .with_context(|| format!("resolving {}", p.display()))
-            .map_err(CliError::input)?;
-        if !abs.exists() {
+        let abs = absolute(p)?;
+        if !Path::new(&abs).exists() {
             return Err(CliError::input(anyhow::anyhow!(
                 "{}: no such file or folder",
                 p.display()
             )));
         }
-        paths.push(abs.to_string_lossy().into_owned());
+        paths.push(abs);
     }
+    // The id's key is kept from earlier versions, so an import into an existing run is recognised.
     let key = format!(
         "{}\n{}\n{}\n{}",
         args.env,
@@ -78,30 +61,20 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
         args.traces_per_shard
     );
     let id = format!("import-{}", &hex(&Sha256::digest(key.as_bytes()))[..10]);
-    let pipeline = OneStage {
-        stage: vec![ImportStage {
-            id: id.clone(),
-            kind: "import",
-            env: args.env.to_string(),
-            paths,
-            skip_invalid: args.skip_invalid,
-            traces_per_shard: args.traces_per_shard.max(1),
-        }],
+    let params = ImportParams {
+        env: args.env,
+        paths,
+        skip_invalid: args.skip_invalid,
+        traces_per_shard: args.traces_per_shard.max(1),
+        ..ImportParams::default()
     };
-    let text = toml::to_string(&pipeline)
-        .map_err(|e| CliError::failed(anyhow::anyhow!("internal error: {e}")))?;
-    let spec = PipelineSpec::from_toml(std::path::Path::new("annotrace-import.toml"), &text)
-        .map_err(CliError::input)?;
-    let opts = RunOptions {
-        run_dir: Some(args.run.clone()),
-        fault: fault_from_env()?,
+    let stage = OneStage {
+        run: &args.run,
+        id,
+        force: false,
         remove_new_run_on_failure: true,
-        ..RunOptions::default()
-    };
-    let report = run_pipeline(&spec, &opts, &Terminal::new(quiet)).map_err(run_error)?;
-    let stage = report.stages.first().ok_or_else(|| {
-        CliError::failed(anyhow::anyhow!("internal error: the import did not run"))
-    })?;
+    }
+    .run(&KIND, &params, quiet)?;
     let summary = &stage.summary;
     let traces = summary["traces"].as_u64().unwrap_or(0);
     let frames = stage.rows.get("frames").copied().unwrap_or(0);

@@ -7,13 +7,15 @@
 //! The environment is read here only: `ANNOTRACE_LOG` (log filter, e.g. `debug`) and `ANNOTRACE_FAULT`
 //! (a test switch that stops a run on purpose, see `docs/pipelines.md`); the LLM endpoint's
 //! `ANNOTRACE_LLM_BASE_URL`, `ANNOTRACE_LLM_MODEL`, `ANNOTRACE_LLM_API_KEY` and `ANNOTRACE_PROMPTS`
-//! are read in `suggest_labels.rs` ([`suggest_labels::LlmArgs`], see `docs/llm.md`).
+//! are read in `llm_args.rs` ([`llm_args::LlmArgs`], see `docs/llm.md`).
 
 mod accuracy;
 mod annotate;
 mod evolve;
 mod export;
 mod import;
+mod llm_args;
+mod one_stage;
 mod progress;
 mod query;
 mod render;

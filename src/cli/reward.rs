@@ -3,10 +3,10 @@
 
 use std::path::{Path, PathBuf};
 
+use annotrace::detect::tables::read_annotations;
 use annotrace::detect::{Annotation, Library, SandboxLimits, WorkerPool};
 use annotrace::envs::Environment;
 use annotrace::envs::pool::{PoolEnv, Scene, Shot};
-use annotrace::pipeline::stages::annotate::read_annotations;
 use annotrace::reward::annotate::{annotate, detectors_for, probe_schema};
 use annotrace::reward::{AnnotatedTrace, RewardError, Schema, compile, evaluate, labels_used};
 use annotrace::store::{ReadTraceError, RunDir, read_trace};
@@ -66,7 +66,7 @@ struct SynthArgs {
     #[arg(long)]
     dry_run: bool,
     #[command(flatten)]
-    llm: super::suggest_labels::LlmArgs,
+    llm: super::llm_args::LlmArgs,
 }
 
 #[derive(clap::Args, Debug)]
@@ -281,7 +281,7 @@ fn scene_summary(scene: &Scene, env: &PoolEnv) -> String {
 }
 
 fn synthesise(a: SynthArgs) -> CliResult {
-    use super::suggest_labels::llm_error;
+    use super::llm_args::llm_error;
     use annotrace::llm::LlmClient;
     use annotrace::reward::synth::{SynthRequest, prompt, synthesise as run_synthesis};
 

@@ -3,8 +3,8 @@
 
 use std::path::PathBuf;
 
+use annotrace::detect::tables::read_annotations;
 use annotrace::detect::{annotated_text, count_tokens};
-use annotrace::pipeline::stages::annotate::read_annotations;
 use annotrace::store::{ReadTraceError, RunDir, read_trace};
 
 use super::{CliError, CliResult};

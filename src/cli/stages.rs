@@ -1,6 +1,7 @@
-//! `annotrace stages`: the stage kinds with their documentation and parameters.
+//! `annotrace stages`: the stage kinds with their documentation and parameters, read off each kind's
+//! typed parameter struct (`pipeline::ParamsOf`).
 
-use annotrace::pipeline::STAGE_KINDS;
+use annotrace::pipeline::{ParamDoc, ParamDocs, STAGE_KINDS};
 
 use super::CliResult;
 
@@ -10,7 +11,33 @@ pub struct Args {
     kind: Option<String>,
 }
 
+fn print_params(docs: &[ParamDoc], indent: &str) {
+    for p in docs {
+        let req = if p.required {
+            "required".to_string()
+        } else if let Some(d) = &p.default {
+            format!("default {d}")
+        } else {
+            "optional".to_string()
+        };
+        println!(
+            "{indent}{:<18} {} ({req}): {}",
+            p.name,
+            p.ty.describe(),
+            p.doc
+        );
+    }
+}
+
 pub fn run(args: Args) -> CliResult {
+    if let Some(k) = &args.kind
+        && !STAGE_KINDS.iter().any(|s| s.name == k)
+    {
+        return Err(super::CliError::input(anyhow::anyhow!(
+            "unknown stage kind {k:?} (known: {})",
+            annotrace::pipeline::kind_names().join(", ")
+        )));
+    }
     for kind in STAGE_KINDS
         .iter()
         .filter(|k| args.kind.as_deref().is_none_or(|n| n == k.name))
@@ -18,16 +45,26 @@ pub fn run(args: Args) -> CliResult {
         println!("{} — {}", kind.name, kind.summary);
         println!("  writes: {}", kind.writes);
         println!("  {}", kind.doc);
-        println!("  parameters:");
-        for p in kind.params {
-            let req = if p.required {
-                "required".to_string()
-            } else if let Some(d) = p.default {
-                format!("default {d}")
-            } else {
-                "optional".to_string()
-            };
-            println!("    {:<18} {} ({req}): {}", p.name, p.ty.describe(), p.doc);
+        match kind.params.docs() {
+            ParamDocs::Flat(docs) => {
+                println!("  parameters:");
+                print_params(&docs, "    ");
+            }
+            ParamDocs::ByTag {
+                tag,
+                default,
+                variants,
+            } => {
+                for (value, docs) in variants {
+                    let dflt = if value == default {
+                        ", the default"
+                    } else {
+                        ""
+                    };
+                    println!("  parameters with {tag} = \"{value}\"{dflt}:");
+                    print_params(&docs, "    ");
+                }
+            }
         }
         println!();
     }

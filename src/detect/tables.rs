@@ -1,6 +1,6 @@
 //! The Arrow schemas and record batches of the tables the detector runtime fills: `detectors`,
-//! `detector_calls` and `annotations` (documented in `docs/schema.md`). Writing them to the run is the
-//! `annotate` stage's job.
+//! `detector_calls` and `annotations` (documented in `docs/schema.md`), and reading annotations back
+//! from a run ([`read_annotations`]). Writing them to the run is the `annotate` stage's job.
 
 use std::sync::Arc;
 
@@ -14,6 +14,8 @@ use arrow::error::ArrowError;
 use super::annotation::Annotation;
 use super::detector::Detector;
 use super::pool::CallResult;
+use crate::store::StoreError;
+use crate::trace::Env;
 
 fn utf8(name: &str, nullable: bool) -> Field {
     Field::new(name, DataType::Utf8, nullable)
@@ -189,6 +191,84 @@ pub fn annotations_batch(rows: &[Annotation]) -> Result<RecordBatch, ArrowError>
             )),
         ],
     )
+}
+
+/// Reads the `annotations` rows of `env` in the run (of one trace when `trace` is given), in file order.
+pub fn read_annotations(
+    run: &crate::store::RunDir,
+    env: Env,
+    trace: Option<&str>,
+) -> Result<Vec<Annotation>, StoreError> {
+    use arrow::array::{Array, AsArray};
+    use arrow::datatypes::{Float64Type, Int32Type, Int64Type};
+    let mut out = Vec::new();
+    for f in run.table("annotations")?.files {
+        if f.env != Some(env) {
+            continue;
+        }
+        for b in crate::store::read_file(&f.path)? {
+            let col = |n: &str| {
+                b.column_by_name(n)
+                    .cloned()
+                    .ok_or_else(|| StoreError::Schema {
+                        path: f.path.clone(),
+                        message: format!("no column {n}"),
+                    })
+            };
+            let (det, tr, label) = (col("detector_id")?, col("trace_id")?, col("label")?);
+            let (det, tr, label) = (
+                det.as_string::<i32>(),
+                tr.as_string::<i32>(),
+                label.as_string::<i32>(),
+            );
+            let (seq, s0, s1) = (col("seq")?, col("start_step")?, col("end_step")?);
+            let seq = seq.as_primitive::<Int32Type>();
+            let (s0, s1) = (
+                s0.as_primitive::<Int64Type>(),
+                s1.as_primitive::<Int64Type>(),
+            );
+            let (t0, t1) = (col("t_start")?, col("t_end")?);
+            let (t0, t1) = (
+                t0.as_primitive::<Float64Type>(),
+                t1.as_primitive::<Float64Type>(),
+            );
+            let (objects, params) = (col("objects")?, col("parameters")?);
+            let (objects, params) = (objects.as_list::<i32>(), params.as_string::<i32>());
+            let (prov, meta, act) = (col("provenance")?, col("metadata")?, col("activation")?);
+            let (prov, meta) = (prov.as_string::<i32>(), meta.as_string::<i32>());
+            let act = act.as_primitive::<Float64Type>();
+            let json = |a: &arrow::array::StringArray, i: usize| {
+                (!a.is_null(i))
+                    .then(|| serde_json::from_str(a.value(i)).unwrap_or(serde_json::Value::Null))
+            };
+            for i in 0..b.num_rows() {
+                if trace.is_some_and(|t| t != tr.value(i)) {
+                    continue;
+                }
+                let objs = objects.value(i);
+                let objs = objs.as_string::<i32>();
+                out.push(Annotation {
+                    detector_id: super::DetectorId(det.value(i).to_string()),
+                    trace_id: tr.value(i).to_string(),
+                    label: label.value(i).to_string(),
+                    seq: seq.value(i).max(0) as usize,
+                    start_step: s0.value(i),
+                    end_step: s1.value(i),
+                    t_start: if t0.is_null(i) { f64::NAN } else { t0.value(i) },
+                    t_end: if t1.is_null(i) { f64::NAN } else { t1.value(i) },
+                    objects: (0..objs.len()).map(|k| objs.value(k).to_string()).collect(),
+                    parameters: match serde_json::from_str(params.value(i)) {
+                        Ok(serde_json::Value::Object(m)) => m,
+                        _ => Default::default(),
+                    },
+                    provenance: json(prov, i),
+                    metadata: json(meta, i),
+                    activation: act.value(i),
+                });
+            }
+        }
+    }
+    Ok(out)
 }
 
 #[cfg(test)]

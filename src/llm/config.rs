@@ -88,40 +88,56 @@ pub struct ReplayConfig {
 /// max_calls = 500
 /// temperature = 0.8
 /// ```
-#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Deserialize, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LlmSettings {
     /// Endpoint URL (see [`ENV_BASE_URL`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub base_url: Option<String>,
     /// Model name.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub model: Option<String>,
     /// Name of the environment variable holding the key (default `ANNOTRACE_LLM_API_KEY`).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub api_key_env: Option<String>,
     /// Whole-request timeout (s); default 300 (local models are slow).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub timeout_s: Option<f64>,
     /// Connection timeout (s); default 10.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub connect_timeout_s: Option<f64>,
     /// Retries after the first attempt on 408/429/5xx, timeouts and connection errors; default 4.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub max_retries: Option<u32>,
     /// First backoff delay (s), doubled per retry; default 1.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub backoff_base_s: Option<f64>,
     /// Longest backoff delay (s), also the cap on a server's `Retry-After`; default 60.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub backoff_max_s: Option<f64>,
     /// Requests in flight at once (the endpoint's parallel slots); default 4.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub parallel: Option<usize>,
     /// Call cap.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub max_calls: Option<u64>,
     /// Token cap.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub max_tokens: Option<u64>,
     /// Sampling temperature sent when a request does not set one.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub temperature: Option<f64>,
     /// `max_tokens` sent when a request does not set one.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub max_output_tokens: Option<u32>,
     /// Seed of the retry jitter (request seeds come from the callers).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub seed: Option<u64>,
     /// Replay answers from this run folder's `llm_calls`.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub replay: Option<PathBuf>,
     /// With `replay`: a request with no recorded answer is an error (default true).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub strict_replay: Option<bool>,
 }
 

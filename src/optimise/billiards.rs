@@ -20,7 +20,20 @@ use crate::reward::{AnnotatedTrace, Program, evaluate};
 use crate::trace::Trace;
 
 /// Which reward drives a chain.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Hash,
+    PartialOrd,
+    Ord,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+)]
+#[serde(rename_all = "lowercase")]
 pub enum RewardKind {
     /// The goal's reward program on the annotated trace (dense, in [0, 1]).
     Dense,

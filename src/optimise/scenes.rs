@@ -7,7 +7,10 @@ use crate::envs::pool::rack::{SplitMix64, scene_seed};
 use crate::envs::pool::{Goal, PoolEnv, Scene, SceneBall};
 
 /// How the balls of a scene are laid out.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize, schemars::JsonSchema,
+)]
+#[serde(rename_all = "lowercase")]
 pub enum Layout {
     /// A 9-ball rack with the cue ball behind the head string (`PoolEnv::scenes`).
     Rack,

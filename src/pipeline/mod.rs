@@ -20,7 +20,7 @@ mod toml_doc;
 use std::path::PathBuf;
 
 pub use manifest::{Manifest, PipelineInfo, StageRecord, StageStatus};
-pub use params::{ParamSpec, ParamType};
+pub use params::{ParamDoc, ParamDocs, ParamError, ParamType, ParamsOf, StageParams};
 pub use progress::Progress;
 pub use registry::{BuildError, STAGE_KINDS, StageKind, find_kind, kind_names};
 pub use runner::{
@@ -53,7 +53,7 @@ pub enum SpecError {
         message: String,
     },
     /// A key that means nothing here.
-    #[error("{}:{line}: unknown key `{key}` in {context} (known: {known})", file.display())]
+    #[error("{}:{line}: unknown key `{key}` in {context}{} (known: {known})", file.display(), suggestion.as_ref().map(|s| format!("; did you mean `{s}`?")).unwrap_or_default())]
     UnknownKey {
         /// The file.
         file: PathBuf,
@@ -65,6 +65,8 @@ pub enum SpecError {
         context: String,
         /// Keys that would have been understood.
         known: String,
+        /// The closest known key, when the key looks like a typo of it.
+        suggestion: Option<String>,
     },
     /// A stage kind that does not exist.
     #[error("{}:{line}: unknown stage kind {kind:?}{} (known: {known})", file.display(), suggestion.as_ref().map(|s| format!("; did you mean {s:?}?")).unwrap_or_default())]

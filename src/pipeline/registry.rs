@@ -3,7 +3,7 @@
 //! A kind lives in `pipeline/stages/<kind>.rs` with its parameters, docs, constructor and tests; adding
 //! one means adding it to [`STAGE_KINDS`]. `annotrace stages` prints this list.
 
-use super::params::ParamSpec;
+use super::params::ParamsOf;
 use super::spec::{PipelineSpec, StageDef};
 use super::stage::Stage;
 use super::stages;
@@ -41,8 +41,8 @@ pub struct StageKind {
     pub doc: &'static str,
     /// The tables (or files) it writes.
     pub writes: &'static str,
-    /// Its parameters.
-    pub params: &'static [ParamSpec],
+    /// Its parameters: the kind's typed parameter struct.
+    pub params: ParamsOf,
     /// Builds the stage from validated parameters; also called once during validation.
     pub build: BuildStage,
 }

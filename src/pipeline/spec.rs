@@ -29,7 +29,8 @@ use std::path::{Path, PathBuf};
 use serde_json::{Map, Value};
 use sha2::{Digest, Sha256};
 
-use super::registry::{StageKind, find_kind, kind_names};
+use super::params::StageParams;
+use super::registry::{BuildError, StageKind, find_kind, kind_names};
 use super::toml_doc::{self, Entry, Node, NodeValue};
 use super::{SpecError, params};
 
@@ -74,6 +75,49 @@ pub struct StageDef {
 }
 
 impl StageDef {
+    /// A stage built in code (a one-stage CLI command) from its kind's typed parameters: the same
+    /// canonical parameters, and so the same fingerprint, as the equivalent pipeline file would give.
+    pub fn new<P: StageParams>(
+        id: impl Into<String>,
+        kind: &'static StageKind,
+        params: &P,
+    ) -> Result<Self, SpecError> {
+        let id = id.into();
+        let invalid = |message: String| SpecError::Invalid {
+            file: PathBuf::from(format!("annotrace-{}", kind.name)),
+            line: 0,
+            message,
+        };
+        let value =
+            serde_json::to_value(params).map_err(|e| invalid(format!("stage \"{id}\": {e}")))?;
+        let canonical = kind
+            .params
+            .canonical(value)
+            .map_err(|e| invalid(format!("stage \"{id}\": `{}`: {}", e.path, e.message)))?;
+        let Value::Object(params) = canonical else {
+            return Err(invalid(format!(
+                "stage \"{id}\": parameters are not a table"
+            )));
+        };
+        Ok(StageDef {
+            id,
+            kind,
+            inputs: Vec::new(),
+            params,
+            description: None,
+            line: 0,
+            param_lines: Vec::new(),
+        })
+    }
+
+    /// The stage's parameters as its kind's struct.
+    pub fn params<P: StageParams>(&self) -> Result<P, BuildError> {
+        serde_json::from_value(Value::Object(self.params.clone())).map_err(|e| BuildError {
+            param: None,
+            message: format!("parameters do not fit kind {}: {e}", self.kind.name),
+        })
+    }
+
     /// The line of a parameter, or of the stage when the parameter was defaulted.
     pub fn line_of(&self, param: &str) -> usize {
         self.param_lines
@@ -128,6 +172,7 @@ impl Ctx<'_> {
             key: e.key.clone(),
             context: context.to_string(),
             known: known.join(", "),
+            suggestion: suggest(&e.key, known),
         }
     }
 
@@ -297,7 +342,7 @@ impl PipelineSpec {
                 .filter(|e| !matches!(e.key.as_str(), "id" | "kind" | "inputs" | "description"))
                 .collect();
             let (params, mut param_lines) =
-                params::resolve(file, &id, line, kind.name, kind.params, &param_entries)?;
+                params::resolve(file, &id, line, kind.name, &kind.params, &param_entries)?;
             if let Some(e) = get("inputs") {
                 param_lines.push(("inputs".to_string(), e.key_line));
             }
@@ -312,25 +357,6 @@ impl PipelineSpec {
             });
         }
 
-        // Every input names a stage; the graph has no cycle.
-        for s in &stages {
-            for input in &s.inputs {
-                if !stages.iter().any(|o| &o.id == input) {
-                    let line = s.line_of("inputs");
-                    return Err(SpecError::MissingInput {
-                        file: file.to_path_buf(),
-                        line,
-                        stage: s.id.clone(),
-                        input: input.clone(),
-                        known: stages
-                            .iter()
-                            .map(|o| o.id.clone())
-                            .collect::<Vec<_>>()
-                            .join(", "),
-                    });
-                }
-            }
-        }
         let spec = PipelineSpec {
             file: file.to_path_buf(),
             name,
@@ -341,16 +367,83 @@ impl PipelineSpec {
             stages,
             sha256: hex(&Sha256::digest(text.as_bytes())),
         };
-        spec.order()?;
-        for s in &spec.stages {
-            (s.kind.build)(s, &spec).map(|_| ()).map_err(|e| {
-                cx.invalid(
-                    e.param.map_or(s.line, |p| s.line_of(p)),
-                    format!("stage \"{}\": {}", s.id, e.message),
-                )
-            })?;
-        }
+        spec.check_graph()?;
         Ok(spec)
+    }
+
+    /// A pipeline of stages built in code (what a one-stage CLI command runs), checked as a file would
+    /// be: ids, inputs, cycles, and each stage's `build`. `name` stands for the file in errors;
+    /// relative paths resolve against `project_dir`.
+    pub fn from_stages(
+        name: &str,
+        project_dir: PathBuf,
+        seed: u64,
+        stages: Vec<StageDef>,
+    ) -> Result<Self, SpecError> {
+        let file = PathBuf::from(format!("{name}.toml"));
+        let mut text = String::new();
+        for s in &stages {
+            text.push_str(&format!(
+                "{} {} {}\n",
+                s.id,
+                s.kind.name,
+                Value::Object(s.params.clone())
+            ));
+        }
+        let spec = PipelineSpec {
+            file,
+            name: name.to_string(),
+            description: None,
+            seed,
+            project_dir,
+            run_dir: None,
+            stages,
+            sha256: hex(&Sha256::digest(text.as_bytes())),
+        };
+        spec.check_graph()?;
+        Ok(spec)
+    }
+
+    /// Checks that ids are unique, inputs name stages, the graph has no cycle, and every stage builds.
+    fn check_graph(&self) -> Result<(), SpecError> {
+        let file = &self.file;
+        for (i, s) in self.stages.iter().enumerate() {
+            if let Some(first) = self.stages[..i].iter().find(|o| o.id == s.id) {
+                return Err(SpecError::DuplicateId {
+                    file: file.clone(),
+                    line: s.line,
+                    id: s.id.clone(),
+                    first_line: first.line,
+                });
+            }
+            for input in &s.inputs {
+                if !self.stages.iter().any(|o| &o.id == input) {
+                    return Err(SpecError::MissingInput {
+                        file: file.clone(),
+                        line: s.line_of("inputs"),
+                        stage: s.id.clone(),
+                        input: input.clone(),
+                        known: self
+                            .stages
+                            .iter()
+                            .map(|o| o.id.clone())
+                            .collect::<Vec<_>>()
+                            .join(", "),
+                    });
+                }
+            }
+        }
+        self.order()?;
+        for s in &self.stages {
+            (s.kind.build)(s, self)
+                .map(|_| ())
+                .map_err(|e| SpecError::Invalid {
+                    file: file.clone(),
+                    line: e.param.map_or(s.line, |p| s.line_of(p)),
+                    message: format!("stage \"{}\": {}", s.id, e.message),
+                })?;
+        }
+        Ok(())
     }
 
     /// The stages in an order where every stage comes after its inputs (file order among equals).

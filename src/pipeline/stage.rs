@@ -53,6 +53,9 @@ pub enum StageError {
     /// A query failed.
     #[error(transparent)]
     Query(#[from] QueryError),
+    /// The detector worker pool could not start or failed as a whole.
+    #[error(transparent)]
+    Workers(#[from] crate::detect::DetectError),
     /// Building a batch failed (an annotrace bug if it happens).
     #[error("internal error, please report it: {0}")]
     Internal(String),
@@ -176,6 +179,21 @@ impl<'a> StageContext<'a> {
     /// The stage's staging area: tables written here appear in the run when the stage finishes.
     pub fn staging(&self) -> &Staging {
         &self.staging
+    }
+
+    /// Writes one batch as a staged file of `table` (partition `env`, file named after `shard`) and
+    /// returns its row count.
+    pub fn write_batch(
+        &self,
+        table: &str,
+        env: crate::trace::Env,
+        shard: &str,
+        batch: &arrow::array::RecordBatch,
+    ) -> Result<u64, StageError> {
+        let mut sink = self.staging.sink(table, Some(env), shard, batch.schema())?;
+        sink.write(batch)?;
+        let (_, n) = sink.commit()?;
+        Ok(n as u64)
     }
 
     /// Progress reporting.

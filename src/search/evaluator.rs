@@ -29,13 +29,18 @@ pub struct EvalSettings {
     pub time_penalty: bool,
 }
 
+impl EvalSettings {
+    /// The defaults.
+    pub const DEFAULT: EvalSettings = EvalSettings {
+        bins: crate::fitness::histogram::DEFAULT_BINS,
+        probe: 8,
+        time_penalty: true,
+    };
+}
+
 impl Default for EvalSettings {
     fn default() -> Self {
-        EvalSettings {
-            bins: crate::fitness::histogram::DEFAULT_BINS,
-            probe: 8,
-            time_penalty: true,
-        }
+        EvalSettings::DEFAULT
     }
 }
 

@@ -20,7 +20,9 @@ use crate::envs::pool::rack::SplitMix64;
 use crate::fitness::FitnessTerms;
 
 /// How a search picks parents and keeps programs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum Strategy {
     /// FunSearch's island model.
@@ -80,13 +82,18 @@ pub struct Temperatures {
     pub period: usize,
 }
 
+impl Temperatures {
+    /// FunSearch's temperatures.
+    pub const DEFAULT: Temperatures = Temperatures {
+        island: 0.1,
+        cluster: 0.1,
+        period: 30_000,
+    };
+}
+
 impl Default for Temperatures {
     fn default() -> Self {
-        Temperatures {
-            island: 0.1,
-            cluster: 0.1,
-            period: 30_000,
-        }
+        Temperatures::DEFAULT
     }
 }
 

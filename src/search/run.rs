@@ -50,20 +50,26 @@ pub struct SearchConfig {
     pub seed: u64,
 }
 
+impl SearchConfig {
+    /// The defaults (the paper's settings where it gives them); the `evolve` stage's parameters and
+    /// the CLI's flags take theirs from here.
+    pub const DEFAULT: SearchConfig = SearchConfig {
+        strategy: Strategy::Island,
+        islands: 4,
+        prompt_size: 2,
+        reset_period: 100,
+        budget: 200,
+        delta: 0.0,
+        parallel: 4,
+        repair_attempts: 2,
+        temperatures: Temperatures::DEFAULT,
+        seed: 0,
+    };
+}
+
 impl Default for SearchConfig {
     fn default() -> Self {
-        SearchConfig {
-            strategy: Strategy::Island,
-            islands: 4,
-            prompt_size: 2,
-            reset_period: 100,
-            budget: 200,
-            delta: 0.0,
-            parallel: 4,
-            repair_attempts: 2,
-            temperatures: Temperatures::default(),
-            seed: 0,
-        }
+        SearchConfig::DEFAULT
     }
 }
 

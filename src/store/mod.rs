@@ -55,6 +55,14 @@ pub enum StoreError {
         #[source]
         source: ::parquet::errors::ParquetError,
     },
+    /// A table file lacks a column (or has another table's schema).
+    #[error("{}: {message}", path.display())]
+    Schema {
+        /// The file.
+        path: PathBuf,
+        /// What is missing or wrong.
+        message: String,
+    },
     /// A JSON file of the run is not what annotrace wrote.
     #[error("{}", path.display())]
     Json {

@@ -7,10 +7,24 @@ use serde::{Deserialize, Serialize};
 
 /// A simulation environment. Its string form (`pooltool`, `phyre`, `iphyre`) is the value of a trace's
 /// `environment` field, of the `env=` partition of the run's tables and of `--env` on the command line.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    PartialOrd,
+    Ord,
+    Hash,
+    Default,
+    Serialize,
+    Deserialize,
+    schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Env {
-    /// Billiards in the style of pooltool: 3D ball states, an exact event log.
+    /// Billiards in the style of pooltool: 3D ball states, an exact event log. The default.
+    #[default]
     Pooltool,
     /// PHYRE: a 256×256 2D scene of balls, bars and jars; place a red ball.
     Phyre,

@@ -8,54 +8,53 @@ use std::sync::Arc;
 
 use arrow::array::{Float64Array, Int64Array, RecordBatch, StringArray};
 use arrow::datatypes::{DataType, Field, Schema};
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
-use super::annotate::{
-    DetectorSetup, SANDBOX_PARAMS, annotations_of, read_annotations, status_counts, write,
-};
+use super::annotate::{annotations_of, status_counts};
+use super::detector_setup::{DetectorSetup, SandboxParams};
 use super::trace_files::{read_traces, trace_file_sets};
 use crate::detect::accuracy::{LabelScore, grounded, markdown, scorable, score_trace, truth};
+use crate::detect::tables::read_annotations;
 use crate::detect::{Annotation, WorkerPool};
-use crate::pipeline::params::{ParamSpec, ParamType};
+use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
 use crate::trace::{Env, Trace};
 
-const PARAMS: &[ParamSpec] = &[
-    SANDBOX_PARAMS[0],
-    SANDBOX_PARAMS[1],
-    SANDBOX_PARAMS[2],
-    SANDBOX_PARAMS[3],
-    SANDBOX_PARAMS[4],
-    ParamSpec::optional(
-        "tolerance",
-        ParamType::Float,
-        "0.05",
-        "time tolerance (s) around a detection's span when matching an event",
-    ),
-    ParamSpec::optional(
-        "merge",
-        ParamType::Float,
-        "0.05",
-        "contacts of the same pair (or ball and cushion) closer than this (s) are one event (PHYRE, \
-         I-PHYRE: a contact that begins again within this long after it ended)",
-    ),
-    ParamSpec::optional(
-        "hide_events",
-        ParamType::Bool,
-        "false",
-        "give the detectors the traces without their event log (scoring still uses it): measures \
-         what they infer from the timesteps alone",
-    ),
-    ParamSpec::optional(
-        "use_annotations",
-        ParamType::Bool,
-        "false",
-        "score the run's annotations table (rows of this library's detectors, written by an annotate \
-         stage listed in `inputs`) instead of running the detectors again",
-    ),
-];
+/// The parameters of an `accuracy` stage.
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(default)]
+pub struct AccuracyParams {
+    /// The library, environment and sandbox limits.
+    #[serde(flatten)]
+    pub sandbox: SandboxParams,
+    /// Time tolerance (s) around a detection's span when matching an event.
+    pub tolerance: f64,
+    /// Contacts of the same pair (or ball and cushion) closer than this (s) are one event (PHYRE,
+    /// I-PHYRE: a contact that begins again within this long after it ended).
+    pub merge: f64,
+    /// Give the detectors the traces without their event log (scoring still uses it): measures what
+    /// they infer from the timesteps alone.
+    pub hide_events: bool,
+    /// Score the run's annotations table (rows of this library's detectors, written by an annotate
+    /// stage listed in `inputs`) instead of running the detectors again.
+    pub use_annotations: bool,
+}
+
+impl Default for AccuracyParams {
+    fn default() -> Self {
+        AccuracyParams {
+            sandbox: SandboxParams::default(),
+            tolerance: 0.05,
+            merge: 0.05,
+            hide_events: false,
+            use_annotations: false,
+        }
+    }
+}
 
 /// The `accuracy` stage kind.
 pub static KIND: StageKind = StageKind {
@@ -70,7 +69,7 @@ pub static KIND: StageKind = StageKind {
           matches an event of its label whose objects it all names and falls in its time span ± \
           `tolerance`. Imported traces without the events that ground the labels are not scored. Writes the accuracy table (one row per label).",
     writes: "accuracy",
-    params: PARAMS,
+    params: ParamsOf::of::<AccuracyParams>(),
     build,
 };
 
@@ -85,9 +84,9 @@ pub struct AccuracyStage {
 }
 
 fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
-    let setup = DetectorSetup::from_params(def, spec)?;
-    let num = |k: &'static str| -> Result<f64, BuildError> {
-        let v = def.params[k].as_f64().unwrap_or(0.05);
+    let p: AccuracyParams = def.params()?;
+    let setup = DetectorSetup::new(&p.sandbox, spec)?;
+    let num = |k: &'static str, v: f64| -> Result<f64, BuildError> {
         if v >= 0.0 && v.is_finite() {
             Ok(v)
         } else {
@@ -98,10 +97,10 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         }
     };
     Ok(Box::new(AccuracyStage {
-        use_annotations: def.params["use_annotations"].as_bool().unwrap_or(false),
-        hide_events: def.params["hide_events"].as_bool().unwrap_or(false),
-        tolerance: num("tolerance")?,
-        merge: num("merge")?,
+        use_annotations: p.use_annotations,
+        hide_events: p.hide_events,
+        tolerance: num("tolerance", p.tolerance)?,
+        merge: num("merge", p.merge)?,
         setup,
     }))
 }
@@ -224,7 +223,7 @@ impl Stage for AccuracyStage {
             .iter()
             .filter_map(|l| scores.get(*l).cloned())
             .collect();
-        let n = write(ctx, "accuracy", self.setup.env, "00000", &batch(&ordered)?)?;
+        let n = ctx.write_batch("accuracy", self.setup.env, "00000", &batch(&ordered)?)?;
         let min_f1 = ordered.iter().map(LabelScore::f1).fold(1.0_f64, f64::min);
         let mut rows = BTreeMap::new();
         rows.insert("accuracy".to_string(), n);

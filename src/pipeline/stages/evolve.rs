@@ -11,15 +11,17 @@ use std::cell::RefCell;
 use std::path::PathBuf;
 use std::sync::Arc;
 
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
-use super::annotate::{DetectorSetup, write};
+use super::detector_setup::{DetectorSetup, SandboxParams};
 use super::trace_files::{read_traces, trace_file_sets};
 use crate::fitness::DistanceMatrix;
 use crate::fitness::table::{distances_batch, matrix_from_batches, set_id};
-use crate::llm::{LlmClient, LlmConfig, Prompts};
-use crate::pipeline::params::{ParamSpec, ParamType};
+use crate::llm::{LlmClient, LlmConfig, LlmSettings, Prompts};
+use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
@@ -44,160 +46,231 @@ pub static KIND: StageKind = StageKind {
           Every candidate goes to the candidates table; the grown library is written as a folder \
           (default exports/<stage>/library) that `annotate` reads. See docs/evolution.md.",
     writes: "candidates, evolution_labels, evolution_convergence, trace_distances, exports/<stage>/library/",
-    params: PARAMS,
+    params: ParamsOf::of::<EvolveParams>(),
     build,
 };
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec::optional(
-        "env",
-        ParamType::Choice(&["pooltool", "phyre", "iphyre"]),
-        "\"pooltool\"",
-        "environment whose traces are used",
-    ),
-    ParamSpec::maybe(
-        "library",
-        ParamType::Str,
-        "starting library folder, relative to the project folder (default: data/libraries/<env>)",
-    ),
-    ParamSpec::maybe(
-        "labels",
-        ParamType::StrList,
-        "labels to learn, in order (default: the library's labels)",
-    ),
-    ParamSpec::optional(
-        "strategy",
-        ParamType::Choice(&["island", "hill-climb", "best-of-n"]),
-        "\"island\"",
-        "search strategy",
-    ),
-    ParamSpec::optional(
-        "proposer",
-        ParamType::Choice(&["auto", "mutate", "llm"]),
-        "\"auto\"",
-        "where children come from: syntax-tree edits (mutate) or an LLM; auto = llm when an endpoint \
-         (llm.base_url or ANNOTRACE_LLM_BASE_URL) or a replay run is configured, else mutate",
-    ),
-    ParamSpec::maybe(
-        "llm",
-        ParamType::Table,
-        "LLM settings (base_url, model, parallel, timeout_s, max_retries, max_calls, max_tokens, \
-         temperature, replay, …; docs/llm.md), over the ANNOTRACE_LLM_* variables",
-    ),
-    ParamSpec::maybe(
-        "prompts",
-        ParamType::Str,
-        "prompt template folder, relative to the project (default: <project>/prompts if present, else built-in)",
-    ),
-    ParamSpec::optional("budget", ParamType::Count, "200", "proposals per label"),
-    ParamSpec::optional("islands", ParamType::Count, "4", "islands I"),
-    ParamSpec::optional(
-        "prompt_size",
-        ParamType::Count,
-        "2",
-        "parents per proposal s",
-    ),
-    ParamSpec::optional(
-        "reset_period",
-        ParamType::Count,
-        "100",
-        "reset the weaker half of the islands every T_r steps (0: never)",
-    ),
-    ParamSpec::optional(
-        "delta",
-        ParamType::Float,
-        "0.0",
-        "acceptance threshold δ on ν",
-    ),
-    ParamSpec::optional(
-        "parallel",
-        ParamType::Count,
-        "4",
-        "proposals requested at once",
-    ),
-    ParamSpec::optional(
-        "repair_attempts",
-        ParamType::Count,
-        "2",
-        "repair requests per failed child (proposers that repair)",
-    ),
-    ParamSpec::optional(
-        "max_traces",
-        ParamType::Count,
-        "100",
-        "training traces at most (and held-out traces at most)",
-    ),
-    ParamSpec::optional(
-        "holdout",
-        ParamType::Float,
-        "0.2",
-        "fraction of traces held out for the convergence statistics",
-    ),
-    ParamSpec::optional(
-        "probe",
-        ParamType::Count,
-        "8",
-        "training traces in the probe set (cheap checks)",
-    ),
-    ParamSpec::optional(
-        "bins",
-        ParamType::Count,
-        "10",
-        "time bins b of the annotation histograms",
-    ),
-    ParamSpec::optional(
-        "samples",
-        ParamType::Count,
-        "64",
-        "normalised-time samples per trace for d_x",
-    ),
-    ParamSpec::optional(
-        "time_penalty",
-        ParamType::Bool,
-        "true",
-        "compute ψ from wall time (off: reproducible scores)",
-    ),
-    ParamSpec::optional(
-        "convergence_per_bin",
-        ParamType::Count,
-        "3",
-        "detectors per 10 % bin compared on the held-out traces (0: skip)",
-    ),
-    ParamSpec::optional(
-        "max_edits",
-        ParamType::Count,
-        "2",
-        "mutate proposer: edits per child at most",
-    ),
-    ParamSpec::maybe(
-        "seed",
-        ParamType::Int,
-        "search seed (default: the pipeline's seed)",
-    ),
-    ParamSpec::maybe(
-        "output",
-        ParamType::Str,
-        "folder for the grown library, relative to the project (default: <run>/exports/<stage>/library)",
-    ),
-    ParamSpec::optional(
-        "workers",
-        ParamType::Count,
-        "0",
-        "Python worker processes (0 = one per core)",
-    ),
-    ParamSpec::optional(
-        "timeout",
-        ParamType::Float,
-        "10.0",
-        "wall-clock limit of one detector call (s)",
-    ),
-    ParamSpec::optional(
-        "memory_mb",
-        ParamType::Count,
-        "2048",
-        "address-space limit of a worker (MiB)",
-    ),
-];
+/// Where an evolve stage's children come from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum ProposerChoice {
+    /// `llm` when an endpoint (llm.base_url or ANNOTRACE_LLM_BASE_URL) or a replay run is
+    /// configured, else `mutate`.
+    #[default]
+    Auto,
+    /// Syntax-tree edits of the parents (no model needed).
+    Mutate,
+    /// An OpenAI-compatible chat endpoint.
+    Llm,
+}
+
+impl ProposerChoice {
+    /// `auto`, `mutate` or `llm`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ProposerChoice::Auto => "auto",
+            ProposerChoice::Mutate => "mutate",
+            ProposerChoice::Llm => "llm",
+        }
+    }
+}
+
+/// The parameters of an `evolve` stage.
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(default)]
+pub struct EvolveParams {
+    /// Environment whose traces are used.
+    pub env: Env,
+    /// Starting library folder, relative to the project folder (default: data/libraries/<env>).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub library: Option<String>,
+    /// Labels to learn, in order (default: the library's labels).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub labels: Option<Vec<String>>,
+    /// Search strategy.
+    pub strategy: Strategy,
+    /// Where children come from: syntax-tree edits (mutate) or an LLM; auto = llm when an endpoint
+    /// (llm.base_url or ANNOTRACE_LLM_BASE_URL) or a replay run is configured, else mutate.
+    pub proposer: ProposerChoice,
+    /// LLM settings (base_url, model, parallel, timeout_s, max_retries, max_calls, max_tokens,
+    /// temperature, replay, …; docs/llm.md), over the ANNOTRACE_LLM_* variables.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub llm: Option<LlmSettings>,
+    /// Prompt template folder, relative to the project (default: <project>/prompts if present, else
+    /// built-in).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub prompts: Option<String>,
+    /// Proposals per label.
+    pub budget: u64,
+    /// Islands I.
+    pub islands: u64,
+    /// Parents per proposal s.
+    pub prompt_size: u64,
+    /// Reset the weaker half of the islands every T_r steps (0: never).
+    pub reset_period: u64,
+    /// Acceptance threshold δ on ν.
+    pub delta: f64,
+    /// Proposals requested at once.
+    pub parallel: u64,
+    /// Repair requests per failed child (proposers that repair).
+    pub repair_attempts: u64,
+    /// Training traces at most (and held-out traces at most).
+    pub max_traces: u64,
+    /// Fraction of traces held out for the convergence statistics.
+    pub holdout: f64,
+    /// Training traces in the probe set (cheap checks).
+    pub probe: u64,
+    /// Time bins b of the annotation histograms.
+    pub bins: u64,
+    /// Normalised-time samples per trace for d_x.
+    pub samples: u64,
+    /// Compute ψ from wall time (off: reproducible scores).
+    pub time_penalty: bool,
+    /// Detectors per 10 % bin compared on the held-out traces (0: skip).
+    pub convergence_per_bin: u64,
+    /// Mutate proposer: edits per child at most.
+    pub max_edits: u64,
+    /// Search seed (default: the pipeline's seed).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+    /// Folder for the grown library, relative to the project (default:
+    /// <run>/exports/<stage>/library).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub output: Option<String>,
+    /// Python worker processes (0 = one per core).
+    pub workers: u64,
+    /// Wall-clock limit of one detector call (s).
+    pub timeout: f64,
+    /// Address-space limit of a worker (MiB).
+    pub memory_mb: u64,
+}
+
+impl EvolveParams {
+    /// The defaults: the search's own ([`SearchConfig::DEFAULT`], [`EvalSettings::DEFAULT`]), the
+    /// sandbox's ([`SandboxParams::DEFAULT`]) and this stage's.
+    pub const DEFAULT: EvolveParams = {
+        let search = SearchConfig::DEFAULT;
+        let eval = EvalSettings::DEFAULT;
+        let sandbox = SandboxParams::DEFAULT;
+        EvolveParams {
+            env: sandbox.env,
+            library: None,
+            labels: None,
+            strategy: search.strategy,
+            proposer: ProposerChoice::Auto,
+            llm: None,
+            prompts: None,
+            budget: search.budget,
+            islands: search.islands as u64,
+            prompt_size: search.prompt_size as u64,
+            reset_period: search.reset_period,
+            delta: search.delta,
+            parallel: search.parallel as u64,
+            repair_attempts: search.repair_attempts as u64,
+            max_traces: 100,
+            holdout: 0.2,
+            probe: eval.probe as u64,
+            bins: eval.bins as u64,
+            samples: 64,
+            time_penalty: eval.time_penalty,
+            convergence_per_bin: 3,
+            max_edits: 2,
+            seed: None,
+            output: None,
+            workers: sandbox.workers,
+            timeout: sandbox.timeout,
+            memory_mb: sandbox.memory_mb,
+        }
+    };
+}
+
+impl Default for EvolveParams {
+    fn default() -> Self {
+        EvolveParams::DEFAULT
+    }
+}
+
+impl EvolveParams {
+    /// The sandbox part.
+    fn sandbox(&self) -> SandboxParams {
+        SandboxParams {
+            env: self.env,
+            library: self.library.clone(),
+            workers: self.workers,
+            timeout: self.timeout,
+            memory_mb: self.memory_mb,
+        }
+    }
+}
+
+/// What an `evolve` stage reports (its manifest summary, read back by `annotrace evolve`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct EvolveSummary {
+    /// The environment.
+    pub env: Env,
+    /// The search seed.
+    pub seed: u64,
+    /// The search strategy.
+    pub strategy: Strategy,
+    /// The proposer's name (`mutate`, or `llm:<model>`).
+    pub proposer: String,
+    /// Proposals per label.
+    pub budget: u64,
+    /// Training traces.
+    pub train: u64,
+    /// Held-out traces.
+    pub holdout: u64,
+    /// The D_x matrix of the training set.
+    pub dx: DxSummary,
+    /// One entry per label, in order.
+    pub labels: Vec<LabelSummary>,
+    /// Labels whose best detector was added to the library.
+    pub accepted: usize,
+    /// The grown library's folder.
+    pub library: String,
+    /// Wall time of the stage (s).
+    pub wall_s: f64,
+    /// Time spent waiting for proposals (s).
+    pub propose_s: f64,
+    /// Share of wall time outside the proposer.
+    pub outside_proposer_share: f64,
+    /// The sandbox layers the workers run under.
+    pub sandbox: Value,
+}
+
+/// The D_x matrix an `evolve` stage used.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct DxSummary {
+    /// Trace pairs.
+    pub pairs: u64,
+    /// Whether it was read from the run's `trace_distances` instead of computed.
+    pub reused: bool,
+    /// Seconds spent on it.
+    pub seconds: f64,
+}
+
+/// One label's search, as an `evolve` stage reports it.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct LabelSummary {
+    /// The label.
+    pub label: String,
+    /// ν of the starting detector.
+    pub seed_nu: f64,
+    /// ν of the best candidate.
+    pub best_nu: f64,
+    /// Every fitness term of the best candidate.
+    pub best_terms: crate::fitness::FitnessTerms,
+    /// Whether the best candidate was added to the library (ν > δ).
+    pub accepted: bool,
+    /// Candidates evaluated.
+    pub candidates: u64,
+    /// Best ν after each step.
+    pub best_by_step: Vec<f64>,
+    /// Wall time of the label's search (s).
+    pub wall_s: f64,
+    /// Time spent waiting for proposals (s).
+    pub propose_s: f64,
+}
 
 /// The `evolve` stage.
 #[derive(Debug)]
@@ -207,8 +280,8 @@ pub struct EvolveStage {
     config: SearchConfig,
     seed: Option<u64>,
     eval: EvalSettings,
-    proposer: String,
-    llm: crate::llm::LlmSettings,
+    proposer: ProposerChoice,
+    llm: LlmSettings,
     prompts: Option<PathBuf>,
     project: PathBuf,
     max_traces: usize,
@@ -219,18 +292,11 @@ pub struct EvolveStage {
     output: Option<PathBuf>,
 }
 
-fn count(p: &serde_json::Map<String, Value>, k: &str, default: u64) -> u64 {
-    p.get(k).and_then(Value::as_u64).unwrap_or(default)
-}
-
 fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
-    let setup = DetectorSetup::from_params(def, spec)?;
-    let p = &def.params;
-    let labels: Vec<String> = match p.get("labels").and_then(Value::as_array) {
-        Some(a) => a
-            .iter()
-            .filter_map(|v| v.as_str().map(str::to_string))
-            .collect(),
+    let p: EvolveParams = def.params()?;
+    let setup = DetectorSetup::new(&p.sandbox(), spec)?;
+    let labels: Vec<String> = match &p.labels {
+        Some(a) => a.clone(),
         None => setup
             .library
             .labels()
@@ -247,80 +313,52 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     if labels.is_empty() {
         return Err(BuildError::param("labels", "no label to learn"));
     }
-    let strategy: Strategy = p["strategy"]
-        .as_str()
-        .unwrap_or("island")
-        .parse()
-        .map_err(|e: String| BuildError::param("strategy", e))?;
-    let holdout = p["holdout"].as_f64().unwrap_or(0.2);
-    if !(0.0..1.0).contains(&holdout) {
+    if !(0.0..1.0).contains(&p.holdout) {
         return Err(BuildError::param(
             "holdout",
-            format!("holdout must be in [0, 1), found {holdout}"),
+            format!("holdout must be in [0, 1), found {}", p.holdout),
         ));
     }
-    let delta = p["delta"].as_f64().unwrap_or(0.0);
-    if !delta.is_finite() {
+    if !p.delta.is_finite() {
         return Err(BuildError::param("delta", "delta must be a finite number"));
     }
-    let budget = count(p, "budget", 200);
-    if budget == 0 {
+    if p.budget == 0 {
         return Err(BuildError::param("budget", "budget must be at least 1"));
     }
-    let proposer = p["proposer"].as_str().unwrap_or("auto").to_string();
-    let mut llm: crate::llm::LlmSettings = match p.get("llm") {
-        Some(v) => serde_json::from_value(v.clone())
-            .map_err(|e| BuildError::param("llm", format!("bad LLM settings: {e}")))?,
-        None => crate::llm::LlmSettings::default(),
-    };
+    let mut llm = p.llm.clone().unwrap_or_default();
     if let Some(r) = &llm.replay {
         llm.replay = Some(spec.project_dir.join(r));
     }
-    let seed = match p.get("seed") {
-        Some(v) => Some(
-            v.as_i64()
-                .filter(|s| *s >= 0)
-                .ok_or_else(|| BuildError::param("seed", "seed must be a non-negative integer"))?
-                as u64,
-        ),
-        None => None,
-    };
     Ok(Box::new(EvolveStage {
         labels,
         config: SearchConfig {
-            strategy,
-            islands: count(p, "islands", 4).max(1) as usize,
-            prompt_size: count(p, "prompt_size", 2).max(1) as usize,
-            reset_period: count(p, "reset_period", 100),
-            budget,
-            delta,
-            parallel: count(p, "parallel", 4).max(1) as usize,
-            repair_attempts: count(p, "repair_attempts", 2) as u32,
+            strategy: p.strategy,
+            islands: p.islands.max(1) as usize,
+            prompt_size: p.prompt_size.max(1) as usize,
+            reset_period: p.reset_period,
+            budget: p.budget,
+            delta: p.delta,
+            parallel: p.parallel.max(1) as usize,
+            repair_attempts: p.repair_attempts.min(u64::from(u32::MAX)) as u32,
             temperatures: Temperatures::default(),
             seed: 0,
         },
-        seed,
+        seed: p.seed,
         eval: EvalSettings {
-            bins: count(p, "bins", 10).max(1) as usize,
-            probe: count(p, "probe", 8).max(1) as usize,
-            time_penalty: p["time_penalty"].as_bool().unwrap_or(true),
+            bins: p.bins.max(1) as usize,
+            probe: p.probe.max(1) as usize,
+            time_penalty: p.time_penalty,
         },
-        proposer,
-        max_traces: count(p, "max_traces", 100).max(2) as usize,
-        holdout,
-        samples: count(p, "samples", 64).max(2) as usize,
-        convergence_per_bin: count(p, "convergence_per_bin", 3) as usize,
-        max_edits: count(p, "max_edits", 2).max(1) as u32,
+        proposer: p.proposer,
+        max_traces: p.max_traces.max(2) as usize,
+        holdout: p.holdout,
+        samples: p.samples.max(2) as usize,
+        convergence_per_bin: p.convergence_per_bin as usize,
+        max_edits: p.max_edits.clamp(1, u64::from(u32::MAX)) as u32,
         llm,
-        prompts: p
-            .get("prompts")
-            .and_then(Value::as_str)
-            .map(|d| spec.project_dir.join(d)),
+        prompts: p.prompts.as_ref().map(|d| spec.project_dir.join(d)),
         project: spec.project_dir.clone(),
-        output: p
-            .get("output")
-            .and_then(Value::as_str)
-            .map(|o| spec.project_dir.join(o)),
+        output: p.output.as_ref().map(|o| spec.project_dir.join(o)),
         setup,
     }))
 }
@@ -421,10 +459,12 @@ impl EvolveStage {
         let env_url = std::env::var(crate::llm::ENV_BASE_URL)
             .ok()
             .filter(|v| !v.trim().is_empty());
-        let use_llm = match self.proposer.as_str() {
-            "llm" => true,
-            "mutate" => false,
-            _ => self.llm.base_url.is_some() || self.llm.replay.is_some() || env_url.is_some(),
+        let use_llm = match self.proposer {
+            ProposerChoice::Llm => true,
+            ProposerChoice::Mutate => false,
+            ProposerChoice::Auto => {
+                self.llm.base_url.is_some() || self.llm.replay.is_some() || env_url.is_some()
+            }
         };
         if !use_llm {
             let m = MutateProposer::new(None, self.max_edits)
@@ -474,7 +514,7 @@ impl EvolveStage {
         }
         let m = DistanceMatrix::compute(train, self.samples);
         let b = distances_batch(&sid, &m)?;
-        write(ctx, "trace_distances", env, "dx", &b)?;
+        ctx.write_batch("trace_distances", env, "dx", &b)?;
         ctx.finish_shard("dx", &json!({"set_id": sid, "pairs": m.upper.len()}))?;
         Ok((m, false))
     }
@@ -546,11 +586,17 @@ impl Stage for EvolveStage {
         let mut labels_summary = Vec::new();
         let mut after = |m: u32, r: &crate::search::LabelResult| -> Result<(), SearchError> {
             let o = &r.outcome;
-            labels_summary.push(json!({
-                "label": o.label, "seed_nu": o.seed_nu, "best_nu": o.best.terms.nu,
-                "best_terms": o.best.terms, "accepted": r.accepted, "candidates": o.records.len(),
-                "best_by_step": o.best_by_step, "wall_s": o.wall_s, "propose_s": o.propose_s,
-            }));
+            labels_summary.push(LabelSummary {
+                label: o.label.clone(),
+                seed_nu: o.seed_nu,
+                best_nu: o.best.terms.nu,
+                best_terms: o.best.terms,
+                accepted: r.accepted,
+                candidates: o.records.len() as u64,
+                best_by_step: o.best_by_step.clone(),
+                wall_s: o.wall_s,
+                propose_s: o.propose_s,
+            });
             label_lines.push(format!(
                 "{}: ν {:.4} → {:.4}{}",
                 o.label,
@@ -574,7 +620,9 @@ impl Stage for EvolveStage {
                 if b.num_rows() == 0 {
                     return Ok(());
                 }
-                let n = write(ctx, table, env, &shard, &b).map_err(|e| checkpoint.fail(e))?;
+                let n = ctx
+                    .write_batch(table, env, &shard, &b)
+                    .map_err(|e| checkpoint.fail(e))?;
                 *rows.entry(table.to_string()).or_default() += n;
                 written.insert(table.into(), json!(n));
                 Ok(())
@@ -642,23 +690,32 @@ impl Stage for EvolveStage {
         Ok(StageOutput {
             rows,
             files: library_files(&out_dir),
-            summary: json!({
-                "env": env.as_str(),
-                "seed": config.seed,
-                "strategy": config.strategy.as_str(),
-                "proposer": proposer.name(),
-                "budget": config.budget,
-                "train": train.len(),
-                "holdout": holdout.len(),
-                "dx": {"pairs": dx.upper.len(), "reused": reused, "seconds": dx_s},
-                "labels": labels_summary,
-                "accepted": accepted,
-                "library": out_dir.to_string_lossy(),
-                "wall_s": wall,
-                "propose_s": prop,
-                "outside_proposer_share": if wall > 0.0 { (wall - prop) / wall } else { 0.0 },
-                "sandbox": pool.layers(),
-            }),
+            summary: serde_json::to_value(EvolveSummary {
+                env,
+                seed: config.seed,
+                strategy: config.strategy,
+                proposer: proposer.name().to_string(),
+                budget: config.budget,
+                train: train.len() as u64,
+                holdout: holdout.len() as u64,
+                dx: DxSummary {
+                    pairs: dx.upper.len() as u64,
+                    reused,
+                    seconds: dx_s,
+                },
+                labels: labels_summary,
+                accepted,
+                library: out_dir.to_string_lossy().into_owned(),
+                wall_s: wall,
+                propose_s: prop,
+                outside_proposer_share: if wall > 0.0 {
+                    (wall - prop) / wall
+                } else {
+                    0.0
+                },
+                sandbox: serde_json::to_value(pool.layers()).unwrap_or(Value::Null),
+            })
+            .unwrap_or(Value::Null),
             line,
         })
     }

@@ -5,10 +5,12 @@
 
 use std::io::Write;
 
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use super::SqlSource;
-use crate::pipeline::params::{ParamSpec, ParamType};
+use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
@@ -23,52 +25,90 @@ pub static KIND: StageKind = StageKind {
           exports/<file>. LaTeX output is a booktabs tabular ready for \\input; floats in the text formats \
           for people (Markdown, LaTeX) are printed with `precision` decimals, CSV and JSON keep them exact.",
     writes: "exports/<file>",
-    params: &[
-        ParamSpec::maybe("table", ParamType::Str, "table to export"),
-        ParamSpec::maybe(
-            "query",
-            ParamType::Str,
-            "SQL file under sql/ whose result to export, instead of `table`",
-        ),
-        ParamSpec::maybe(
-            "sql",
-            ParamType::Str,
-            "inline SQL whose result to export, instead of `table`",
-        ),
-        ParamSpec::optional(
-            "format",
-            ParamType::Choice(&["csv", "markdown", "latex", "json", "ndjson", "parquet"]),
-            "\"csv\"",
-            "file format",
-        ),
-        ParamSpec::maybe(
-            "file",
-            ParamType::Str,
-            "file name under exports/ (default: <table or stage id>.<extension>)",
-        ),
-        ParamSpec::optional(
-            "precision",
-            ParamType::Count,
-            "4",
-            "decimals for floats in Markdown and LaTeX",
-        ),
-        ParamSpec::maybe(
-            "title",
-            ParamType::Str,
-            "caption line written above the table (Markdown, LaTeX)",
-        ),
-    ],
+    params: ParamsOf::of::<ExportParams>(),
     build,
 };
 
+/// The file formats an `export` stage writes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum ExportFormat {
+    /// RFC 4180 CSV with a header row.
+    #[default]
+    Csv,
+    /// A GitHub-flavoured Markdown table.
+    Markdown,
+    /// A booktabs LaTeX tabular.
+    Latex,
+    /// A JSON array of row objects.
+    Json,
+    /// One JSON object per line.
+    Ndjson,
+    /// Apache Parquet.
+    Parquet,
+}
+
+impl From<ExportFormat> for Format {
+    fn from(f: ExportFormat) -> Format {
+        match f {
+            ExportFormat::Csv => Format::Csv,
+            ExportFormat::Markdown => Format::Markdown,
+            ExportFormat::Latex => Format::Latex,
+            ExportFormat::Json => Format::Json,
+            ExportFormat::Ndjson => Format::Ndjson,
+            ExportFormat::Parquet => Format::Parquet,
+        }
+    }
+}
+
+/// The parameters of an `export` stage.
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(default)]
+pub struct ExportParams {
+    /// Table to export.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub table: Option<String>,
+    /// SQL file under sql/ whose result to export, instead of `table`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub query: Option<String>,
+    /// Inline SQL whose result to export, instead of `table`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sql: Option<String>,
+    /// File format.
+    pub format: ExportFormat,
+    /// File name under exports/ (default: <table or stage id>.<extension>).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub file: Option<String>,
+    /// Decimals for floats in Markdown and LaTeX.
+    pub precision: u32,
+    /// Caption line written above the table (Markdown, LaTeX).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub title: Option<String>,
+}
+
+impl Default for ExportParams {
+    fn default() -> Self {
+        ExportParams {
+            table: None,
+            query: None,
+            sql: None,
+            format: ExportFormat::Csv,
+            file: None,
+            precision: 4,
+            title: None,
+        }
+    }
+}
+
 fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
-    let sql = SqlSource::from_params(&def.params, &spec.project_dir, true)?;
-    let table = def
-        .params
-        .get("table")
-        .and_then(Value::as_str)
-        .map(str::to_owned);
-    let source = match (table, sql) {
+    let p: ExportParams = def.params()?;
+    let sql = SqlSource::new(
+        p.query.as_deref(),
+        p.sql.as_deref(),
+        &spec.project_dir,
+        true,
+    )?;
+    let source = match (p.table, sql) {
         (Some(_), Some(_)) => {
             return Err(BuildError::param(
                 "table",
@@ -84,20 +124,13 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
             });
         }
     };
-    let format: Format = def.params["format"]
-        .as_str()
-        .unwrap_or("csv")
-        .parse()
-        .map_err(|e: crate::query::UnknownFormat| BuildError::param("format", e.to_string()))?;
+    let format = Format::from(p.format);
     let stem = match &source {
         Source::Table(t) => t.clone(),
         Source::Sql(_) => def.id.clone(),
     };
-    let file = def
-        .params
-        .get("file")
-        .and_then(Value::as_str)
-        .map(str::to_owned)
+    let file = p
+        .file
         .unwrap_or_else(|| format!("{stem}.{}", format.extension()));
     if file.is_empty() || file.contains(['/', '\\']) || file.starts_with('.') {
         return Err(BuildError::param(
@@ -105,12 +138,8 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
             format!("{file:?} must be a plain file name (it is written under exports/)"),
         ));
     }
-    let precision = def.params["precision"].as_u64().unwrap_or(4) as usize;
-    let title = def
-        .params
-        .get("title")
-        .and_then(Value::as_str)
-        .map(str::to_owned);
+    let precision = p.precision as usize;
+    let title = p.title;
     Ok(Box::new(ExportStage {
         source,
         format,

@@ -13,9 +13,11 @@ use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
 use arrow::array::{AsArray, RecordBatch};
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
-use crate::pipeline::params::{ParamSpec, ParamType};
+use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
@@ -37,53 +39,45 @@ pub static KIND: StageKind = StageKind {
           the scenes, traces, timesteps, frames and events tables. Invalid traces fail the stage unless \
           skip_invalid is set, in which case they are listed with the reason.",
     writes: "scenes, traces, timesteps, frames, events",
-    params: &[
-        ParamSpec::required(
-            "env",
-            ParamType::Choice(&["pooltool", "phyre", "iphyre"]),
-            "environment of the traces",
-        ),
-        ParamSpec::required(
-            "paths",
-            ParamType::StrList,
-            "files or folders to import, relative to the project folder",
-        ),
-        ParamSpec::optional(
-            "skip_invalid",
-            ParamType::Bool,
-            "false",
-            "import the valid traces and list the invalid ones instead of failing",
-        ),
-        ParamSpec::optional(
-            "traces_per_shard",
-            ParamType::Count,
-            "1000",
-            "traces per output file; a resumed import redoes at most one shard per input file",
-        ),
-        ParamSpec::optional(
-            "spill_rows",
-            ParamType::Count,
-            "65536",
-            "frame rows of one trace kept in memory before the rest is spilled to a scratch file",
-        ),
-    ],
+    params: ParamsOf::of::<ImportParams>(),
     build,
 };
 
+/// The parameters of an `import` stage.
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(default)]
+pub struct ImportParams {
+    /// Environment of the traces.
+    #[schemars(required)]
+    pub env: Env,
+    /// Files or folders to import, relative to the project folder.
+    #[schemars(required)]
+    pub paths: Vec<String>,
+    /// Import the valid traces and list the invalid ones instead of failing.
+    pub skip_invalid: bool,
+    /// Traces per output file; a resumed import redoes at most one shard per input file.
+    pub traces_per_shard: u64,
+    /// Frame rows of one trace kept in memory before the rest is spilled to a scratch file.
+    pub spill_rows: u64,
+}
+
+impl Default for ImportParams {
+    fn default() -> Self {
+        ImportParams {
+            env: Env::Pooltool,
+            paths: Vec::new(),
+            skip_invalid: false,
+            traces_per_shard: 1000,
+            spill_rows: 65536,
+        }
+    }
+}
+
 fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
-    let env: Env = def.params["env"]
-        .as_str()
-        .unwrap_or_default()
-        .parse()
-        .map_err(|e: crate::trace::UnknownEnv| BuildError::param("env", e.to_string()))?;
+    let p: ImportParams = def.params()?;
     let mut paths = Vec::new();
-    for p in def.params["paths"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter_map(Value::as_str)
-    {
-        let resolved = spec.project_dir.join(p);
+    for path in &p.paths {
+        let resolved = spec.project_dir.join(path);
         if !resolved.exists() {
             return Err(BuildError::param(
                 "paths",
@@ -95,17 +89,12 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     if paths.is_empty() {
         return Err(BuildError::param("paths", "no paths given"));
     }
-    let per_shard = def.params["traces_per_shard"]
-        .as_u64()
-        .unwrap_or(1000)
-        .max(1) as usize;
-    let spill_rows = def.params["spill_rows"].as_u64().unwrap_or(65536).max(1) as usize;
     Ok(Box::new(ImportStage {
-        env,
+        env: p.env,
         paths,
-        spill_rows,
-        skip_invalid: def.params["skip_invalid"].as_bool().unwrap_or(false),
-        per_shard,
+        spill_rows: usize::try_from(p.spill_rows.max(1)).unwrap_or(usize::MAX),
+        skip_invalid: p.skip_invalid,
+        per_shard: usize::try_from(p.traces_per_shard.max(1)).unwrap_or(usize::MAX),
         project_dir: spec.project_dir.clone(),
     }))
 }

@@ -5,6 +5,7 @@
 
 pub mod accuracy;
 pub mod annotate;
+pub mod detector_setup;
 pub mod evolve;
 pub mod export;
 pub mod import;
@@ -16,8 +17,6 @@ pub mod sql;
 mod trace_files;
 
 use std::path::{Path, PathBuf};
-
-use serde_json::{Map, Value};
 
 use super::registry::BuildError;
 
@@ -31,15 +30,14 @@ pub(crate) enum SqlSource {
 }
 
 impl SqlSource {
-    /// Reads `query` (a file name under `<project>/sql/`, or a path relative to the project) or `sql`
-    /// (inline text) from the parameters; exactly one must be given unless `table` stands in for both.
-    pub(crate) fn from_params(
-        params: &Map<String, Value>,
+    /// From a stage's `query` (a file name under `<project>/sql/`, or a path relative to the project)
+    /// or `sql` (inline text); exactly one must be given unless `optional` (a `table` stands in).
+    pub(crate) fn new(
+        query: Option<&str>,
+        inline: Option<&str>,
         project: &Path,
         optional: bool,
     ) -> Result<Option<Self>, BuildError> {
-        let query = params.get("query").and_then(Value::as_str);
-        let inline = params.get("sql").and_then(Value::as_str);
         match (query, inline) {
             (Some(_), Some(_)) => Err(BuildError::param(
                 "sql",

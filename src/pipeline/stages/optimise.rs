@@ -14,16 +14,18 @@ use arrow::array::{
     Array, AsArray, BooleanArray, Float64Array, Int64Array, RecordBatch, StringArray,
 };
 use arrow::datatypes::{DataType, Field, Int64Type, Schema};
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
-use super::annotate::{DetectorSetup, SANDBOX_PARAMS, write};
+use super::detector_setup::{DetectorSetup, SandboxParams};
 use crate::detect::Library;
 use crate::envs::pool::PoolEnv;
 use crate::optimise::plot::{curves, png, svg};
 use crate::optimise::{
     Chain, GoalTask, Layout, RewardKind, Schedule, Settings, ShotBounds, run_chains, scenes,
 };
-use crate::pipeline::params::{ParamSpec, ParamType};
+use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
@@ -34,93 +36,72 @@ use crate::reward::{compile, labels_used};
 use crate::store::write_atomic;
 use crate::trace::Env;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec::optional(
-        "goals",
-        ParamType::Str,
-        "\"data/goals/pooltool.toml\"",
-        "goal file (sentence, program, verification rule per goal), relative to the project folder",
-    ),
-    ParamSpec::maybe(
-        "goal_ids",
-        ParamType::StrList,
-        "only these goals (default: every goal of the file)",
-    ),
-    ParamSpec::optional(
-        "scenes",
-        ParamType::Count,
-        "10",
-        "held-out 9-ball scenes per goal",
-    ),
-    ParamSpec::optional(
-        "scene_seed",
-        ParamType::Count,
-        "1000",
-        "seed of the held-out scenes (pick one no training or library data used)",
-    ),
-    ParamSpec::optional(
-        "layout",
-        ParamType::Choice(&["scatter", "rack"]),
-        "\"scatter\"",
-        "held-out scenes: balls scattered over the table, or 9-ball racks",
-    ),
-    ParamSpec::optional(
-        "seeds",
-        ParamType::Count,
-        "2",
-        "annealing seeds per goal × scene",
-    ),
-    ParamSpec::optional(
-        "budget",
-        ParamType::Count,
-        "200",
-        "samples per annealing run (N_o)",
-    ),
-    ParamSpec::optional(
-        "checkpoint",
-        ParamType::Count,
-        "50",
-        "record the best-so-far every this many samples",
-    ),
-    ParamSpec::optional(
-        "rewards",
-        ParamType::StrList,
-        "[\"dense\", \"sparse\"]",
-        "reward types: dense (the reward program) and/or sparse (binary verification)",
-    ),
-    ParamSpec::optional(
-        "dt",
-        ParamType::Float,
-        "0.02",
-        "timestep of the simulated traces the detectors read (s)",
-    ),
-    ParamSpec::optional(
-        "v0_max",
-        ParamType::Float,
-        "6.0",
-        "largest cue speed searched (m/s)",
-    ),
-    ParamSpec::optional(
-        "theta_max",
-        ParamType::Float,
-        "45.0",
-        "largest cue elevation searched (deg)",
-    ),
-    ParamSpec::optional(
-        "title",
-        ParamType::Str,
-        "\"Reward programs vs binary rewards\"",
-        "title of the figure",
-    ),
-    ParamSpec::maybe(
-        "library",
-        ParamType::Str,
-        "detector library (default: the goal file's `library`)",
-    ),
-    SANDBOX_PARAMS[2],
-    SANDBOX_PARAMS[3],
-    SANDBOX_PARAMS[4],
-];
+/// The parameters of an `optimise` stage.
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(default)]
+pub struct OptimiseParams {
+    /// Goal file (sentence, program, verification rule per goal), relative to the project folder.
+    pub goals: String,
+    /// Only these goals (default: every goal of the file).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub goal_ids: Option<Vec<String>>,
+    /// Held-out 9-ball scenes per goal.
+    pub scenes: u64,
+    /// Seed of the held-out scenes (pick one no training or library data used).
+    pub scene_seed: u64,
+    /// Held-out scenes: balls scattered over the table, or 9-ball racks.
+    pub layout: Layout,
+    /// Annealing seeds per goal × scene.
+    pub seeds: u64,
+    /// Samples per annealing run (N_o).
+    pub budget: u64,
+    /// Record the best-so-far every this many samples.
+    pub checkpoint: u64,
+    /// Reward types: dense (the reward program) and/or sparse (binary verification).
+    pub rewards: Vec<RewardKind>,
+    /// Timestep of the simulated traces the detectors read (s).
+    pub dt: f64,
+    /// Largest cue speed searched (m/s).
+    pub v0_max: f64,
+    /// Largest cue elevation searched (deg).
+    pub theta_max: f64,
+    /// Title of the figure.
+    pub title: String,
+    /// Detector library (default: the goal file's `library`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub library: Option<String>,
+    /// Python worker processes (0 = one per core).
+    pub workers: u64,
+    /// Wall-clock limit of one detector call (s); a call past it is killed and marked timeout.
+    pub timeout: f64,
+    /// Address-space limit of a worker (MiB); a call past it is marked memory.
+    pub memory_mb: u64,
+}
+
+impl Default for OptimiseParams {
+    fn default() -> Self {
+        let sandbox = SandboxParams::default();
+        OptimiseParams {
+            goals: "data/goals/pooltool.toml".into(),
+            goal_ids: None,
+            scenes: 10,
+            scene_seed: 1000,
+            layout: Layout::Scatter,
+            seeds: 2,
+            budget: 200,
+            checkpoint: 50,
+            rewards: vec![RewardKind::Dense, RewardKind::Sparse],
+            dt: 0.02,
+            v0_max: 6.0,
+            theta_max: 45.0,
+            title: "Reward programs vs binary rewards".into(),
+            library: None,
+            workers: sandbox.workers,
+            timeout: sandbox.timeout,
+            memory_mb: sandbox.memory_mb,
+        }
+    }
+}
 
 /// The `optimise` stage kind.
 pub static KIND: StageKind = StageKind {
@@ -134,7 +115,7 @@ pub static KIND: StageKind = StageKind {
           so far is recorded every `checkpoint` samples with whether it verifies. Writes the optimisation \
           table and exports/<stage>/success_vs_budget.svg and .png.",
     writes: "optimisation, exports/<stage>/success_vs_budget.{svg,png}",
-    params: PARAMS,
+    params: ParamsOf::of::<OptimiseParams>(),
     build,
 };
 
@@ -159,8 +140,8 @@ pub struct OptimiseStage {
 }
 
 fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
-    let p = &def.params;
-    let rel = p["goals"].as_str().unwrap_or("data/goals/pooltool.toml");
+    let p: OptimiseParams = def.params()?;
+    let rel = p.goals.as_str();
     // The project's file, else the crate's own copy (pipelines run from another folder).
     let goals_path = [
         spec.project_dir.join(rel),
@@ -183,12 +164,8 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     }
     let goals_text = std::fs::read_to_string(&goals_path)
         .map_err(|e| BuildError::param("goals", e.to_string()))?;
-    let goal_ids: Vec<String> = match p.get("goal_ids").and_then(Value::as_array) {
-        Some(ids) => ids
-            .iter()
-            .filter_map(Value::as_str)
-            .map(str::to_string)
-            .collect(),
+    let goal_ids: Vec<String> = match &p.goal_ids {
+        Some(ids) => ids.clone(),
         None => goals.goals.iter().map(|g| g.id.clone()).collect(),
     };
     if let Some(bad) = goal_ids.iter().find(|id| goals.get(id).is_none()) {
@@ -198,39 +175,28 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         ));
     }
     // The sandbox settings; the library is the goal file's unless one is given.
-    let mut def2 = def.clone();
-    if def2.params.get("library").is_none()
-        && let Some(l) = &goals.library
-    {
-        def2.params.insert(
-            "library".into(),
-            Value::from(l.to_string_lossy().into_owned()),
-        );
-    }
-    def2.params.insert("env".into(), Value::from("pooltool"));
-    let setup = DetectorSetup::from_params(&def2, spec)?;
+    let sandbox = SandboxParams {
+        env: Env::Pooltool,
+        library: p.library.clone().or_else(|| {
+            goals
+                .library
+                .as_ref()
+                .map(|l| l.to_string_lossy().into_owned())
+        }),
+        workers: p.workers,
+        timeout: p.timeout,
+        memory_mb: p.memory_mb,
+    };
+    let setup = DetectorSetup::new(&sandbox, spec)?;
     let library = setup.library.clone();
-    let mut rewards = Vec::new();
-    for r in p["rewards"].as_array().into_iter().flatten() {
-        match r.as_str() {
-            Some("dense") => rewards.push(RewardKind::Dense),
-            Some("sparse") => rewards.push(RewardKind::Sparse),
-            other => {
-                return Err(BuildError::param(
-                    "rewards",
-                    format!("reward types are \"dense\" and \"sparse\", found {other:?}"),
-                ));
-            }
-        }
-    }
+    let rewards = p.rewards.clone();
     if rewards.is_empty() {
         return Err(BuildError::param(
             "rewards",
             "give at least one reward type",
         ));
     }
-    let count = |k: &'static str, min: u64| -> Result<u64, BuildError> {
-        let v = p[k].as_u64().unwrap_or(0);
+    let count = |k: &'static str, v: u64, min: u64| -> Result<u64, BuildError> {
         if v < min {
             Err(BuildError::param(
                 k,
@@ -240,7 +206,7 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
             Ok(v)
         }
     };
-    let dt = p["dt"].as_f64().unwrap_or(0.02);
+    let dt = p.dt;
     if !(dt > 0.0 && dt <= 1.0) {
         return Err(BuildError::param(
             "dt",
@@ -248,28 +214,20 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         ));
     }
     let bounds = ShotBounds {
-        v0: (
-            0.2_f64.min(p["v0_max"].as_f64().unwrap_or(6.0) / 2.0),
-            p["v0_max"].as_f64().unwrap_or(6.0),
-        ),
-        theta: (0.0, p["theta_max"].as_f64().unwrap_or(45.0)),
+        v0: (0.2_f64.min(p.v0_max / 2.0), p.v0_max),
+        theta: (0.0, p.theta_max),
         ..ShotBounds::default()
     };
     bounds
         .dims(&PoolEnv::default())
         .map_err(|e| BuildError::param("v0_max", e))?;
     Ok(Box::new(OptimiseStage {
-        scenes: count("scenes", 1)? as usize,
-        scene_seed: count("scene_seed", 0)?,
-        layout: p
-            .get("layout")
-            .and_then(Value::as_str)
-            .unwrap_or("scatter")
-            .parse()
-            .map_err(|e: String| BuildError::param("layout", e))?,
-        seeds: count("seeds", 1)?,
-        budget: count("budget", 1)? as usize,
-        checkpoint: count("checkpoint", 1)? as usize,
+        scenes: count("scenes", p.scenes, 1)? as usize,
+        scene_seed: p.scene_seed,
+        layout: p.layout,
+        seeds: count("seeds", p.seeds, 1)?,
+        budget: count("budget", p.budget, 1)? as usize,
+        checkpoint: count("checkpoint", p.checkpoint, 1)? as usize,
         goals,
         goal_ids,
         library,
@@ -277,7 +235,7 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         rewards,
         dt,
         bounds,
-        title: p["title"].as_str().unwrap_or_default().to_string(),
+        title: p.title.clone(),
         goals_text,
     }))
 }
@@ -441,7 +399,7 @@ impl Stage for OptimiseStage {
                 ],
             )?;
             ctx.checkpoint_mid_shard(ordinal)?;
-            let n = write(ctx, "optimisation", Env::Pooltool, &shard, &batch)?;
+            let n = ctx.write_batch("optimisation", Env::Pooltool, &shard, &batch)?;
             let record = json!({
                 "goal": id,
                 "rows": n,

@@ -16,13 +16,15 @@ use std::collections::BTreeMap;
 
 use arrow::array::RecordBatch;
 use rayon::prelude::*;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
 use crate::envs::pool::{
     PoolConfig, Scene, Shot, SimOptions, TraceOptions, rack, simulate, trace_of,
 };
-use crate::pipeline::params::{ParamSpec, ParamType};
+use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef, hex};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
@@ -42,107 +44,202 @@ pub static KIND: StageKind = StageKind {
           the exact event-based solution; `max_events` / `max_time` stop runaway shots with terminal_status \
           max_events / max_time. See docs/envs/pool.md.",
     writes: "scenes, traces, timesteps, frames, events",
-    params: &[
-        ParamSpec::optional(
-            "env",
-            ParamType::Choice(&["pooltool", "iphyre", "phyre"]),
-            "\"pooltool\"",
-            "environment to simulate",
-        ),
-        ParamSpec::optional(
-            "scenes",
-            ParamType::Count,
-            "10",
-            "dataset mode: number of random 9-ball racks",
-        ),
-        ParamSpec::optional(
-            "shots",
-            ParamType::Count,
-            "1",
-            "dataset mode: random shots per scene",
-        ),
-        ParamSpec::maybe(
-            "seed",
-            ParamType::Count,
-            "dataset mode: seed of racks and shots (default: the pipeline's seed)",
-        ),
-        ParamSpec::maybe(
-            "scene_file",
-            ParamType::Str,
-            "replay mode: scene JSON file, relative to the project folder",
-        ),
-        ParamSpec::maybe(
-            "shot",
-            ParamType::Str,
-            "replay mode: the shot as JSON, e.g. '{\"V0\": 3, \"phi\": 90, \"theta\": 0, \"a\": 0, \"b\": 0.2}'",
-        ),
-        ParamSpec::maybe(
-            "table",
-            ParamType::Str,
-            "table file (geometry, ball and cue parameters), relative to the project folder (default: data/tables/pooltool_7ft.json, built in)",
-        ),
-        ParamSpec::optional(
-            "dt",
-            ParamType::Float,
-            "0.01",
-            "timestep spacing of the traces (s)",
-        ),
-        ParamSpec::optional(
-            "max_events",
-            ParamType::Count,
-            "100000",
-            "stop a shot after this many events (terminal_status max_events); 0 = no cap",
-        ),
-        ParamSpec::maybe(
-            "max_time",
-            ParamType::Float,
-            "stop a shot at the first event at or after this time (s) (terminal_status max_time)",
-        ),
-        ParamSpec::maybe(
-            "games",
-            ParamType::Str,
-            "iphyre dataset mode: comma-separated game and fold names, or all (default all 40); `shots` click sets per game",
-        ),
-        ParamSpec::maybe(
-            "fps",
-            ParamType::Float,
-            "iphyre: physics steps per second, 60 (I-PHYRE's default) or 10 (the gym wrappers and DeepPHY)",
-        ),
-        ParamSpec::maybe("game", ParamType::Str, "iphyre replay mode: the game name"),
-        ParamSpec::maybe(
-            "clicks",
-            ParamType::Str,
-            "iphyre replay mode: `x,y,t;…` clicks (px, s) or `k@t;…` (remove eliminable block k at t)",
-        ),
-        ParamSpec::maybe(
-            "tasks",
-            ParamType::Str,
-            "phyre dataset mode: comma-separated template ids (00003), task ids (00003:002), fold splits (ball_cross_template/0/test) or all (default); `scenes` tasks round-robin over templates, `shots` random valid actions each",
-        ),
-        ParamSpec::maybe(
-            "task",
-            ParamType::Str,
-            "phyre replay mode: the task id (00004:063)",
-        ),
-        ParamSpec::maybe(
-            "action",
-            ParamType::Str,
-            "phyre replay mode: `[x, y, r]` in [0, 1], `{\"x\", \"y\", \"r\"}`, or DeepPHY's `{\"cell\": 1-64, \"radius\": 1-8}`",
-        ),
-        ParamSpec::maybe(
-            "stride",
-            ParamType::Count,
-            "phyre: keep a frame every this many 60 Hz steps (default 6, i.e. 10 frames/s; events keep every step)",
-        ),
-        ParamSpec::optional(
-            "scenes_per_shard",
-            ParamType::Count,
-            "100",
-            "scenes per output file; a resumed run redoes at most the unfinished shards",
-        ),
-    ],
+    params: ParamsOf::of::<SimulateParams>(),
     build,
 };
+
+/// The parameters of a `simulate` stage: one set per environment, chosen by `env`.
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(tag = "env", rename_all = "lowercase")]
+pub enum SimulateParams {
+    /// Billiards (pooltool 0.6.0 physics).
+    Pooltool(PoolSimParams),
+    /// PHYRE's ball tier.
+    Phyre(PhyreSimParams),
+    /// I-PHYRE.
+    Iphyre(IphyreSimParams),
+}
+
+impl Default for SimulateParams {
+    fn default() -> Self {
+        SimulateParams::Pooltool(PoolSimParams::default())
+    }
+}
+
+/// The parameters every environment's `simulate` stage has.
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(default)]
+pub struct ShardParams {
+    /// Dataset mode: random shots (actions, click sets) per scene (task, game).
+    pub shots: u64,
+    /// Dataset mode: seed of scenes and shots (default: the pipeline's seed).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+    /// Scenes per output file; a resumed run redoes at most the unfinished shards.
+    pub scenes_per_shard: u64,
+}
+
+impl Default for ShardParams {
+    fn default() -> Self {
+        ShardParams {
+            shots: 1,
+            seed: None,
+            scenes_per_shard: 100,
+        }
+    }
+}
+
+/// Billiards `simulate` parameters.
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(default)]
+pub struct PoolSimParams {
+    /// Dataset mode: number of random 9-ball racks.
+    pub scenes: u64,
+    /// Shots, seed and sharding.
+    #[serde(flatten)]
+    pub shards: ShardParams,
+    /// Replay mode: scene JSON file, relative to the project folder.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scene_file: Option<String>,
+    /// Replay mode: the shot as JSON, e.g. '{"V0": 3, "phi": 90, "theta": 0, "a": 0, "b": 0.2}'.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub shot: Option<String>,
+    /// Table file (geometry, ball and cue parameters), relative to the project folder (default:
+    /// data/tables/pooltool_7ft.json, built in).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub table: Option<String>,
+    /// Timestep spacing of the traces (s).
+    pub dt: f64,
+    /// Stop a shot after this many events (terminal_status max_events); 0 = no cap.
+    pub max_events: u64,
+    /// Stop a shot at the first event at or after this time (s) (terminal_status max_time).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_time: Option<f64>,
+}
+
+impl Default for PoolSimParams {
+    fn default() -> Self {
+        PoolSimParams {
+            scenes: 10,
+            shards: ShardParams::default(),
+            scene_file: None,
+            shot: None,
+            table: None,
+            dt: 0.01,
+            max_events: 100_000,
+            max_time: None,
+        }
+    }
+}
+
+/// PHYRE `simulate` parameters.
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(default)]
+pub struct PhyreSimParams {
+    /// Dataset mode: number of tasks, round-robin over the templates `tasks` selects.
+    pub scenes: u64,
+    /// Shots, seed and sharding.
+    #[serde(flatten)]
+    pub shards: ShardParams,
+    /// Dataset mode: comma-separated template ids (00003), task ids (00003:002), fold splits
+    /// (ball_cross_template/0/test) or all (default); `shots` random valid actions per task.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tasks: Option<String>,
+    /// Replay mode: the task id (00004:063).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub task: Option<String>,
+    /// Replay mode: `[x, y, r]` in [0, 1], `{"x", "y", "r"}`, or DeepPHY's `{"cell": 1-64, "radius":
+    /// 1-8}`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub action: Option<String>,
+    /// Keep a frame every this many 60 Hz steps (default 6, i.e. 10 frames/s; events keep every
+    /// step).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stride: Option<u64>,
+}
+
+impl Default for PhyreSimParams {
+    fn default() -> Self {
+        PhyreSimParams {
+            scenes: 10,
+            shards: ShardParams::default(),
+            tasks: None,
+            task: None,
+            action: None,
+            stride: None,
+        }
+    }
+}
+
+/// I-PHYRE `simulate` parameters.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, JsonSchema)]
+#[serde(default)]
+pub struct IphyreSimParams {
+    /// Click sets per game, seed and sharding.
+    #[serde(flatten)]
+    pub shards: ShardParams,
+    /// Dataset mode: comma-separated game and fold names, or all (default all 40).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub games: Option<String>,
+    /// Physics steps per second: 60 (I-PHYRE's default) or 10 (the gym wrappers and DeepPHY).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fps: Option<f64>,
+    /// Replay mode: the game name.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub game: Option<String>,
+    /// Replay mode: `x,y,t;…` clicks (px, s) or `k@t;…` (remove eliminable block k at t).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub clicks: Option<String>,
+}
+
+/// What a `simulate` stage reports (its manifest summary); fields that do not apply to the
+/// environment are absent.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct SimulateSummary {
+    /// The environment.
+    pub env: Env,
+    /// Traces written.
+    pub traces: u64,
+    /// Traces whose goal was reached.
+    pub successes: u64,
+    /// Traces stopped by `max_events` / `max_time` (0 for PHYRE and I-PHYRE).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub capped: Option<u64>,
+    /// Billiards: physics events over all traces.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub physics_events: Option<u64>,
+    /// Billiards: the table's name.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub table: Option<String>,
+    /// Billiards: timestep spacing (s).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dt: Option<f64>,
+    /// PHYRE: actions refused as invalid input.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub invalid: Option<u64>,
+    /// PHYRE: physics steps over all traces.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub steps: Option<u64>,
+    /// PHYRE: frames kept every this many steps.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stride: Option<u64>,
+    /// I-PHYRE: blocks removed over all traces.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub eliminations: Option<u64>,
+    /// I-PHYRE: mean episode reward.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mean_reward: Option<f64>,
+    /// I-PHYRE: physics steps per second.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fps: Option<f64>,
+}
+
+impl SimulateSummary {
+    /// As the manifest's JSON.
+    pub fn to_json(&self) -> Value {
+        serde_json::to_value(self).unwrap_or(Value::Null)
+    }
+}
 
 /// What to simulate.
 #[derive(Debug)]
@@ -166,14 +263,15 @@ pub struct SimulateStage {
 }
 
 fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
-    let p = &def.params;
-    if p.get("env").and_then(Value::as_str) == Some("iphyre") {
-        return super::simulate_iphyre::build(def, spec);
+    match def.params::<SimulateParams>()? {
+        SimulateParams::Pooltool(p) => build_pool(&p, spec),
+        SimulateParams::Phyre(p) => super::simulate_phyre::build(&p, spec),
+        SimulateParams::Iphyre(p) => super::simulate_iphyre::build(&p, spec),
     }
-    if p.get("env").and_then(Value::as_str) == Some("phyre") {
-        return super::simulate_phyre::build(def, spec);
-    }
-    let (config, table_text) = match p.get("table").and_then(Value::as_str) {
+}
+
+fn build_pool(p: &PoolSimParams, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
+    let (config, table_text) = match &p.table {
         None => (PoolConfig::default_7ft(), None),
         Some(t) => {
             let path = spec.project_dir.join(t);
@@ -186,14 +284,14 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
             (config, Some(text))
         }
     };
-    let dt = p["dt"].as_f64().unwrap_or(0.01);
+    let dt = p.dt;
     if !(dt > 0.0 && dt.is_finite()) {
         return Err(BuildError::param(
             "dt",
             format!("dt must be > 0, found {dt}"),
         ));
     }
-    let max_time = p.get("max_time").and_then(Value::as_f64);
+    let max_time = p.max_time;
     if let Some(t) = max_time
         && (t.is_nan() || t <= 0.0)
     {
@@ -202,7 +300,10 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
             format!("max_time must be > 0, found {t}"),
         ));
     }
-    let work = match replay_pair(p, "scene_file", "shot")? {
+    let work = match replay_pair(
+        ("scene_file", p.scene_file.as_deref()),
+        ("shot", p.shot.as_deref()),
+    )? {
         Some((file, shot_text)) => {
             let path = spec.project_dir.join(file);
             let text = std::fs::read_to_string(&path).map_err(|e| {
@@ -220,9 +321,9 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
             }
         }
         None => Work::Dataset {
-            scenes: p["scenes"].as_u64().unwrap_or(10),
-            shots: p["shots"].as_u64().unwrap_or(1),
-            seed: p.get("seed").and_then(Value::as_u64).unwrap_or(spec.seed),
+            scenes: p.scenes,
+            shots: p.shards.shots,
+            seed: p.shards.seed.unwrap_or(spec.seed),
         },
     };
     Ok(Box::new(SimulateStage {
@@ -230,11 +331,11 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         table_text,
         work,
         sim: SimOptions {
-            max_events: p["max_events"].as_u64().unwrap_or(100_000) as usize,
+            max_events: usize::try_from(p.max_events).unwrap_or(usize::MAX),
             t_final: max_time,
         },
         trace: TraceOptions { dt },
-        per_shard: p["scenes_per_shard"].as_u64().unwrap_or(100).max(1),
+        per_shard: p.shards.scenes_per_shard.max(1),
     }))
 }
 
@@ -308,15 +409,17 @@ impl Stage for SimulateStage {
         Ok(StageOutput {
             rows,
             files: Vec::new(),
-            summary: json!({
-                "env": Env::Pooltool.as_str(),
-                "traces": traces,
-                "successes": successes,
-                "capped": capped,
-                "physics_events": events,
-                "table": self.config.name,
-                "dt": self.trace.dt,
-            }),
+            summary: SimulateSummary {
+                env: Env::Pooltool,
+                traces,
+                successes,
+                capped: Some(capped),
+                physics_events: Some(events),
+                table: Some(self.config.name.clone()),
+                dt: Some(self.trace.dt),
+                ..SimulateSummary::default()
+            }
+            .to_json(),
             line,
         })
     }
@@ -393,14 +496,10 @@ pub(super) fn run_shards(
 /// The two parameters of a replay (`scene_file` and `shot`, `game` and `clicks`, `task` and `action`):
 /// both given, or neither (dataset mode, `None`); one without the other is an error on the missing one.
 pub(super) fn replay_pair<'p>(
-    p: &'p serde_json::Map<String, Value>,
-    first: &'static str,
-    second: &'static str,
+    (first, a): (&'static str, Option<&'p str>),
+    (second, b): (&'static str, Option<&'p str>),
 ) -> Result<Option<(&'p str, &'p str)>, BuildError> {
-    match (
-        p.get(first).and_then(Value::as_str),
-        p.get(second).and_then(Value::as_str),
-    ) {
+    match (a, b) {
         (Some(a), Some(b)) => Ok(Some((a, b))),
         (Some(_), None) => Err(BuildError::param(
             second,

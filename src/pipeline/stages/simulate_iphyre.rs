@@ -22,13 +22,15 @@
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
-use super::simulate::{ShardSinks, check_ids_are_new, replay_pair, run_shards};
+use super::simulate::{
+    IphyreSimParams, ShardSinks, SimulateSummary, check_ids_are_new, replay_pair, run_shards,
+};
 use crate::envs::iphyre::{
     Click, Episode, Game, Games, PhysicsParams, click_block, clicks_rng, random_clicks, trace_of,
     validate_clicks,
 };
 use crate::pipeline::registry::BuildError;
-use crate::pipeline::spec::{PipelineSpec, StageDef, hex};
+use crate::pipeline::spec::{PipelineSpec, hex};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
 use crate::trace::Env;
 use crate::trace::batch::scene_batch;
@@ -54,16 +56,18 @@ pub struct IphyreSimulateStage {
     per_shard: u64,
 }
 
-/// Builds the I-PHYRE `simulate` stage from the stage's resolved parameters.
-pub(super) fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
-    let p = &def.params;
-    let fps = p.get("fps").and_then(Value::as_f64).unwrap_or(60.0);
+/// Builds the I-PHYRE `simulate` stage from its parameters.
+pub(super) fn build(
+    p: &IphyreSimParams,
+    spec: &PipelineSpec,
+) -> Result<Box<dyn Stage>, BuildError> {
+    let fps = p.fps.unwrap_or(60.0);
     let params = PhysicsParams::with_fps(fps);
     params
         .validate()
         .map_err(|e| BuildError::param("fps", e.to_string()))?;
     let all = Games::default_games().map_err(|e| BuildError::param("games", e.to_string()))?;
-    let work = match replay_pair(p, "game", "clicks")? {
+    let work = match replay_pair(("game", p.game.as_deref()), ("clicks", p.clicks.as_deref()))? {
         Some((name, text)) => {
             let game = all
                 .get(name)
@@ -76,23 +80,16 @@ pub(super) fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage
             }
         }
         None => Work::Dataset {
-            games: select_games(
-                &all,
-                p.get("games").and_then(Value::as_str).unwrap_or("all"),
-            )
-            .map_err(|m| BuildError::param("games", format!("`games`: {m}")))?,
-            samples: p.get("shots").and_then(Value::as_u64).unwrap_or(1),
-            seed: p.get("seed").and_then(Value::as_u64).unwrap_or(spec.seed),
+            games: select_games(&all, p.games.as_deref().unwrap_or("all"))
+                .map_err(|m| BuildError::param("games", format!("`games`: {m}")))?,
+            samples: p.shards.shots,
+            seed: p.shards.seed.unwrap_or(spec.seed),
         },
     };
     Ok(Box::new(IphyreSimulateStage {
         params,
         work,
-        per_shard: p
-            .get("scenes_per_shard")
-            .and_then(Value::as_u64)
-            .unwrap_or(100)
-            .max(1),
+        per_shard: p.shards.scenes_per_shard.max(1),
     }))
 }
 
@@ -310,15 +307,17 @@ impl Stage for IphyreSimulateStage {
         Ok(StageOutput {
             rows,
             files: Vec::new(),
-            summary: json!({
-                "env": Env::Iphyre.as_str(),
-                "traces": traces,
-                "successes": successes,
-                "capped": 0,
-                "eliminations": eliminations,
-                "mean_reward": mean_reward,
-                "fps": self.params.fps,
-            }),
+            summary: SimulateSummary {
+                env: Env::Iphyre,
+                traces,
+                successes,
+                capped: Some(0),
+                eliminations: Some(eliminations),
+                mean_reward: Some(mean_reward),
+                fps: Some(self.params.fps),
+                ..SimulateSummary::default()
+            }
+            .to_json(),
             line,
         })
     }

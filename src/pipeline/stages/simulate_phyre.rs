@@ -22,14 +22,16 @@
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
-use super::simulate::{ShardSinks, check_ids_are_new, replay_pair, run_shards};
+use super::simulate::{
+    PhyreSimParams, ShardSinks, SimulateSummary, check_ids_are_new, replay_pair, run_shards,
+};
 use crate::envs::phyre::{
     BallAction, DEFAULT_STRIDE, DEFAULT_TASKS_GZ, EvalSetup, PhyreEnv, PhysicsParams,
     RecordOptions, Status, Task, TaskSet, action_rng, dataset_tasks, episode, fold,
     random_valid_action, trace_of,
 };
 use crate::pipeline::registry::BuildError;
-use crate::pipeline::spec::{PipelineSpec, StageDef, hex};
+use crate::pipeline::spec::{PipelineSpec, hex};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
 use crate::trace::Env;
 use crate::trace::batch::scene_batch;
@@ -56,18 +58,14 @@ pub struct PhyreSimulateStage {
     per_shard: u64,
 }
 
-/// Builds the PHYRE `simulate` stage from the stage's resolved parameters.
-pub(super) fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
-    let p = &def.params;
+/// Builds the PHYRE `simulate` stage from its parameters.
+pub(super) fn build(p: &PhyreSimParams, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
     let set = TaskSet::default_tasks().map_err(|e| BuildError::param("tasks", e.to_string()))?;
-    let stride = p
-        .get("stride")
-        .and_then(Value::as_u64)
-        .unwrap_or(DEFAULT_STRIDE as u64);
+    let stride = p.stride.unwrap_or(DEFAULT_STRIDE as u64);
     let stride = usize::try_from(stride).unwrap_or(usize::MAX);
     episode::validate_stride(stride)
         .map_err(|e| BuildError::param("stride", format!("`stride`: {e}")))?;
-    let work = match replay_pair(p, "task", "action")? {
+    let work = match replay_pair(("task", p.task.as_deref()), ("action", p.action.as_deref()))? {
         Some((id, text)) => {
             if !set.contains(id) {
                 return Err(BuildError::param(
@@ -86,13 +84,12 @@ pub(super) fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage
             }
         }
         None => {
-            let only = select_tasks(set, p.get("tasks").and_then(Value::as_str).unwrap_or("all"))
+            let only = select_tasks(set, p.tasks.as_deref().unwrap_or("all"))
                 .map_err(|m| BuildError::param("tasks", format!("`tasks`: {m}")))?;
-            let n = p.get("scenes").and_then(Value::as_u64).unwrap_or(10);
             Work::Dataset {
-                tasks: dataset_tasks(set, usize::try_from(n).unwrap_or(usize::MAX), &only),
-                samples: p.get("shots").and_then(Value::as_u64).unwrap_or(1),
-                seed: p.get("seed").and_then(Value::as_u64).unwrap_or(spec.seed),
+                tasks: dataset_tasks(set, usize::try_from(p.scenes).unwrap_or(usize::MAX), &only),
+                samples: p.shards.shots,
+                seed: p.shards.seed.unwrap_or(spec.seed),
             }
         }
     };
@@ -103,11 +100,7 @@ pub(super) fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage
             record: true,
         },
         work,
-        per_shard: p
-            .get("scenes_per_shard")
-            .and_then(Value::as_u64)
-            .unwrap_or(100)
-            .max(1),
+        per_shard: p.shards.scenes_per_shard.max(1),
     }))
 }
 
@@ -298,15 +291,17 @@ impl Stage for PhyreSimulateStage {
         Ok(StageOutput {
             rows,
             files: Vec::new(),
-            summary: json!({
-                "env": Env::Phyre.as_str(),
-                "traces": traces,
-                "successes": successes,
-                "capped": 0,
-                "invalid": invalid,
-                "steps": steps,
-                "stride": self.record.stride,
-            }),
+            summary: SimulateSummary {
+                env: Env::Phyre,
+                traces,
+                successes,
+                capped: Some(0),
+                invalid: Some(invalid),
+                steps: Some(steps),
+                stride: Some(self.record.stride as u64),
+                ..SimulateSummary::default()
+            }
+            .to_json(),
             line,
         })
     }

@@ -5,10 +5,12 @@
 //! `<output>/<stage>.result.parquet` and is queryable as `<output>` by later stages and by
 //! `annotrace query`.
 
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use super::{SqlSource, valid_table_name};
-use crate::pipeline::params::{ParamSpec, ParamType};
+use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
@@ -23,21 +25,24 @@ pub static KIND: StageKind = StageKind {
           a table named `output` (default: the stage id with `-` replaced by `_`). The SQL is a file under \
           the project's sql/ folder (`query`) or inline (`sql`).",
     writes: "the table named by `output`",
-    params: &[
-        ParamSpec::maybe(
-            "query",
-            ParamType::Str,
-            "SQL file under sql/ (or a path relative to the project folder)",
-        ),
-        ParamSpec::maybe("sql", ParamType::Str, "inline SQL, instead of `query`"),
-        ParamSpec::maybe(
-            "output",
-            ParamType::Str,
-            "name of the result table (default: the stage id)",
-        ),
-    ],
+    params: ParamsOf::of::<SqlParams>(),
     build,
 };
+
+/// The parameters of an `sql` stage.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, JsonSchema)]
+#[serde(default)]
+pub struct SqlParams {
+    /// SQL file under sql/ (or a path relative to the project folder).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub query: Option<String>,
+    /// Inline SQL, instead of `query`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sql: Option<String>,
+    /// Name of the result table (default: the stage id).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub output: Option<String>,
+}
 
 /// The result table's name for a stage.
 pub(crate) fn output_name(def: &StageDef) -> String {
@@ -49,8 +54,14 @@ pub(crate) fn output_name(def: &StageDef) -> String {
 }
 
 fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
-    let source =
-        SqlSource::from_params(&def.params, &spec.project_dir, false)?.expect("required above");
+    let p: SqlParams = def.params()?;
+    let source = SqlSource::new(
+        p.query.as_deref(),
+        p.sql.as_deref(),
+        &spec.project_dir,
+        false,
+    )?
+    .expect("required above");
     let output = output_name(def);
     if !valid_table_name(&output) {
         return Err(BuildError::param(
