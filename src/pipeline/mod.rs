@@ -22,7 +22,7 @@ use std::path::PathBuf;
 pub use manifest::{Manifest, PipelineInfo, StageRecord, StageStatus};
 pub use params::{ParamDoc, ParamDocs, ParamError, ParamType, ParamsOf, StageParams};
 pub use progress::Progress;
-pub use registry::{BuildError, STAGE_KINDS, StageKind, find_kind, kind_names};
+pub use registry::{BuildError, STAGE_KINDS, StageKind, find_kind, kind_names, params_markdown};
 pub use runner::{
     Action, PlannedStage, RunError, RunOptions, RunReport, StageReport, error_chain, explain, run,
 };

@@ -68,3 +68,84 @@ pub fn find_kind(name: &str) -> Option<&'static StageKind> {
 pub fn kind_names() -> Vec<&'static str> {
     STAGE_KINDS.iter().map(|k| k.name).collect()
 }
+
+/// The parameter reference of every kind as Markdown (one table per kind, per environment where the
+/// parameters depend on it): the section of `docs/pipelines.md` between its `params` markers, which a
+/// test keeps equal to this text.
+pub fn params_markdown() -> String {
+    use super::params::{ParamDoc, ParamDocs};
+    fn table(out: &mut String, docs: &[ParamDoc]) {
+        out.push_str("| parameter | type | default | meaning |\n|---|---|---|---|\n");
+        for p in docs {
+            let default = match (&p.default, p.required) {
+                (_, true) => "required".to_string(),
+                (Some(d), false) => format!("`{d}`"),
+                (None, false) => "–".to_string(),
+            };
+            out.push_str(&format!(
+                "| `{}` | {} | {} | {} |\n",
+                p.name,
+                p.ty.describe(),
+                default,
+                p.doc.replace('|', "\\|")
+            ));
+        }
+        out.push('\n');
+    }
+    let mut out = String::new();
+    for kind in STAGE_KINDS {
+        match kind.params.docs() {
+            ParamDocs::Flat(docs) => {
+                out.push_str(&format!("### `{}`\n\n", kind.name));
+                table(&mut out, &docs);
+            }
+            ParamDocs::ByTag {
+                tag,
+                default,
+                variants,
+            } => {
+                for (value, docs) in variants {
+                    let d = if value == default {
+                        " (the default)"
+                    } else {
+                        ""
+                    };
+                    out.push_str(&format!(
+                        "### `{}` with `{tag} = \"{value}\"`{d}\n\n",
+                        kind.name
+                    ));
+                    table(&mut out, &docs);
+                }
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `docs/pipelines.md` lists every parameter as the structs define it. To refresh the section after
+    /// changing a parameter: `ANNOTRACE_UPDATE_DOCS=1 cargo test --lib params_reference`.
+    #[test]
+    fn params_reference_in_the_docs_matches_the_structs() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/pipelines.md");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let (begin, end) = ("<!-- params:begin -->\n", "<!-- params:end -->");
+        let a = text.find(begin).expect("begin marker") + begin.len();
+        let b = text.find(end).expect("end marker");
+        let want = params_markdown();
+        if std::env::var_os("ANNOTRACE_UPDATE_DOCS").is_some() {
+            let new = format!("{}{want}{}", &text[..a], &text[b..]);
+            std::fs::write(&path, new).unwrap();
+            return;
+        }
+        assert_eq!(
+            &text[a..b],
+            want,
+            "docs/pipelines.md is out of step with the parameter structs: \
+             rerun with ANNOTRACE_UPDATE_DOCS=1"
+        );
+    }
+}

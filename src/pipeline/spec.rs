@@ -643,6 +643,60 @@ mod tests {
     }
 
     #[test]
+    fn typed_parameters_name_the_line_and_the_fix() {
+        let e =
+            parse("[[stage]]\nid = \"s\"\nkind = \"simulate\"\nenv = \"phyre\"\ngames = \"all\"\n")
+                .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "pipelines/t.toml:5: `games` is not a parameter of stage \"s\" (kind simulate, env = \"phyre\"): it applies with env = \"iphyre\" only"
+        );
+        let e = parse("[[stage]]\nid = \"s\"\nkind = \"simulate\"\nscenez = 3\n").unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("pipelines/t.toml:4: unknown key `scenez` in stage \"s\" (kind simulate, env = \"pooltool\"); did you mean `scenes`?"),
+            "{e}"
+        );
+        let e = parse("[[stage]]\nid = \"s\"\nkind = \"simulate\"\nenv = \"pool\"\n").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "pipelines/t.toml:4: stage \"s\": `env` must be one of \"pooltool\", \"phyre\", \"iphyre\", found \"pool\""
+        );
+        let e = parse("[[stage]]\nid = \"i\"\nkind = \"import\"\nenv = \"phyre\"\n").unwrap_err();
+        assert!(
+            e.to_string().contains("missing required parameter `paths`"),
+            "{e}"
+        );
+        let e =
+            parse("[[stage]]\nid = \"e\"\nkind = \"evolve\"\nbudget = 3\nllm = { modl = \"x\" }\n")
+                .unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("pipelines/t.toml:5: stage \"e\": `llm.modl`: unknown field `modl`"),
+            "{e}"
+        );
+        let e =
+            parse("[[stage]]\nid = \"e\"\nkind = \"evolve\"\nstrategy = \"greedy\"\n").unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("`strategy` must be one of \"island\", \"hill-climb\", \"best-of-n\""),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn defaults_enter_the_canonical_parameters() {
+        let spec =
+            parse("[[stage]]\nid = \"s\"\nkind = \"simulate\"\nenv = \"iphyre\"\nshots = 2\n")
+                .unwrap();
+        let p = Value::Object(spec.stages[0].params.clone());
+        assert_eq!(
+            p,
+            serde_json::json!({"env": "iphyre", "shots": 2, "scenes_per_shard": 100})
+        );
+    }
+
+    #[test]
     fn cycles_are_reported_with_their_path() {
         let text = format!(
             "[[stage]]\nid = \"a\"\ninputs = [\"c\"]\n{SQL}\n[[stage]]\nid = \"b\"\ninputs = [\"a\"]\n{SQL}\n[[stage]]\nid = \"c\"\ninputs = [\"b\"]\n{SQL}"

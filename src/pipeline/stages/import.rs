@@ -43,22 +43,31 @@ pub static KIND: StageKind = StageKind {
     build,
 };
 
-/// The parameters of an `import` stage.
+/// The parameters of an `import` stage (`env` and `paths` are required).
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
-#[serde(default)]
 pub struct ImportParams {
     /// Environment of the traces.
-    #[schemars(required)]
     pub env: Env,
     /// Files or folders to import, relative to the project folder.
-    #[schemars(required)]
     pub paths: Vec<String>,
     /// Import the valid traces and list the invalid ones instead of failing.
+    #[serde(default)]
     pub skip_invalid: bool,
     /// Traces per output file; a resumed import redoes at most one shard per input file.
+    #[serde(default = "ImportParams::default_traces_per_shard")]
     pub traces_per_shard: u64,
     /// Frame rows of one trace kept in memory before the rest is spilled to a scratch file.
+    #[serde(default = "ImportParams::default_spill_rows")]
     pub spill_rows: u64,
+}
+
+impl ImportParams {
+    fn default_traces_per_shard() -> u64 {
+        1000
+    }
+    fn default_spill_rows() -> u64 {
+        65536
+    }
 }
 
 impl Default for ImportParams {
@@ -67,8 +76,8 @@ impl Default for ImportParams {
             env: Env::Pooltool,
             paths: Vec::new(),
             skip_invalid: false,
-            traces_per_shard: 1000,
-            spill_rows: 65536,
+            traces_per_shard: Self::default_traces_per_shard(),
+            spill_rows: Self::default_spill_rows(),
         }
     }
 }
