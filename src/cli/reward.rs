@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
+use annotrace::builtin::Location;
 use annotrace::detect::{Annotation, Library, SandboxLimits, WorkerPool};
 use annotrace::envs::Environment;
 use annotrace::envs::pool::{PoolEnv, Scene, Shot};
@@ -113,23 +114,16 @@ pub(crate) fn program_text(arg: &str) -> Result<String, CliError> {
     }
 }
 
-/// The library folder: the one given, or data/libraries/<env> of the current folder, or the crate's.
-pub(crate) fn library_dir(given: Option<&Path>, env: Env) -> PathBuf {
-    if let Some(p) = given {
-        return p.to_path_buf();
-    }
-    let local = Path::new("data/libraries").join(env.as_str());
-    if local.join("library.toml").is_file() {
-        local
-    } else {
-        Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("data/libraries")
-            .join(env.as_str())
+/// The library: the folder given, or data/libraries/<env> of the current folder, or the built-in one.
+pub(crate) fn library_dir(given: Option<&Path>, env: Env) -> Location {
+    match given {
+        Some(p) => Location::Disk(p.to_path_buf()),
+        None => Location::default_library(Path::new("."), env),
     }
 }
 
-pub(crate) fn load_library(dir: &Path) -> Result<Library, CliError> {
-    Library::load(dir).map_err(|e| CliError::input(anyhow::anyhow!("{e}")))
+pub(crate) fn load_library(dir: &Location) -> Result<Library, CliError> {
+    Library::open(dir).map_err(|e| CliError::input(anyhow::anyhow!("{e}")))
 }
 
 pub(crate) fn pool() -> Result<WorkerPool, CliError> {

@@ -7,13 +7,14 @@
 //! `detector_calls` row with its status and error, never a failed stage.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::Path;
 use std::time::Duration;
 
 use arrow::array::RecordBatch;
 use serde_json::{Value, json};
 
 use super::trace_files::{read_traces, trace_file_sets};
+use crate::builtin::Location;
 use crate::detect::tables::{annotations_batch, calls_batch, detectors_batch};
 use crate::detect::{Annotation, BatchResult, CandidateStatus, Library, SandboxLimits, WorkerPool};
 use crate::pipeline::params::{ParamSpec, ParamType};
@@ -86,20 +87,16 @@ impl DetectorSetup {
             .unwrap_or("pooltool")
             .parse()
             .map_err(|e: crate::trace::UnknownEnv| BuildError::param("env", e.to_string()))?;
-        let dir: PathBuf = match p.get("library").and_then(Value::as_str) {
-            Some(l) => spec.project_dir.join(l),
-            None => default_library_dir(&spec.project_dir, env),
+        let dir = match p.get("library").and_then(Value::as_str) {
+            Some(l) => Location::library(&spec.project_dir, Path::new(l)),
+            None => Location::default_library(&spec.project_dir, env),
         };
         let library =
-            Library::load(&dir).map_err(|e| BuildError::param("library", e.to_string()))?;
+            Library::open(&dir).map_err(|e| BuildError::param("library", e.to_string()))?;
         if library.env != env {
             return Err(BuildError::param(
                 "library",
-                format!(
-                    "library {} is for {}, not {env}",
-                    dir.display(),
-                    library.env
-                ),
+                format!("library {dir} is for {}, not {env}", library.env),
             ));
         }
         let timeout = p["timeout"].as_f64().unwrap_or(10.0);
@@ -126,18 +123,6 @@ impl DetectorSetup {
     /// Starts the worker pool.
     pub(crate) fn pool(&self) -> Result<WorkerPool, StageError> {
         WorkerPool::new(self.limits.clone()).map_err(|e| StageError::Input(e.to_string()))
-    }
-}
-
-/// `data/libraries/<env>` under the project folder, or the crate's own copy when the project has none.
-pub(crate) fn default_library_dir(project: &std::path::Path, env: Env) -> PathBuf {
-    let local = project.join("data/libraries").join(env.as_str());
-    if local.join("library.toml").is_file() {
-        local
-    } else {
-        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("data/libraries")
-            .join(env.as_str())
     }
 }
 

@@ -17,6 +17,7 @@ use arrow::datatypes::{DataType, Field, Int64Type, Schema};
 use serde_json::{Value, json};
 
 use super::annotate::{DetectorSetup, SANDBOX_PARAMS, write};
+use crate::builtin::Location;
 use crate::detect::Library;
 use crate::envs::pool::PoolEnv;
 use crate::optimise::plot::{curves, png, svg};
@@ -161,15 +162,10 @@ pub struct OptimiseStage {
 fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
     let p = &def.params;
     let rel = p["goals"].as_str().unwrap_or("data/goals/pooltool.toml");
-    // The project's file, else the crate's own copy (pipelines run from another folder).
-    let goals_path = [
-        spec.project_dir.join(rel),
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(rel),
-    ]
-    .into_iter()
-    .find(|p| p.is_file())
-    .unwrap_or_else(|| spec.project_dir.join(rel));
-    let goals = GoalSet::load(&goals_path, &spec.project_dir)
+    // The project's file, else the built-in one (pipelines run from another folder).
+    let goals_at = Location::file(&spec.project_dir, std::path::Path::new(rel));
+    let goals_path = goals_at.path();
+    let goals = GoalSet::open(&goals_at, &spec.project_dir)
         .map_err(|e| BuildError::param("goals", e.to_string()))?;
     if goals.env != Env::Pooltool {
         return Err(BuildError::param(
@@ -181,7 +177,8 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
             ),
         ));
     }
-    let goals_text = std::fs::read_to_string(&goals_path)
+    let goals_text = goals_at
+        .read_to_string()
         .map_err(|e| BuildError::param("goals", e.to_string()))?;
     let goal_ids: Vec<String> = match p.get("goal_ids").and_then(Value::as_array) {
         Some(ids) => ids
@@ -202,10 +199,8 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     if def2.params.get("library").is_none()
         && let Some(l) = &goals.library
     {
-        def2.params.insert(
-            "library".into(),
-            Value::from(l.to_string_lossy().into_owned()),
-        );
+        def2.params
+            .insert("library".into(), Value::from(l.as_param()));
     }
     def2.params.insert("env".into(), Value::from("pooltool"));
     let setup = DetectorSetup::from_params(&def2, spec)?;
