@@ -11,7 +11,7 @@ pub struct Args {
     /// Run folder holding simulated traces.
     #[arg(long)]
     run: PathBuf,
-    /// Library folder; default: data/libraries/<env>.
+    /// Library folder; default: the built-in one, or ./data/libraries/<env> when present.
     #[arg(long)]
     library: Option<PathBuf>,
     /// Environment of the run's traces to score.

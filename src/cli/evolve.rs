@@ -23,7 +23,7 @@ pub struct Args {
     /// Environment whose traces are used.
     #[arg(long, default_value = "pooltool", value_parser = ["pooltool", "phyre", "iphyre"])]
     env: String,
-    /// Starting library folder; default: data/libraries/<env>.
+    /// Starting library folder; default: the built-in one, or ./data/libraries/<env> when present.
     #[arg(long)]
     library: Option<PathBuf>,
     /// Labels to learn, in order (comma-separated or repeated); default: the library's labels.

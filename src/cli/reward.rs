@@ -42,7 +42,7 @@ struct SynthArgs {
     /// Billiards scene: a scene JSON file, or SEED:INDEX for a generated 9-ball rack.
     #[arg(long, default_value = "1000:0")]
     scene: String,
-    /// Library folder; default: data/libraries/<env>.
+    /// Library folder; default: the built-in one, or ./data/libraries/<env> when present.
     #[arg(long)]
     library: Option<PathBuf>,
     /// Repair rounds after the first answer.
@@ -74,7 +74,7 @@ struct SynthArgs {
 struct CheckArgs {
     /// The program (DSL text), or @FILE to read it from a file.
     program: String,
-    /// Library folder; default: data/libraries/pooltool.
+    /// Library folder; default: the built-in pooltool one, or ./data/libraries/pooltool when present.
     #[arg(long)]
     library: Option<PathBuf>,
     /// Do not learn parameter keys by annotating a few simulated shots (then any key is accepted).
@@ -92,7 +92,8 @@ struct EvalArgs {
     /// Trace id.
     #[arg(long)]
     trace: String,
-    /// Library folder; default: data/libraries/<env of the trace>.
+    /// Library folder; default: the built-in one of the trace's environment, or
+    /// ./data/libraries/<env> when present.
     #[arg(long)]
     library: Option<PathBuf>,
 }

@@ -1,4 +1,5 @@
-//! `annotrace simulate`: simulates billiards shots or I-PHYRE episodes into a run, as a one-stage pipeline.
+//! `annotrace simulate`: simulates billiards shots, I-PHYRE or PHYRE episodes into a run, as a one-stage
+//! pipeline.
 //!
 //! Dataset mode (`--scenes N --shots K --seed S`) and replay mode (`--scene FILE --shot JSON`) both
 //! become a `simulate` stage (`pipeline/stages/simulate.rs`) recorded in the run's manifest as
@@ -26,34 +27,35 @@ pub struct Args {
     /// Run folder to write into (created if needed).
     #[arg(long)]
     run: PathBuf,
-    /// Dataset mode: number of random 9-ball racks.
+    /// Dataset mode: number of random 9-ball racks (phyre: of tasks; iphyre: see --games).
     #[arg(long, default_value_t = 10, conflicts_with = "scene")]
     scenes: u64,
-    /// Dataset mode: random shots per rack (iphyre: random click sets per game).
+    /// Dataset mode: random shots per rack (iphyre: click sets per game; phyre: valid actions per task).
     #[arg(long, default_value_t = 1, conflicts_with = "scene")]
     shots: u64,
-    /// Dataset mode: seed of racks and shots.
+    /// Dataset mode: seed of the scenes and actions.
     #[arg(long, default_value_t = 0, conflicts_with = "scene")]
     seed: u64,
-    /// Replay mode: a scene JSON file (balls, cue ball, goal; see docs/envs/pool.md).
+    /// pooltool replay mode: a scene JSON file (balls, cue ball, goal; see docs/envs/pool.md).
     #[arg(long, requires = "shot")]
     scene: Option<PathBuf>,
-    /// Replay mode: the shot, e.g. '{"V0": 3, "phi": 90, "theta": 0, "a": 0, "b": 0.2}'.
+    /// pooltool replay mode: the shot, e.g. '{"V0": 3, "phi": 90, "theta": 0, "a": 0, "b": 0.2}'.
     #[arg(long, requires = "scene")]
     shot: Option<String>,
-    /// Table file (geometry, ball and cue parameters); default: the built-in pooltool 7-ft table.
+    /// pooltool: table file (geometry, ball and cue parameters); default: the built-in 7-ft table.
     #[arg(long)]
     table: Option<PathBuf>,
-    /// Timestep spacing of the traces (s).
+    /// pooltool: timestep spacing of the traces (s).
     #[arg(long, default_value_t = 0.01)]
     dt: f64,
-    /// Stop a shot after this many events (0 = no cap).
+    /// pooltool: stop a shot after this many events (0 = no cap).
     #[arg(long, default_value_t = 100_000)]
     max_events: u64,
-    /// Stop a shot at the first event at or after this time (s).
+    /// pooltool: stop a shot at the first event at or after this time (s).
     #[arg(long)]
     max_time: Option<f64>,
-    /// Scenes per output file (a resumed run redoes at most the unfinished shards; iphyre: traces per file).
+    /// Scenes per output file (a resumed run redoes at most the unfinished shards; iphyre and phyre:
+    /// traces per file).
     #[arg(long, default_value_t = 100)]
     scenes_per_shard: u64,
     /// iphyre dataset mode: comma-separated game and fold names (basic, noisy, compositional,

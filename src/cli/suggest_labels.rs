@@ -125,7 +125,8 @@ pub fn llm_error(e: LlmError) -> CliError {
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Library folder whose labels the suggestions must not repeat (default: data/libraries/<env>).
+    /// Library folder whose labels the suggestions must not repeat; default: the built-in one of --env,
+    /// or ./data/libraries/<env> when present.
     #[arg(long)]
     library: Option<PathBuf>,
     /// Environment (default: the library's).
