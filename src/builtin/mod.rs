@@ -1,12 +1,13 @@
 //! The built-in data compiled into the binary, so every command works from any folder and from a copied
-//! or `cargo install`ed binary: the detector libraries (`data/libraries/<env>/`: `library.toml` and its
-//! `.py` files), the goal files (`data/goals/<env>.toml`), the billiards table, the I-PHYRE games and the
-//! PHYRE tasks.
+//! or `cargo install`ed binary: the detector libraries (`data/libraries/<env>/`: `library.toml` and
+//! its `.py` files), the goal files (`data/goals/<env>.toml`), the billiards table, the I-PHYRE games
+//! and the PHYRE tasks.
 //!
 //! Each file is found by its path in the repository ([`get`], [`text`]), e.g.
 //! `data/libraries/pooltool/library.toml`. The table, games and tasks are embedded once, by the
 //! environment that reads them (`envs::pool::DEFAULT_TABLE_JSON`, `envs::iphyre::DEFAULT_GAMES_JSON`,
-//! `envs::phyre::DEFAULT_TASKS_GZ`); this index refers to those constants instead of embedding them again.
+//! `envs::phyre::DEFAULT_TASKS_GZ`); this index refers to those constants instead of embedding them
+//! again.
 //! The prompt templates are embedded by `llm::prompt`, and the detector worker and mutation scripts by
 //! their modules; they are not listed here.
 //!

@@ -19,7 +19,8 @@ pub struct Args {
     /// Run folder holding the traces.
     #[arg(long)]
     run: PathBuf,
-    /// Library folder (library.toml + one .py per detector); default: the built-in one, or ./data/libraries/<env> when present.
+    /// Library folder (library.toml + one .py per detector); default: the built-in one, or
+    /// ./data/libraries/<env> when present.
     #[arg(long)]
     library: Option<PathBuf>,
     /// Environment whose traces are annotated.

@@ -81,7 +81,7 @@ enum Command {
     Stages(stages::Args),
     /// Simulate billiards shots, I-PHYRE or PHYRE episodes into a run (a random dataset, or one replay).
     Simulate(simulate::Args),
-    /// Draw a trace of a run, an I-PHYRE game or a PHYRE task as a PNG (one instant or a strip of frames).
+    /// Draw a run's trace, an I-PHYRE game or a PHYRE task as a PNG (one instant or a strip of frames).
     Render(render::Args),
     /// Import traces in the paper's JSON format into a run.
     Import(import::Args),
