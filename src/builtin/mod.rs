@@ -38,7 +38,7 @@ macro_rules! embed {
     };
 }
 
-/// The libraries and goal files (everything [`FILES`] embeds itself).
+/// The libraries and goal files: the files this index embeds itself.
 const OWN: &[File] = embed![
     "data/goals/iphyre.toml",
     "data/goals/phyre.toml",
