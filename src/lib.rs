@@ -8,12 +8,15 @@
 //! - [`trace`]: the trace model, its Arrow schemas and the paper's JSON format;
 //! - [`store`]: the run directory on disk — atomic files, Parquet datasets, staging and commit;
 //! - [`envs`]: simulators behind one `Environment` trait (billiards: pooltool 0.6.0 physics), producing traces;
+//! - [`builtin`]: the built-in data compiled into the binary (libraries, goal files), and whether a
+//!   path means a file on disk or a built-in;
 //! - [`detect`]: sandboxed Python workers that run detector programs over traces, annotations and libraries;
 //! - [`llm`]: OpenAI-compatible chat client (retries, budget, `llm_calls` recording and replay), prompt templates;
 //! - [`query`]: DataFusion over a run's tables, and result formats (table, CSV, Markdown, LaTeX, JSON);
 //! - [`pipeline`]: pipeline files, the stage registry, fingerprints, the runner and its manifest.
 #![warn(missing_docs)]
 
+pub mod builtin;
 pub mod detect;
 pub mod envs;
 pub mod fitness;

@@ -22,7 +22,8 @@ pub(crate) struct SandboxArgs {
     /// Run folder holding the traces.
     #[arg(long)]
     pub run: PathBuf,
-    /// Library folder (library.toml + one .py per detector); default: data/libraries/<env>.
+    /// Library folder (library.toml + one .py per detector); default: the built-in one, or
+    /// ./data/libraries/<env> when present.
     #[arg(long)]
     pub library: Option<PathBuf>,
     /// Environment of the traces: pooltool, phyre or iphyre.

@@ -28,7 +28,7 @@ pub struct Args {
     /// Environment whose traces are used: pooltool, phyre or iphyre.
     #[arg(long, default_value = "pooltool")]
     env: Env,
-    /// Starting library folder; default: data/libraries/<env>.
+    /// Starting library folder; default: the built-in one, or ./data/libraries/<env> when present.
     #[arg(long)]
     library: Option<PathBuf>,
     /// Labels to learn, in order (comma-separated or repeated); default: the library's labels.

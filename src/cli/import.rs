@@ -18,7 +18,7 @@ use super::{CliError, CliResult};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Environment of the traces.
+    /// Environment of the traces: pooltool, phyre or iphyre.
     #[arg(long, value_parser = parse_env)]
     env: Env,
     /// JSON files (one trace or an array), JSON Lines files (.jsonl) or folders of them.

@@ -81,9 +81,9 @@ enum Command {
     Run(run::Args),
     /// List the stage kinds a pipeline can use, with their parameters.
     Stages(stages::Args),
-    /// Simulate billiards shots into a run (random 9-ball racks, or one scene and shot).
+    /// Simulate billiards shots, I-PHYRE or PHYRE episodes into a run (a random dataset, or one replay).
     Simulate(simulate::Args),
-    /// Draw a billiards trace of a run as a PNG (one instant or a strip of frames).
+    /// Draw a run's trace, an I-PHYRE game or a PHYRE task as a PNG (one instant or a strip of frames).
     Render(render::Args),
     /// Import traces in the paper's JSON format into a run.
     Import(import::Args),

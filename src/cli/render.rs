@@ -44,7 +44,7 @@ pub struct Args {
     /// PHYRE: draw DeepPHY's 8×8 grid with cells numbered 1–64 from the top-left.
     #[arg(long)]
     grid: bool,
-    /// Time to draw (s); the nearest timestep is shown. Default: 0 (the initial table).
+    /// Time to draw (s); the nearest timestep is shown. Default: 0 (the initial state).
     #[arg(long, conflicts_with = "frames")]
     t: Option<f64>,
     /// Draw K frames evenly spread over the trace, side by side.
@@ -56,7 +56,7 @@ pub struct Args {
     /// Width and height of one frame in pixels.
     #[arg(long, default_value_t = 512)]
     size: u32,
-    /// Table file the trace was simulated on; default: the built-in pooltool 7-ft table.
+    /// pooltool: table file the trace was simulated on; default: the built-in 7-ft table.
     #[arg(long)]
     table: Option<PathBuf>,
 }

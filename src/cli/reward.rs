@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
+use annotrace::builtin::Location;
 use annotrace::detect::tables::read_annotations;
 use annotrace::detect::{Annotation, Library, SandboxLimits, WorkerPool};
 use annotrace::envs::Environment;
@@ -41,7 +42,7 @@ struct SynthArgs {
     /// Billiards scene: a scene JSON file, or SEED:INDEX for a generated 9-ball rack.
     #[arg(long, default_value = "1000:0")]
     scene: String,
-    /// Library folder; default: data/libraries/<env>.
+    /// Library folder; default: the built-in one, or ./data/libraries/<env> when present.
     #[arg(long)]
     library: Option<PathBuf>,
     /// Repair rounds after the first answer.
@@ -73,7 +74,7 @@ struct SynthArgs {
 struct CheckArgs {
     /// The program (DSL text), or @FILE to read it from a file.
     program: String,
-    /// Library folder; default: data/libraries/pooltool.
+    /// Library folder; default: the built-in pooltool one, or ./data/libraries/pooltool when present.
     #[arg(long)]
     library: Option<PathBuf>,
     /// Do not learn parameter keys by annotating a few simulated shots (then any key is accepted).
@@ -91,7 +92,8 @@ struct EvalArgs {
     /// Trace id.
     #[arg(long)]
     trace: String,
-    /// Library folder; default: data/libraries/<env of the trace>.
+    /// Library folder; default: the built-in one of the trace's environment, or
+    /// ./data/libraries/<env> when present.
     #[arg(long)]
     library: Option<PathBuf>,
 }
@@ -113,23 +115,16 @@ pub(crate) fn program_text(arg: &str) -> Result<String, CliError> {
     }
 }
 
-/// The library folder: the one given, or data/libraries/<env> of the current folder, or the crate's.
-pub(crate) fn library_dir(given: Option<&Path>, env: Env) -> PathBuf {
-    if let Some(p) = given {
-        return p.to_path_buf();
-    }
-    let local = Path::new("data/libraries").join(env.as_str());
-    if local.join("library.toml").is_file() {
-        local
-    } else {
-        Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("data/libraries")
-            .join(env.as_str())
+/// The library: the folder given, or data/libraries/<env> of the current folder, or the built-in one.
+pub(crate) fn library_dir(given: Option<&Path>, env: Env) -> Location {
+    match given {
+        Some(p) => Location::Disk(p.to_path_buf()),
+        None => Location::default_library(Path::new("."), env),
     }
 }
 
-pub(crate) fn load_library(dir: &Path) -> Result<Library, CliError> {
-    Library::load(dir).map_err(|e| CliError::input(anyhow::anyhow!("{e}")))
+pub(crate) fn load_library(dir: &Location) -> Result<Library, CliError> {
+    Library::open(dir).map_err(|e| CliError::input(anyhow::anyhow!("{e}")))
 }
 
 pub(crate) fn pool() -> Result<WorkerPool, CliError> {

@@ -11,7 +11,7 @@ use super::{CliError, CliResult, fault_from_env, run_error};
 pub struct Args {
     /// The pipeline file (TOML).
     pipeline: PathBuf,
-    /// Run folder (default: runs/<pipeline name> in the project folder).
+    /// Run folder (default: the file's `run_dir`, else runs/<pipeline name> in the project folder).
     #[arg(long)]
     run_dir: Option<PathBuf>,
     /// Rerun this stage and every stage downstream of it, even if cached.

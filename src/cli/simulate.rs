@@ -33,13 +33,13 @@ pub struct Args {
     /// Dataset mode: random shots per rack (phyre: actions per task; iphyre: click sets per game).
     #[arg(long, default_value_t = 1, conflicts_with = "scene")]
     shots: u64,
-    /// Dataset mode: seed of racks and shots.
+    /// Dataset mode: seed of the scenes and actions.
     #[arg(long, default_value_t = 0, conflicts_with = "scene")]
     seed: u64,
-    /// Replay mode: a scene JSON file (balls, cue ball, goal; see docs/envs/pool.md).
+    /// pooltool replay mode: a scene JSON file (balls, cue ball, goal; see docs/envs/pool.md).
     #[arg(long, requires = "shot")]
     scene: Option<PathBuf>,
-    /// Replay mode: the shot, e.g. '{"V0": 3, "phi": 90, "theta": 0, "a": 0, "b": 0.2}'.
+    /// pooltool replay mode: the shot, e.g. '{"V0": 3, "phi": 90, "theta": 0, "a": 0, "b": 0.2}'.
     #[arg(long, requires = "scene")]
     shot: Option<String>,
     /// pooltool: table file (geometry, ball and cue parameters); default: the built-in 7-ft table.
@@ -54,7 +54,8 @@ pub struct Args {
     /// pooltool: stop a shot at the first event at or after this time (s).
     #[arg(long)]
     max_time: Option<f64>,
-    /// Scenes per output file (a resumed run redoes at most the unfinished shards; iphyre: traces per file).
+    /// Scenes per output file (a resumed run redoes at most the unfinished shards; iphyre and phyre:
+    /// traces per file).
     #[arg(long, default_value_t = 100)]
     scenes_per_shard: u64,
     /// iphyre dataset mode: comma-separated game and fold names (basic, noisy, compositional,

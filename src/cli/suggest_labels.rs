@@ -9,6 +9,7 @@
 
 use std::path::{Path, PathBuf};
 
+use annotrace::builtin::Location;
 use annotrace::detect::Library;
 use annotrace::llm::{
     LabelsContext, LabelsError, LibraryEntry, LlmClient, SuggestParams, suggest_labels,
@@ -22,7 +23,8 @@ use super::{CliError, CliResult};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Library folder whose labels the suggestions must not repeat (default: data/libraries/<env>).
+    /// Library folder whose labels the suggestions must not repeat; default: the built-in one of --env,
+    /// or ./data/libraries/<env> when present.
     #[arg(long)]
     library: Option<PathBuf>,
     /// Environment (default: the library's).
@@ -58,21 +60,23 @@ pub struct Args {
 
 fn load_library(args: &Args) -> Result<Library, CliError> {
     let dir = match (&args.library, &args.env) {
-        (Some(d), _) => d.clone(),
-        (None, Some(env)) => Path::new("data/libraries").join(env),
+        (Some(d), _) => Location::Disk(d.clone()),
+        (None, Some(env)) => {
+            let env: Env = env.parse().map_err(CliError::input)?;
+            Location::default_library(Path::new("."), env)
+        }
         (None, None) => {
             return Err(CliError::input(anyhow!(
-                "give --library DIR or --env (whose default library is data/libraries/<env>)"
+                "give --library DIR or --env (whose default is the built-in library of <env>)"
             )));
         }
     };
-    let lib = Library::load(&dir).map_err(CliError::input)?;
+    let lib = Library::open(&dir).map_err(CliError::input)?;
     if let Some(env) = &args.env
         && env.parse::<Env>().ok() != Some(lib.env)
     {
         return Err(CliError::input(anyhow!(
-            "{}: the library is for {}, not --env {env}",
-            dir.display(),
+            "{dir}: the library is for {}, not --env {env}",
             lib.env
         )));
     }

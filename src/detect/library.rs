@@ -22,6 +22,10 @@
 //!
 //! Several detectors may share a label (an ensemble). Unknown keys are errors, so a typo does not pass
 //! silently.
+//!
+//! A library is read from a folder on disk ([`Library::load`]) or from the built-in data compiled into
+//! the binary ([`Library::builtin`]); [`Library::open`] takes either ([`Location`]). Ids, fingerprints
+//! and stored code depend on the files' contents and names, never on where they were read from.
 
 use std::path::{Path, PathBuf};
 
@@ -29,6 +33,7 @@ use serde::Deserialize;
 use sha2::{Digest, Sha256};
 
 use super::detector::{Detector, DetectorId};
+use crate::builtin::Location;
 use crate::trace::Env;
 
 /// A library could not be loaded; every variant names the file.
@@ -99,8 +104,8 @@ pub struct Library {
     pub env: Env,
     /// One paragraph on what it is.
     pub description: String,
-    /// The folder it was read from.
-    pub dir: PathBuf,
+    /// Where it was read from: a folder on disk, or built in.
+    pub origin: Location,
     /// Its detectors, in manifest order.
     pub detectors: Vec<Detector>,
 }
@@ -108,11 +113,25 @@ pub struct Library {
 impl Library {
     /// Reads `dir/library.toml` and the detector files it lists.
     pub fn load(dir: &Path) -> Result<Library, LibraryError> {
-        let path = dir.join("library.toml");
-        let text = std::fs::read_to_string(&path).map_err(|source| LibraryError::Io {
-            path: path.clone(),
-            source,
-        })?;
+        Library::open(&Location::Disk(dir.to_path_buf()))
+    }
+
+    /// The built-in library of `env` (`data/libraries/<env>`, compiled into the binary).
+    pub fn builtin(env: Env) -> Result<Library, LibraryError> {
+        Library::open(&Location::Builtin(crate::builtin::library_path(env)))
+    }
+
+    /// Reads `library.toml` and the detector files it lists from a folder on disk or a built-in one.
+    pub fn open(dir: &Location) -> Result<Library, LibraryError> {
+        let read = |name: &str| {
+            let file = dir.join(name);
+            file.read_to_string().map_err(|source| LibraryError::Io {
+                path: file.path(),
+                source,
+            })
+        };
+        let path = dir.join("library.toml").path();
+        let text = read("library.toml")?;
         let bad = |message: String| LibraryError::Manifest {
             path: path.clone(),
             message,
@@ -126,10 +145,6 @@ impl Library {
         if m.detectors.is_empty() {
             return Err(bad("the library lists no [[detector]]".into()));
         }
-        let read = |name: &str| {
-            let file = dir.join(name);
-            std::fs::read_to_string(&file).map_err(|source| LibraryError::Io { path: file, source })
-        };
         let mut shared = String::new();
         for name in &m.library.prelude {
             shared.push_str(&read(name)?);
@@ -169,7 +184,7 @@ impl Library {
             name: m.library.name,
             env,
             description: m.library.description,
-            dir: dir.to_path_buf(),
+            origin: dir.clone(),
             detectors,
         })
     }
@@ -218,6 +233,25 @@ mod tests {
             lib.fingerprint(),
             Library::load(&dir).unwrap().fingerprint()
         );
+    }
+
+    #[test]
+    fn each_builtin_library_is_its_folder_byte_for_byte() {
+        for env in Env::ALL {
+            let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join(crate::builtin::library_path(env));
+            let disk = Library::load(&dir).unwrap();
+            let built = Library::builtin(env).unwrap();
+            assert!(built.origin.is_builtin() && !disk.origin.is_builtin());
+            assert_eq!(built.fingerprint(), disk.fingerprint(), "{env}");
+            assert_eq!((&built.name, built.env), (&disk.name, disk.env));
+            let code = |l: &Library| -> Vec<(String, String)> {
+                l.detectors
+                    .iter()
+                    .map(|d| (d.source.clone(), d.code.clone()))
+                    .collect()
+            };
+            assert_eq!(code(&built), code(&disk), "{env}");
+        }
     }
 
     #[test]

@@ -14,6 +14,10 @@
 //! verify = "SEQ(CURVE(\"cue\"), FIRST_HIT(\"8\"), POCKET(\"8\"))"
 //! source = "paper appendix G, goal 1"   # optional
 //! ```
+//!
+//! A goal file is read from disk or from the built-in data ([`GoalSet::open`]); its relative `library`
+//! is resolved against the project folder, then among the built-in libraries
+//! ([`crate::builtin::Location::library`]).
 
 use std::path::{Path, PathBuf};
 
@@ -22,6 +26,7 @@ use serde::Deserialize;
 use super::error::RewardError;
 use super::schema::{LabelInfo, Schema};
 use super::verify::Rule;
+use crate::builtin::Location;
 use crate::detect::Library;
 use crate::trace::Env;
 
@@ -63,12 +68,12 @@ struct File {
 /// A loaded goal file.
 #[derive(Debug, Clone)]
 pub struct GoalSet {
-    /// The file.
+    /// The file (`(built-in) data/goals/<env>.toml` for a built-in one).
     pub path: PathBuf,
     /// The environment.
     pub env: Env,
-    /// The library folder the programs are written for, when it exists.
-    pub library: Option<PathBuf>,
+    /// The library the programs are written for, when it exists.
+    pub library: Option<Location>,
     /// The schema the programs were checked against.
     pub schema: Schema,
     /// The goals in file order.
@@ -111,9 +116,15 @@ pub enum GoalError {
 
 impl GoalSet {
     /// Loads and checks `path`; a relative `library` is resolved against `project` (and then the
-    /// crate's own folder).
+    /// built-in libraries).
     pub fn load(path: &Path, project: &Path) -> Result<GoalSet, GoalError> {
-        let text = std::fs::read_to_string(path).map_err(|source| GoalError::Io {
+        GoalSet::open(&Location::Disk(path.to_path_buf()), project)
+    }
+
+    /// Like [`GoalSet::load`], for a goal file on disk or a built-in one.
+    pub fn open(at: &Location, project: &Path) -> Result<GoalSet, GoalError> {
+        let path = &at.path();
+        let text = at.read_to_string().map_err(|source| GoalError::Io {
             path: path.into(),
             source,
         })?;
@@ -127,17 +138,15 @@ impl GoalSet {
             .env
             .parse()
             .map_err(|e: crate::trace::UnknownEnv| fmt(format!("goals.env: {e}")))?;
-        let library = file.goals.library.as_ref().and_then(|l| {
-            [
-                project.join(l),
-                Path::new(env!("CARGO_MANIFEST_DIR")).join(l),
-            ]
-            .into_iter()
-            .find(|p| p.join("library.toml").is_file())
-        });
+        let library = file
+            .goals
+            .library
+            .as_ref()
+            .map(|l| Location::library(project, Path::new(l)))
+            .filter(Location::is_library);
         let schema = match &library {
             Some(dir) => {
-                let lib = Library::load(dir).map_err(|e| fmt(format!("goals.library: {e}")))?;
+                let lib = Library::open(dir).map_err(|e| fmt(format!("goals.library: {e}")))?;
                 Schema::from_library(&lib)
             }
             None if !file.goals.labels.is_empty() => Schema {
@@ -186,5 +195,30 @@ impl GoalSet {
     /// The goal with this id.
     pub fn get(&self, id: &str) -> Option<&Goal> {
         self.goals.iter().find(|g| g.id == id)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_builtin_goal_file_opens_from_an_empty_project_like_its_file_in_the_repository() {
+        let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let empty = tempfile::tempdir().unwrap();
+        for env in Env::ALL {
+            let rel = format!("data/goals/{env}.toml");
+            let at = Location::file(empty.path(), Path::new(&rel));
+            assert!(at.is_builtin(), "{rel}");
+            let built = GoalSet::open(&at, empty.path()).unwrap();
+            let disk = GoalSet::load(&repo.join(&rel), repo).unwrap();
+            assert_eq!(built.env, env);
+            assert_eq!(built.goals, disk.goals, "{rel}");
+            assert_eq!(built.schema.labels.len(), disk.schema.labels.len(), "{rel}");
+            // The goal file's library is the built-in one, found without the repository.
+            let lib = built.library.as_ref().expect("a library");
+            assert!(lib.is_builtin(), "{rel}: {lib}");
+            assert_eq!(built.path, Path::new(&format!("(built-in) {rel}")));
+        }
     }
 }

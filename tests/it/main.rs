@@ -3,6 +3,7 @@
 mod common;
 
 mod annotate;
+mod anywhere;
 mod evolve;
 mod export;
 mod import;

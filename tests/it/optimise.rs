@@ -188,5 +188,5 @@ fn optimise_rejects_bad_parameters() {
     );
     t.run(&["run", "q.toml", "--run-dir", "out"])
         .code(2)
-        .stderr_has("reward types are");
+        .stderr_has("q.toml:6: stage \"o\": `rewards[1]`: unknown variant `medium`, expected `dense` or `sparse`");
 }

@@ -5,12 +5,13 @@
 //! and `optimise`) and [`DetectorSetup`]. **Does not:** run detectors (`detect::WorkerPool`) or write
 //! tables (each stage does, through [`StageContext::write_batch`](crate::pipeline::StageContext)).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::builtin::Location;
 use crate::detect::{Library, SandboxLimits, WorkerPool};
 use crate::pipeline::registry::BuildError;
 use crate::pipeline::spec::PipelineSpec;
@@ -23,7 +24,8 @@ use crate::trace::Env;
 pub struct SandboxParams {
     /// Environment whose traces are used.
     pub env: Env,
-    /// Library folder, relative to the project folder (default: data/libraries/<env>).
+    /// Library folder, relative to the project folder (default: the project's data/libraries/<env>
+    /// when it has one, else the built-in library).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub library: Option<String>,
     /// Python worker processes (0 = one per core).
@@ -63,20 +65,16 @@ impl DetectorSetup {
     /// Loads the library and checks the limits.
     pub(crate) fn new(p: &SandboxParams, spec: &PipelineSpec) -> Result<Self, BuildError> {
         let env = p.env;
-        let dir: PathBuf = match &p.library {
-            Some(l) => spec.project_dir.join(l),
-            None => default_library_dir(&spec.project_dir, env),
+        let dir = match &p.library {
+            Some(l) => Location::library(&spec.project_dir, Path::new(l)),
+            None => Location::default_library(&spec.project_dir, env),
         };
         let library =
-            Library::load(&dir).map_err(|e| BuildError::param("library", e.to_string()))?;
+            Library::open(&dir).map_err(|e| BuildError::param("library", e.to_string()))?;
         if library.env != env {
             return Err(BuildError::param(
                 "library",
-                format!(
-                    "library {} is for {}, not {env}",
-                    dir.display(),
-                    library.env
-                ),
+                format!("library {dir} is for {}, not {env}", library.env),
             ));
         }
         if !(p.timeout > 0.0 && p.timeout.is_finite()) {
@@ -101,17 +99,5 @@ impl DetectorSetup {
     /// Starts the worker pool.
     pub(crate) fn pool(&self) -> Result<WorkerPool, StageError> {
         WorkerPool::new(self.limits.clone()).map_err(StageError::Workers)
-    }
-}
-
-/// `data/libraries/<env>` under the project folder, or the crate's own copy when the project has none.
-pub(crate) fn default_library_dir(project: &Path, env: Env) -> PathBuf {
-    let local = project.join("data/libraries").join(env.as_str());
-    if local.join("library.toml").is_file() {
-        local
-    } else {
-        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("data/libraries")
-            .join(env.as_str())
     }
 }

@@ -19,6 +19,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use super::detector_setup::{DetectorSetup, SandboxParams};
+use crate::builtin::Location;
 use crate::detect::Library;
 use crate::envs::pool::PoolEnv;
 use crate::optimise::plot::{curves, png, svg};
@@ -141,16 +142,10 @@ pub struct OptimiseStage {
 
 fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
     let p: OptimiseParams = def.params()?;
-    let rel = p.goals.as_str();
-    // The project's file, else the crate's own copy (pipelines run from another folder).
-    let goals_path = [
-        spec.project_dir.join(rel),
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(rel),
-    ]
-    .into_iter()
-    .find(|p| p.is_file())
-    .unwrap_or_else(|| spec.project_dir.join(rel));
-    let goals = GoalSet::load(&goals_path, &spec.project_dir)
+    // The project's file, else the built-in one (pipelines run from another folder).
+    let goals_at = Location::file(&spec.project_dir, std::path::Path::new(&p.goals));
+    let goals_path = goals_at.path();
+    let goals = GoalSet::open(&goals_at, &spec.project_dir)
         .map_err(|e| BuildError::param("goals", e.to_string()))?;
     if goals.env != Env::Pooltool {
         return Err(BuildError::param(
@@ -162,7 +157,8 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
             ),
         ));
     }
-    let goals_text = std::fs::read_to_string(&goals_path)
+    let goals_text = goals_at
+        .read_to_string()
         .map_err(|e| BuildError::param("goals", e.to_string()))?;
     let goal_ids: Vec<String> = match &p.goal_ids {
         Some(ids) => ids.clone(),
@@ -177,12 +173,10 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     // The sandbox settings; the library is the goal file's unless one is given.
     let sandbox = SandboxParams {
         env: Env::Pooltool,
-        library: p.library.clone().or_else(|| {
-            goals
-                .library
-                .as_ref()
-                .map(|l| l.to_string_lossy().into_owned())
-        }),
+        library: p
+            .library
+            .clone()
+            .or_else(|| goals.library.as_ref().map(|l| l.as_param())),
         workers: p.workers,
         timeout: p.timeout,
         memory_mb: p.memory_mb,
