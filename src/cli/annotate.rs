@@ -6,7 +6,8 @@
 
 use std::path::{Path, PathBuf};
 
-use annotrace::pipeline::{PipelineSpec, RunOptions, StageReport, hex, run as run_pipeline};
+use annotrace::digest::hex;
+use annotrace::pipeline::{PipelineSpec, RunOptions, StageReport, run as run_pipeline};
 use annotrace::query::{Format, RenderOptions, render_string};
 use anyhow::Context;
 use sha2::{Digest, Sha256};

@@ -5,7 +5,8 @@
 
 use std::path::PathBuf;
 
-use annotrace::pipeline::{PipelineSpec, RunOptions, hex, run as run_pipeline};
+use annotrace::digest::hex;
+use annotrace::pipeline::{PipelineSpec, RunOptions, run as run_pipeline};
 use annotrace::query::{Format, RenderOptions, render_string};
 use annotrace::trace::Env;
 use anyhow::Context;

@@ -10,7 +10,8 @@
 
 use std::path::{Path, PathBuf};
 
-use annotrace::pipeline::{PipelineSpec, RunOptions, hex, run as run_pipeline};
+use annotrace::digest::hex;
+use annotrace::pipeline::{PipelineSpec, RunOptions, run as run_pipeline};
 use anyhow::Context;
 use serde::Serialize;
 use sha2::{Digest, Sha256};

@@ -14,9 +14,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Condvar, Mutex};
 use std::time::{Duration, Instant, SystemTime};
 
-use sha2::{Digest, Sha256};
-
-use super::backoff::{delay, parse_retry_after, splitmix64};
+use super::backoff::{delay, parse_retry_after};
 use super::budget::{Meter, Usage};
 use super::config::{LlmConfig, endpoint_url, redact_url};
 use super::error::LlmError;
@@ -24,6 +22,8 @@ use super::message::{ChatReply, ChatRequest, excerpt, parse_answer};
 use super::record::{CallLog, CallRecord, now_ms, status};
 use super::replay::ReplayIndex;
 use crate::detect::count_tokens;
+use crate::digest::sha256_hex;
+use crate::rng::splitmix64;
 use crate::store::RunDir;
 
 /// Keys shorter than this are not scrubbed from recorded text (replacing every `x` would mangle the
@@ -114,13 +114,6 @@ enum Attempt {
     },
 }
 
-fn sha_hex(s: &str) -> String {
-    Sha256::digest(s.as_bytes())
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
-}
-
 impl LlmClient {
     /// A client for `config`, recording every call into `record`'s `llm_calls` table when given.
     /// Opens the replay source when the configuration has one.
@@ -206,7 +199,7 @@ impl LlmClient {
 
     /// The SHA-256 of the body this client would send for `req` (the replay key).
     pub fn request_hash(&self, req: &ChatRequest) -> String {
-        sha_hex(&self.body(req).to_string())
+        sha256_hex(self.body(req).to_string().as_bytes())
     }
 
     fn body(&self, req: &ChatRequest) -> serde_json::Value {
@@ -247,8 +240,8 @@ impl LlmClient {
         }
         let body = self.body(req);
         let body_text = body.to_string();
-        let request_hash = sha_hex(&body_text);
-        let prompt_hash = sha_hex(&body["messages"].to_string());
+        let request_hash = sha256_hex(body_text.as_bytes());
+        let prompt_hash = sha256_hex(body["messages"].to_string().as_bytes());
         self.meter.reserve()?;
         let call_id = format!(
             "{}-{}",

@@ -16,14 +16,13 @@ use std::collections::{BTreeMap, HashMap};
 use std::sync::Mutex;
 use std::time::Instant;
 
-use sha2::{Digest, Sha256};
-
 use super::candidate::{CandidateRecord, code_hash};
 use super::evaluator::{Evaluation, Evaluator};
 use super::islands::{Database, Program, Strategy, Temperatures};
 use super::proposer::{Parent, Proposal, ProposalRequest, ProposeError, Proposer, count_lines};
 use crate::detect::DetectorError;
-use crate::envs::pool::rack::SplitMix64;
+use crate::digest::words_u64;
+use crate::rng::SplitMix64;
 
 /// The knobs of a search (the paper's I, s, T_r, budget and δ, and ours).
 #[derive(Clone, Debug, PartialEq)]
@@ -163,17 +162,9 @@ pub struct LabelOutcome {
     pub budget_exhausted: bool,
 }
 
-fn mix(parts: &[u64]) -> u64 {
-    let mut h = Sha256::new();
-    for p in parts {
-        h.update(p.to_le_bytes());
-    }
-    u64::from_le_bytes(h.finalize()[..8].try_into().expect("8 bytes"))
-}
-
 /// The generator of step `step` of label `label_index`'s search.
 pub fn step_rng(seed: u64, label_index: u32, step: u64) -> SplitMix64 {
-    SplitMix64::new(mix(&[seed, u64::from(label_index), step, 0x57E9]))
+    SplitMix64::new(words_u64(&[seed, u64::from(label_index), step, 0x57E9]))
 }
 
 fn repairable(e: &DetectorError) -> bool {
@@ -231,8 +222,12 @@ impl State {
             if let Some(db) = &mut self.db {
                 self.best_by_step.push(db.best().terms.nu);
                 if cfg.reset_period > 0 && (step + 1).is_multiple_of(cfg.reset_period) {
-                    let mut rng =
-                        SplitMix64::new(mix(&[cfg.seed, u64::from(label_index), step, 0x4E5E7]));
+                    let mut rng = SplitMix64::new(words_u64(&[
+                        cfg.seed,
+                        u64::from(label_index),
+                        step,
+                        0x4E5E7,
+                    ]));
                     db.reset(&mut rng);
                 }
             }

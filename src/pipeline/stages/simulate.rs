@@ -19,12 +19,13 @@ use rayon::prelude::*;
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
+use crate::digest::hex;
 use crate::envs::pool::{
     PoolConfig, Scene, Shot, SimOptions, TraceOptions, rack, simulate, trace_of,
 };
 use crate::pipeline::params::{ParamSpec, ParamType};
 use crate::pipeline::registry::{BuildError, StageKind};
-use crate::pipeline::spec::{PipelineSpec, StageDef, hex};
+use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
 use crate::store::ParquetSink;
 use crate::trace::batch::scene_batch;

@@ -23,12 +23,13 @@ use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
 use super::simulate::{ShardSinks, check_ids_are_new, replay_pair, run_shards};
+use crate::digest::hex;
 use crate::envs::iphyre::{
     Click, Episode, Game, Games, PhysicsParams, click_block, clicks_rng, random_clicks, trace_of,
     validate_clicks,
 };
 use crate::pipeline::registry::BuildError;
-use crate::pipeline::spec::{PipelineSpec, StageDef, hex};
+use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
 use crate::trace::Env;
 use crate::trace::batch::scene_batch;
