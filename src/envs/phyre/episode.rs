@@ -213,7 +213,7 @@ fn advance(
                 }
             });
         }
-        if opts.stride > 0 && step % opts.stride == 0 {
+        if opts.stride > 0 && step.is_multiple_of(opts.stride) {
             result.frames.push(snapshot(world, step));
         }
     }
