@@ -398,11 +398,21 @@ impl TraceBatchBuilder {
         scene_id: &str,
         source: &str,
     ) -> Result<TraceBatches, ArrowError> {
-        let mut b = TraceBatchBuilder::new();
+        TraceBatchBuilder::new().push_trace(trace, scene_id, source)
+    }
+
+    /// Converts a whole in-memory trace with this builder (whose buffers a writer of many traces
+    /// keeps): every timestep, then the trace's row and events.
+    pub fn push_trace(
+        &mut self,
+        trace: &Trace,
+        scene_id: &str,
+        source: &str,
+    ) -> Result<TraceBatches, ArrowError> {
         for ts in &trace.timesteps {
-            b.push_timestep(ts);
+            self.push_timestep(ts);
         }
-        b.finish(&TraceMeta {
+        self.finish(&TraceMeta {
             trace_id: &trace.trace_id,
             scene_id,
             task_id: &trace.task_id,
