@@ -6,6 +6,12 @@
 //! CPython's `marshal` format (`M`, read by `marshal.rs`). A run request gets one reply per detector, in
 //! order; an evict request gets none (it is sent behind a run request); every other request gets one
 //! reply.
+//!
+//! Owns the request bodies and the one parser of replies: [`parse_reply`] turns a frame into a
+//! [`WorkerReply`] (done, or failed with a typed [`WorkerError`] that maps to a
+//! [`DetectorError`]), so no caller reads reply JSON by key (only the spawner reads the ready
+//! message's fields, through [`parse_json`]). Does not own the pipes, timeouts or restarts
+//! (`worker.rs`, `pool.rs`).
 
 use std::io::{self, Write};
 

@@ -521,8 +521,8 @@ impl<'a> Engine<'a> {
 }
 
 /// Simulate `shot` on `system` until every ball rests (or a cap is hit). One loop turn is one
-/// event, in the steps of the module doc: [`Engine::next_event`], [`Engine::evolve_to`],
-/// [`Engine::resolve`], the transition cache, [`Engine::record`], the caps, the collision cache.
+/// event, in the steps of the module doc: `next_event`, `evolve_to`, `resolve`, the transition
+/// cache, `record`, the caps, the collision cache.
 pub fn simulate(system: &System, shot: &Shot, opts: &SimOptions) -> Result<Simulation> {
     shot.validate()?;
     let cue_idx = system.validate()?;
