@@ -5,6 +5,8 @@
 //! over a run's tables makes the paper's figures and tables.
 //!
 //! Modules, bottom to top (each depends only on those above it in this list):
+//! - [`rng`]: the seeded SplitMix64 generator every seeded draw comes from (its streams are output format);
+//! - [`digest`]: hex and SHA-256 helpers for ids, fingerprints and string-keyed seeds;
 //! - [`trace`]: the trace model, its Arrow schemas and the paper's JSON format;
 //! - [`store`]: the run directory on disk — atomic files, Parquet datasets, staging and commit;
 //! - [`envs`]: simulators behind one `Environment` trait (billiards: pooltool 0.6.0 physics), producing traces;
@@ -18,6 +20,7 @@
 
 pub mod builtin;
 pub mod detect;
+pub mod digest;
 pub mod envs;
 pub mod fitness;
 pub mod llm;
@@ -25,6 +28,7 @@ pub mod optimise;
 pub mod pipeline;
 pub mod query;
 pub mod reward;
+pub mod rng;
 pub mod search;
 pub mod store;
 pub mod trace;

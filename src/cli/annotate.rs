@@ -6,7 +6,7 @@
 
 use std::path::PathBuf;
 
-use annotrace::pipeline::hex;
+use annotrace::digest::hex;
 use annotrace::pipeline::stages::annotate::KIND;
 use annotrace::pipeline::stages::detector_setup::SandboxParams;
 use annotrace::query::{Format, RenderOptions, render_string};

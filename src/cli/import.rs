@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
-use annotrace::pipeline::hex;
+use annotrace::digest::hex;
 use annotrace::pipeline::stages::import::{ImportParams, KIND};
 use annotrace::query::{Format, RenderOptions, render_string};
 use annotrace::trace::Env;

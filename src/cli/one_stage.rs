@@ -4,12 +4,12 @@
 
 use std::path::{Path, PathBuf};
 
+use annotrace::digest::sha256_hex;
 use annotrace::pipeline::{
-    PipelineSpec, RunOptions, SpecError, StageDef, StageKind, StageParams, StageReport, hex,
+    PipelineSpec, RunOptions, SpecError, StageDef, StageKind, StageParams, StageReport,
     run as run_pipeline,
 };
 use anyhow::Context;
-use sha2::{Digest, Sha256};
 
 use super::progress::Terminal;
 use super::{CliError, fault_from_env, run_error};
@@ -61,7 +61,7 @@ impl OneStage<'_> {
 /// rerun is a no-op, an interrupted one resumes), another command another stage.
 pub(crate) fn params_id<P: StageParams>(kind: &str, params: &P) -> String {
     let key = serde_json::to_string(params).unwrap_or_default();
-    format!("{kind}-{}", &hex(&Sha256::digest(key.as_bytes()))[..10])
+    format!("{kind}-{}", &sha256_hex(key.as_bytes())[..10])
 }
 
 /// A path as an absolute string (the stage resolves paths against the working folder anyway; absolute

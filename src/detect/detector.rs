@@ -4,6 +4,7 @@ use std::fmt;
 
 use sha2::{Digest, Sha256};
 
+use crate::digest::hex;
 use crate::trace::Env;
 
 /// A detector's id: the first 16 hex digits of the SHA-256 of its environment, label and code, so the
@@ -20,11 +21,7 @@ impl DetectorId {
         h.update(label.as_bytes());
         h.update([0]);
         h.update(code.as_bytes());
-        let hex: String = h.finalize()[..8]
-            .iter()
-            .map(|b| format!("{b:02x}"))
-            .collect();
-        DetectorId(hex)
+        DetectorId(hex(&h.finalize()[..8]))
     }
 
     /// The id as text.

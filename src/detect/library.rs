@@ -199,7 +199,7 @@ impl Library {
             h.update(d.weight.to_le_bytes());
             h.update(d.source.as_bytes());
         }
-        h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+        crate::digest::hex(&h.finalize())
     }
 
     /// The distinct labels, in manifest order.

@@ -217,21 +217,7 @@ impl Reader<'_> {
             TRUE => Value::Bool(true),
             INT => Value::from(self.i32(path)?),
             LONG => self.long(path)?,
-            BINARY_FLOAT => {
-                let b = self.take(8, path)?;
-                let f = f64::from_le_bytes(b.try_into().expect("8 bytes"));
-                match Number::from_f64(f) {
-                    Some(n) => Value::Number(n),
-                    None => {
-                        return Err(self.fail(
-                            path,
-                            format!(
-                                "{f} is not a JSON number (NaN and infinities are not allowed)"
-                            ),
-                        ));
-                    }
-                }
-            }
+            BINARY_FLOAT => self.float(path)?,
             UNICODE | INTERNED | ASCII | ASCII_INTERNED => {
                 let n = self.len(path)?;
                 Value::String(self.string(n, path)?)
@@ -240,64 +226,9 @@ impl Reader<'_> {
                 let n = self.u8(path)? as usize;
                 Value::String(self.string(n, path)?)
             }
-            TUPLE | LIST | SMALL_TUPLE => {
-                let n = if code == SMALL_TUPLE {
-                    self.u8(path)? as usize
-                } else {
-                    self.len(path)?
-                };
-                self.charge(n)?;
-                // Every item takes at least one byte, so a length beyond the message is a lie.
-                let mut items = Vec::with_capacity(n.min(self.bytes.len() - self.pos));
-                for i in 0..n {
-                    path.push(Seg::Index(i));
-                    items.push(self.value(depth + 1, path)?);
-                    path.pop();
-                }
-                Value::Array(items)
-            }
-            DICT => {
-                let mut map = Map::new();
-                loop {
-                    if self.bytes.get(self.pos) == Some(&NULL) {
-                        self.pos += 1;
-                        break;
-                    }
-                    let key = self.key(depth, path)?;
-                    self.charge(1 + key.len())?;
-                    path.push(Seg::Key(key));
-                    let item = self.value(depth + 1, path)?;
-                    let Some(Seg::Key(key)) = path.pop() else {
-                        unreachable!("pushed a key")
-                    };
-                    map.insert(key, item);
-                }
-                Value::Object(map)
-            }
-            REF => {
-                let i = self.len(path)?;
-                // Each reference stands for a full copy in JSON, charged as it is produced.
-                return match self.refs.get(i) {
-                    Some(Shared::Value(v)) => {
-                        let v = v.clone();
-                        self.charge(size(&v, self.budget.saturating_add(1)))?;
-                        Ok(v)
-                    }
-                    Some(&Shared::At(start)) => {
-                        let resume = self.pos;
-                        self.pos = start;
-                        self.replay += 1;
-                        let v = self.value(depth, path);
-                        self.replay -= 1;
-                        self.pos = resume;
-                        v
-                    }
-                    Some(Shared::Open) => {
-                        Err(self.fail(path, "the output contains itself (a cycle)"))
-                    }
-                    None => Err(self.fail(path, "a reference to nothing (corrupt message)")),
-                };
-            }
+            TUPLE | LIST | SMALL_TUPLE => self.sequence(code == SMALL_TUPLE, depth, path)?,
+            DICT => self.dict(depth, path)?,
+            REF => return self.reference(depth, path),
             other => {
                 return Err(self.fail(
                     path,
@@ -314,6 +245,87 @@ impl Reader<'_> {
             None => {}
         }
         Ok(v)
+    }
+
+    /// A float (8 bytes, little-endian); NaN and infinities are refused.
+    fn float(&mut self, path: &[Seg]) -> Result<Value, OutputError> {
+        let b = self.take(8, path)?;
+        let f = f64::from_le_bytes(b.try_into().expect("8 bytes"));
+        match Number::from_f64(f) {
+            Some(n) => Ok(Value::Number(n)),
+            None => Err(self.fail(
+                path,
+                format!("{f} is not a JSON number (NaN and infinities are not allowed)"),
+            )),
+        }
+    }
+
+    /// A tuple or list (its length a byte for a small tuple, else 4 bytes), as a JSON array.
+    fn sequence(
+        &mut self,
+        small: bool,
+        depth: usize,
+        path: &mut Vec<Seg>,
+    ) -> Result<Value, OutputError> {
+        let n = if small {
+            self.u8(path)? as usize
+        } else {
+            self.len(path)?
+        };
+        self.charge(n)?;
+        // Every item takes at least one byte, so a length beyond the message is a lie.
+        let mut items = Vec::with_capacity(n.min(self.bytes.len() - self.pos));
+        for i in 0..n {
+            path.push(Seg::Index(i));
+            items.push(self.value(depth + 1, path)?);
+            path.pop();
+        }
+        Ok(Value::Array(items))
+    }
+
+    /// A dict: key, value pairs up to a `NULL` byte.
+    fn dict(&mut self, depth: usize, path: &mut Vec<Seg>) -> Result<Value, OutputError> {
+        let mut map = Map::new();
+        loop {
+            if self.bytes.get(self.pos) == Some(&NULL) {
+                self.pos += 1;
+                break;
+            }
+            let key = self.key(depth, path)?;
+            self.charge(1 + key.len())?;
+            path.push(Seg::Key(key));
+            let item = self.value(depth + 1, path)?;
+            let Some(Seg::Key(key)) = path.pop() else {
+                unreachable!("pushed a key")
+            };
+            map.insert(key, item);
+        }
+        Ok(Value::Object(map))
+    }
+
+    /// A reference to a shared value read before: a copy of it (charged again, as JSON repeats
+    /// it), or a container read again from where it started; a reference to a container still
+    /// being read is a cycle.
+    fn reference(&mut self, depth: usize, path: &mut Vec<Seg>) -> Result<Value, OutputError> {
+        let i = self.len(path)?;
+        match self.refs.get(i) {
+            Some(Shared::Value(v)) => {
+                let v = v.clone();
+                self.charge(size(&v, self.budget.saturating_add(1)))?;
+                Ok(v)
+            }
+            Some(&Shared::At(start)) => {
+                let resume = self.pos;
+                self.pos = start;
+                self.replay += 1;
+                let v = self.value(depth, path);
+                self.replay -= 1;
+                self.pos = resume;
+                v
+            }
+            Some(Shared::Open) => Err(self.fail(path, "the output contains itself (a cycle)")),
+            None => Err(self.fail(path, "a reference to nothing (corrupt message)")),
+        }
     }
 
     /// A dict key as JSON has it: strings as they are; integers, booleans and `None` as `json.dumps`

@@ -42,8 +42,5 @@ pub use self::validate::{Pattern, validate};
 /// A hash of the worker's source, so that stages rerun when the sandbox changes.
 pub fn worker_fingerprint() -> String {
     use sha2::{Digest, Sha256};
-    Sha256::digest(worker::WORKER_PY.as_bytes())[..8]
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
+    crate::digest::hex(&Sha256::digest(worker::WORKER_PY.as_bytes())[..8])
 }

@@ -17,7 +17,7 @@ use serde_json::Value;
 
 use super::detector::Detector;
 use super::error::{CandidateStatus, DetectError, DetectorError};
-use super::protocol::{self, COMPILE, RUN};
+use super::protocol::{self, COMPILE, RUN, WorkerReply};
 use super::sandbox::{SandboxLayers, SandboxLimits, resolve_python};
 use super::validate::{Pattern, validate};
 use super::worker::{Death, Reply, Worker, parse};
@@ -229,16 +229,15 @@ impl WorkerPool {
                                 t
                             }
                         };
-                        let next = self.run_trace(
-                            &mut guard,
+                        let job = TraceJob {
                             detectors,
                             t,
-                            &keys[t],
-                            &traces[t],
+                            key: &keys[t],
+                            trace: &traces[t],
                             shared,
-                            &mut local,
-                            (&mut unsettled, &store),
-                        );
+                        };
+                        let next =
+                            self.run_trace(&mut guard, &job, &mut local, (&mut unsettled, &store));
                         unsettled = Some(next);
                     }
                     if let Some(u) = unsettled.take() {
@@ -301,18 +300,14 @@ impl WorkerPool {
     /// if the worker dies with more than one reply missing, which call did it is unknown (the earlier
     /// ones may have finished, their replies unwritten), so the missing ones run again, each reply
     /// written as its call ends.
-    #[allow(clippy::too_many_arguments)]
     fn run_trace(
         &self,
         slot: &mut Option<Worker>,
-        detectors: &[Detector],
-        t: usize,
-        key: &str,
-        trace: &Trace,
-        shared: &Shared,
+        job: &TraceJob<'_>,
         stats: &mut RunStats,
         (prev, store): (&mut Option<Unsettled>, &Store),
     ) -> Unsettled {
+        let detectors = job.detectors;
         let mut decode_s = 0.0;
         let mut settle_prev = || {
             if let Some(p) = prev.take() {
@@ -321,35 +316,24 @@ impl WorkerPool {
                 decode_s += d0.elapsed().as_secs_f64();
             }
         };
-        let mut frames: Vec<(usize, Vec<u8>)> = Vec::new();
-        let mut one_by_one = false;
-        let steps = trace
-            .timesteps
-            .first()
-            .zip(trace.timesteps.last())
-            .map(|(a, b)| (a.index, b.index));
-        let timeout = self.limits.call_timeout;
-        let blank = |d: usize| CallResult {
-            detector: d,
-            trace: t,
-            status: CandidateStatus::Ok,
-            patterns: Vec::new(),
-            wall_s: 0.0,
-            cpu_s: 0.0,
-            round_trip_s: 0.0,
-            printed: String::new(),
+        let mut turn = Turn {
+            out: (0..detectors.len()).map(|d| job.blank(d)).collect(),
+            frames: Vec::new(),
+            one_by_one: false,
+            steps: job
+                .trace
+                .timesteps
+                .first()
+                .zip(job.trace.timesteps.last())
+                .map(|(a, b)| (a.index, b.index)),
         };
-        let mut out: Vec<CallResult> = (0..detectors.len()).map(blank).collect();
-        fn fail(out: &mut [CallResult], d: usize, e: DetectorError) {
-            out[d].status = CandidateStatus::Failed(e);
-        }
         let mut pending: Vec<usize> = (0..detectors.len()).collect();
         // Each pass either finishes `pending` or loses its worker and retries the rest on a new one;
         // every pass settles at least one detector, so this ends.
         while !pending.is_empty() {
-            pending.retain(|&d| match shared.dead_error(detectors[d].id.as_str()) {
+            pending.retain(|&d| match job.shared.dead_error(detectors[d].id.as_str()) {
                 Some(e) => {
-                    fail(&mut out, d, e);
+                    turn.fail(d, e);
                     false
                 }
                 None => true,
@@ -357,163 +341,216 @@ impl WorkerPool {
             if pending.is_empty() {
                 break;
             }
-            let worker = match self.ensure_worker(slot, stats) {
-                Ok(w) => w,
-                Err(e) => {
-                    for &d in &pending {
-                        fail(&mut out, d, e.clone());
-                    }
-                    break;
-                }
-            };
-            // Load the trace (once per worker while it stays cached).
-            if let Err(e) = self.load(worker, key, trace, stats) {
-                *slot = None;
+            if let Err(e) = self.ensure_loaded(slot, job, stats) {
                 for &d in &pending {
-                    fail(&mut out, d, e.clone());
+                    turn.fail(d, e.clone());
                 }
                 break;
             }
-            // Compile what this worker lacks.
-            let mut lost = false;
-            let mut ready = Vec::with_capacity(pending.len());
-            for &d in &pending {
-                let det = &detectors[d];
-                let Some(worker) = slot.as_mut() else {
-                    lost = true;
-                    break;
-                };
-                if worker.detectors.contains(det.id.as_str()) {
-                    ready.push(d);
-                    continue;
-                }
-                let c0 = Instant::now();
-                let reply = worker.request(
-                    COMPILE,
-                    &protocol::compile_body(det.id.as_str(), &det.code),
-                    timeout,
-                );
-                stats.compile_s += c0.elapsed().as_secs_f64();
-                match self.interpret(reply, slot) {
-                    Ok(v) if v["ok"] == Value::Bool(true) => {
-                        if let Some(w) = slot.as_mut() {
-                            w.detectors.insert(det.id.0.clone());
-                        }
-                        ready.push(d);
-                    }
-                    Ok(v) => {
-                        let e = error_of(&v["error"], &self.limits);
-                        if error_is_fatal_for_worker(&v["error"]) {
-                            *slot = None;
-                        }
-                        shared.kill(det.id.as_str(), &e);
-                        fail(&mut out, d, e);
-                    }
-                    Err(e) => {
-                        shared.kill(det.id.as_str(), &e);
-                        fail(&mut out, d, e);
-                    }
-                }
-            }
-            if lost || slot.is_none() {
+            let Some(ready) = self.compile_missing(slot, job, &pending, &mut turn, stats) else {
                 // The worker died while compiling: start over with what is not settled yet.
-                pending.retain(|&d| out[d].status == CandidateStatus::Ok);
+                pending.retain(|&d| turn.out[d].status == CandidateStatus::Ok);
                 continue;
-            }
+            };
             if ready.is_empty() {
                 // Every pending detector failed to compile: no run request (the worker would send no
                 // reply to an empty one, and waiting for it killed the worker at the deadline).
                 break;
             }
-            let Some(worker) = slot.as_mut() else { break };
-            let ids: Vec<&str> = ready.iter().map(|&d| detectors[d].id.as_str()).collect();
-            let batched = ready.len() > 1 && !one_by_one;
-            let flush = if batched { BATCH_FLUSH } else { Duration::ZERO };
-            let wait = timeout + flush;
-            let mut started = Instant::now();
-            let sent = worker
-                .send(RUN, &protocol::run_body(&ids, key, flush.as_secs_f64()))
-                .and_then(|()| worker.send_evictions());
-            // The worker is busy with this trace: decode the previous one's replies meanwhile.
-            settle_prev();
-            let mut first = Some(match sent {
-                Ok(()) => slot.as_mut().map_or(Reply::Timeout, |w| w.wait(wait)),
-                Err(death) => Reply::Died(death),
-            });
-            let mut settled = 0;
-            for (pos, &d) in ready.iter().enumerate() {
-                let reply = match first.take() {
-                    Some(r) => r,
-                    None => match slot.as_mut() {
-                        Some(w) => w.wait(wait),
-                        None => break,
-                    },
-                };
-                if batched && ready.len() - pos > 1 && !matches!(reply, Reply::Frame(_)) {
-                    // Timed out or died with several replies missing: run those again one by one.
-                    if let Reply::Died(_) | Reply::Timeout = reply {
-                        *slot = None;
-                    }
-                    one_by_one = true;
-                    break;
-                }
-                let det = &detectors[d];
-                let res = &mut out[d];
-                res.round_trip_s = started.elapsed().as_secs_f64();
-                started = Instant::now();
-                stats.calls += 1;
-                stats.round_trip_s += res.round_trip_s;
-                settled = pos + 1;
-                // Patterns in marshal format: decoded later; only the timing is read now.
-                if let Reply::Frame(f) = &reply
-                    && let Some((wall, cpu)) = protocol::marshal_times(f)
-                {
-                    res.wall_s = wall;
-                    res.cpu_s = cpu;
-                    stats.detector_wall_s += wall;
-                    if let Reply::Frame(f) = reply {
-                        frames.push((d, f));
-                    }
-                    continue;
-                }
-                let parsed = self.interpret(reply, slot);
-                let worker_gone = parsed.is_err();
-                match parsed {
-                    Ok(mut v) => {
-                        res.wall_s = v["wall"].as_f64().unwrap_or(0.0);
-                        res.cpu_s = v["cpu"].as_f64().unwrap_or(0.0);
-                        stats.detector_wall_s += res.wall_s;
-                        if v["ok"] == Value::Bool(true) {
-                            accept(res, &mut v, det, steps);
-                        } else {
-                            let e = error_of(&v["error"], &self.limits);
-                            if error_is_fatal_for_worker(&v["error"]) {
-                                // The worker exits after a fatal error; its remaining replies never come.
-                                *slot = None;
-                                shared.kill(det.id.as_str(), &e);
-                            }
-                            res.status = CandidateStatus::Failed(e);
-                        }
-                    }
-                    Err(e) => {
-                        shared.kill(det.id.as_str(), &e);
-                        res.status = CandidateStatus::Failed(e);
-                    }
-                }
-                if worker_gone || slot.is_none() {
-                    break;
-                }
-            }
+            let Some(settled) =
+                self.run_ready(slot, job, &ready, &mut turn, stats, &mut settle_prev)
+            else {
+                break;
+            };
             pending = ready[settled..].to_vec();
         }
         settle_prev();
         stats.decode_s += decode_s;
         Unsettled {
-            trace: t,
-            steps,
-            out,
-            frames,
+            trace: job.t,
+            steps: turn.steps,
+            out: turn.out,
+            frames: turn.frames,
         }
+    }
+
+    /// A live worker in the slot that holds the job's trace; a worker that fails to load it is
+    /// dropped.
+    fn ensure_loaded(
+        &self,
+        slot: &mut Option<Worker>,
+        job: &TraceJob<'_>,
+        stats: &mut RunStats,
+    ) -> Result<(), DetectorError> {
+        let worker = self.ensure_worker(slot, stats)?;
+        if let Err(e) = self.load(worker, job.key, job.trace, stats) {
+            *slot = None;
+            return Err(e);
+        }
+        Ok(())
+    }
+
+    /// Compiles the `pending` detectors the worker lacks (once per worker). Returns those ready to
+    /// run, or `None` when the worker died on the way; a detector that fails to compile is settled
+    /// in `turn` (and marked dead for the batch when its error is fatal).
+    fn compile_missing(
+        &self,
+        slot: &mut Option<Worker>,
+        job: &TraceJob<'_>,
+        pending: &[usize],
+        turn: &mut Turn,
+        stats: &mut RunStats,
+    ) -> Option<Vec<usize>> {
+        let mut ready = Vec::with_capacity(pending.len());
+        for &d in pending {
+            let det = &job.detectors[d];
+            let worker = slot.as_mut()?;
+            if worker.detectors.contains(det.id.as_str()) {
+                ready.push(d);
+                continue;
+            }
+            let c0 = Instant::now();
+            let reply = worker.request(
+                COMPILE,
+                &protocol::compile_body(det.id.as_str(), &det.code),
+                self.limits.call_timeout,
+            );
+            stats.compile_s += c0.elapsed().as_secs_f64();
+            let e = match self.interpret(reply, slot) {
+                Ok(WorkerReply::Done { .. }) => {
+                    if let Some(w) = slot.as_mut() {
+                        w.detectors.insert(det.id.0.clone());
+                    }
+                    ready.push(d);
+                    continue;
+                }
+                Ok(WorkerReply::Failed { error, .. }) => {
+                    if error.ends_worker() {
+                        *slot = None;
+                    }
+                    error.to_detector_error(self.limits.memory_bytes)
+                }
+                Err(e) => e,
+            };
+            job.shared.kill(det.id.as_str(), &e);
+            turn.fail(d, e);
+        }
+        slot.is_some().then_some(ready)
+    }
+
+    /// Sends one run request for the `ready` detectors, settles the previous trace
+    /// (`settle_prev`) while the worker works, and takes the replies in order. Returns how many
+    /// of `ready` got a reply (the rest run again), or `None` when there is no worker to ask.
+    fn run_ready(
+        &self,
+        slot: &mut Option<Worker>,
+        job: &TraceJob<'_>,
+        ready: &[usize],
+        turn: &mut Turn,
+        stats: &mut RunStats,
+        settle_prev: &mut dyn FnMut(),
+    ) -> Option<usize> {
+        let worker = slot.as_mut()?;
+        let ids: Vec<&str> = ready
+            .iter()
+            .map(|&d| job.detectors[d].id.as_str())
+            .collect();
+        let batched = ready.len() > 1 && !turn.one_by_one;
+        let flush = if batched { BATCH_FLUSH } else { Duration::ZERO };
+        let wait = self.limits.call_timeout + flush;
+        let mut started = Instant::now();
+        let sent = worker
+            .send(RUN, &protocol::run_body(&ids, job.key, flush.as_secs_f64()))
+            .and_then(|()| worker.send_evictions());
+        // The worker is busy with this trace: decode the previous one's replies meanwhile.
+        settle_prev();
+        let mut first = Some(match sent {
+            Ok(()) => slot.as_mut().map_or(Reply::Timeout, |w| w.wait(wait)),
+            Err(death) => Reply::Died(death),
+        });
+        let mut settled = 0;
+        for (pos, &d) in ready.iter().enumerate() {
+            let reply = match first.take() {
+                Some(r) => r,
+                None => match slot.as_mut() {
+                    Some(w) => w.wait(wait),
+                    None => break,
+                },
+            };
+            if batched && ready.len() - pos > 1 && !matches!(reply, Reply::Frame(_)) {
+                // Timed out or died with several replies missing: run those again one by one.
+                if let Reply::Died(_) | Reply::Timeout = reply {
+                    *slot = None;
+                }
+                turn.one_by_one = true;
+                break;
+            }
+            let res = &mut turn.out[d];
+            res.round_trip_s = started.elapsed().as_secs_f64();
+            started = Instant::now();
+            stats.calls += 1;
+            stats.round_trip_s += res.round_trip_s;
+            settled = pos + 1;
+            if !self.take_reply(slot, job, d, reply, turn, stats) {
+                break;
+            }
+        }
+        Some(settled)
+    }
+
+    /// Takes detector `d`'s run reply into `turn`: a marshal reply's timing now and its patterns
+    /// later ([`Unsettled`]), a JSON reply or a dead worker's error at once. Returns whether the
+    /// worker is still there for the next reply.
+    fn take_reply(
+        &self,
+        slot: &mut Option<Worker>,
+        job: &TraceJob<'_>,
+        d: usize,
+        reply: Reply,
+        turn: &mut Turn,
+        stats: &mut RunStats,
+    ) -> bool {
+        let det = &job.detectors[d];
+        let res = &mut turn.out[d];
+        // Patterns in marshal format: decoded later; only the timing is read now.
+        if let Reply::Frame(f) = &reply
+            && let Some((wall, cpu)) = protocol::marshal_times(f)
+        {
+            res.wall_s = wall;
+            res.cpu_s = cpu;
+            stats.detector_wall_s += wall;
+            if let Reply::Frame(f) = reply {
+                turn.frames.push((d, f));
+            }
+            return true;
+        }
+        let parsed = self.interpret(reply, slot);
+        let worker_gone = parsed.is_err();
+        match parsed {
+            Ok(reply) => {
+                (res.wall_s, res.cpu_s) = reply.times();
+                stats.detector_wall_s += res.wall_s;
+                match reply {
+                    WorkerReply::Done {
+                        printed, patterns, ..
+                    } => accept(res, printed, patterns, det, turn.steps),
+                    WorkerReply::Failed { error, .. } => {
+                        let e = error.to_detector_error(self.limits.memory_bytes);
+                        if error.ends_worker() {
+                            // The worker exits after a fatal error; its remaining replies never come.
+                            *slot = None;
+                            job.shared.kill(det.id.as_str(), &e);
+                        }
+                        res.status = CandidateStatus::Failed(e);
+                    }
+                }
+            }
+            Err(e) => {
+                job.shared.kill(det.id.as_str(), &e);
+                res.status = CandidateStatus::Failed(e);
+            }
+        }
+        !(worker_gone || slot.is_none())
     }
 
     /// Makes sure the worker holds the trace, evicting its least recently used one beyond the cache size.
@@ -539,8 +576,8 @@ impl WorkerPool {
             .max(std::time::Duration::from_secs(30));
         match worker.request(kind, &body, wait) {
             Reply::Frame(f) => match parse(&f, 0) {
-                Ok(v) if v["ok"] == Value::Bool(true) => {
-                    stats.build_s += v["build"].as_f64().unwrap_or(0.0);
+                Ok(WorkerReply::Done { build, .. }) => {
+                    stats.build_s += build;
                 }
                 // The worker's only failure while loading is running out of memory.
                 _ => {
@@ -579,8 +616,12 @@ impl WorkerPool {
         Ok(())
     }
 
-    /// Turns a reply into JSON, or into the error of a killed or dead worker (which is then dropped).
-    fn interpret(&self, reply: Reply, slot: &mut Option<Worker>) -> Result<Value, DetectorError> {
+    /// Parses a reply, or turns it into the error of a killed or dead worker (which is then dropped).
+    fn interpret(
+        &self,
+        reply: Reply,
+        slot: &mut Option<Worker>,
+    ) -> Result<WorkerReply, DetectorError> {
         match reply {
             Reply::Frame(f) => parse(&f, self.limits.max_output_bytes).map_err(|e| {
                 *slot = None;
@@ -627,10 +668,13 @@ impl Unsettled {
         for (d, frame) in self.frames {
             let res = &mut self.out[d];
             match protocol::parse_reply(&frame, limits.max_output_bytes) {
-                Ok(mut v) if v["ok"] == Value::Bool(true) => {
-                    accept(res, &mut v, &detectors[d], self.steps)
+                Ok(WorkerReply::Done {
+                    printed, patterns, ..
+                }) => accept(res, printed, patterns, &detectors[d], self.steps),
+                Ok(WorkerReply::Failed { error, .. }) => {
+                    res.status =
+                        CandidateStatus::Failed(error.to_detector_error(limits.memory_bytes))
                 }
-                Ok(v) => res.status = CandidateStatus::Failed(error_of(&v["error"], limits)),
                 Err(message) => {
                     res.status = CandidateStatus::Failed(DetectorError::Crashed { message })
                 }
@@ -641,11 +685,64 @@ impl Unsettled {
 }
 
 /// Takes a successful reply's printed text and validated patterns into `res`.
-fn accept(res: &mut CallResult, v: &mut Value, det: &Detector, steps: Option<(i64, i64)>) {
-    res.printed = v["printed"].as_str().unwrap_or_default().to_string();
-    match validate(v["patterns"].take(), det, steps) {
+fn accept(
+    res: &mut CallResult,
+    printed: String,
+    patterns: Value,
+    det: &Detector,
+    steps: Option<(i64, i64)>,
+) {
+    res.printed = printed;
+    match validate(patterns, det, steps) {
         Ok(p) => res.patterns = p,
         Err(e) => res.status = CandidateStatus::Failed(e),
+    }
+}
+
+/// One trace's turn on a worker: the batch's detectors and the trace, as [`WorkerPool::run_trace`]
+/// and its steps read them.
+struct TraceJob<'j> {
+    detectors: &'j [Detector],
+    /// The trace's index in the batch.
+    t: usize,
+    /// Its key in the workers' caches.
+    key: &'j str,
+    trace: &'j Trace,
+    shared: &'j Shared,
+}
+
+impl TraceJob<'_> {
+    /// Detector `d`'s result before it runs: ok, no patterns, no time.
+    fn blank(&self, d: usize) -> CallResult {
+        CallResult {
+            detector: d,
+            trace: self.t,
+            status: CandidateStatus::Ok,
+            patterns: Vec::new(),
+            wall_s: 0.0,
+            cpu_s: 0.0,
+            round_trip_s: 0.0,
+            printed: String::new(),
+        }
+    }
+}
+
+/// What a trace's turn has gathered so far.
+struct Turn {
+    /// Results by detector; `Ok` until settled otherwise.
+    out: Vec<CallResult>,
+    /// (detector, reply frame) of the calls whose marshalled patterns are decoded later.
+    frames: Vec<(usize, Vec<u8>)>,
+    /// Whether a batched run lost its worker with several replies missing, so the rest run one
+    /// reply at a time.
+    one_by_one: bool,
+    /// The trace's first and last step, for validating patterns.
+    steps: Option<(i64, i64)>,
+}
+
+impl Turn {
+    fn fail(&mut self, d: usize, e: DetectorError) {
+        self.out[d].status = CandidateStatus::Failed(e);
     }
 }
 
@@ -678,46 +775,6 @@ impl Shared {
                 message: other.to_string(),
             },
         })
-    }
-}
-
-fn error_is_fatal_for_worker(e: &Value) -> bool {
-    e["fatal"] == Value::Bool(true) || e["category"] == "memory"
-}
-
-/// The typed error of a worker's error reply.
-fn error_of(e: &Value, limits: &SandboxLimits) -> DetectorError {
-    let s = |k: &str| e[k].as_str().unwrap_or_default().to_string();
-    let n = |k: &str| e[k].as_u64().map(|v| v as u32);
-    match e["category"].as_str().unwrap_or_default() {
-        "syntax" => DetectorError::Syntax {
-            message: s("message"),
-            line: n("line"),
-            column: n("column"),
-        },
-        "forbidden" => DetectorError::Forbidden {
-            message: s("message"),
-            line: n("line"),
-            column: n("column"),
-        },
-        "no_find_pattern" => DetectorError::NoFindPattern {
-            message: s("message"),
-        },
-        "runtime" => DetectorError::Runtime {
-            exception: e["exception"].as_str().map(str::to_string),
-            message: s("message"),
-            line: n("line"),
-        },
-        "memory" => DetectorError::Memory {
-            limit_bytes: limits.memory_bytes,
-        },
-        "invalid_output" => DetectorError::InvalidOutput {
-            path: e["path"].as_str().unwrap_or("$").to_string(),
-            message: s("message"),
-        },
-        other => DetectorError::Crashed {
-            message: format!("worker error {other}: {}", s("message")),
-        },
     }
 }
 

@@ -6,11 +6,18 @@
 //! CPython's `marshal` format (`M`, read by `marshal.rs`). A run request gets one reply per detector, in
 //! order; an evict request gets none (it is sent behind a run request); every other request gets one
 //! reply.
+//!
+//! Owns the request bodies and the one parser of replies: [`parse_reply`] turns a frame into a
+//! [`WorkerReply`] (done, or failed with a typed [`WorkerError`] that maps to a
+//! [`DetectorError`]), so no caller reads reply JSON by key (only the spawner reads the ready
+//! message's fields, through [`parse_json`]). Does not own the pipes, timeouts or restarts
+//! (`worker.rs`, `pool.rs`).
 
 use std::io::{self, Write};
 
 use serde_json::Value;
 
+use super::error::DetectorError;
 use crate::trace::Trace;
 
 /// Request types.
@@ -223,14 +230,154 @@ pub(crate) fn evict_body(keys: &[String]) -> Vec<u8> {
 /// `marshal.dumps(patterns, 4)`.
 pub(crate) const MARSHAL_REPLY: u8 = b'M';
 
-/// Parses a reply: JSON, or a run reply with marshalled patterns, returned in the JSON reply's shape
-/// (`ok`, `wall`, `cpu`, `printed`, `patterns`). The patterns are decoded under a budget of
-/// `max_output_bytes`; an output the decoder refuses becomes an `invalid_output` error reply with its
-/// path, as the worker's own checks produce.
-pub(crate) fn parse_reply(bytes: &[u8], max_output_bytes: usize) -> Result<Value, String> {
+/// A worker's reply to a load, compile or run request, parsed once: `{"ok": true, ...}` or
+/// `{"ok": false, "error": {...}}` (anything without `"ok": true` is a failure).
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) enum WorkerReply {
+    /// The request succeeded. Fields a reply does not carry are 0, empty or null.
+    Done {
+        /// Wall seconds of `find_pattern` (run replies).
+        wall: f64,
+        /// CPU seconds of `find_pattern` (run replies).
+        cpu: f64,
+        /// Seconds the worker spent building the trace's dicts (load replies).
+        build: f64,
+        /// What the detector printed (run replies).
+        printed: String,
+        /// The patterns it returned, not yet validated (run replies).
+        patterns: Value,
+    },
+    /// The request failed.
+    Failed {
+        /// Wall seconds at the top level of the reply (0: the worker puts a call's times inside
+        /// `error`).
+        wall: f64,
+        /// CPU seconds at the top level of the reply.
+        cpu: f64,
+        /// What went wrong.
+        error: WorkerError,
+    },
+}
+
+impl WorkerReply {
+    /// The typed form of a JSON reply.
+    pub(crate) fn from_json(mut v: Value) -> Self {
+        let wall = v["wall"].as_f64().unwrap_or(0.0);
+        let cpu = v["cpu"].as_f64().unwrap_or(0.0);
+        if v["ok"] == Value::Bool(true) {
+            WorkerReply::Done {
+                wall,
+                cpu,
+                build: v["build"].as_f64().unwrap_or(0.0),
+                printed: v["printed"].as_str().unwrap_or_default().to_string(),
+                patterns: v["patterns"].take(),
+            }
+        } else {
+            WorkerReply::Failed {
+                wall,
+                cpu,
+                error: WorkerError::from_json(&v["error"]),
+            }
+        }
+    }
+
+    /// Wall and CPU seconds of the call.
+    pub(crate) fn times(&self) -> (f64, f64) {
+        match self {
+            WorkerReply::Done { wall, cpu, .. } | WorkerReply::Failed { wall, cpu, .. } => {
+                (*wall, *cpu)
+            }
+        }
+    }
+}
+
+/// The `error` object of a failed reply (`_error` in worker.py); missing fields are empty.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct WorkerError {
+    /// `syntax`, `forbidden`, `no_find_pattern`, `runtime`, `memory`, `invalid_output`, or another
+    /// word the Rust side does not know.
+    pub category: String,
+    /// The message.
+    pub message: String,
+    /// 1-based line in the detector's source, when known.
+    pub line: Option<u32>,
+    /// Column, when known.
+    pub column: Option<u32>,
+    /// The Python exception's type (runtime errors).
+    pub exception: Option<String>,
+    /// Where in the output an invalid output went wrong (`$` when not given).
+    pub path: String,
+    /// Whether the worker exits after this error.
+    pub fatal: bool,
+}
+
+impl WorkerError {
+    fn from_json(e: &Value) -> Self {
+        let s = |k: &str| e[k].as_str().unwrap_or_default().to_string();
+        let n = |k: &str| e[k].as_u64().map(|v| v as u32);
+        WorkerError {
+            category: s("category"),
+            message: s("message"),
+            line: n("line"),
+            column: n("column"),
+            exception: e["exception"].as_str().map(str::to_string),
+            path: e["path"].as_str().unwrap_or("$").to_string(),
+            fatal: e["fatal"] == Value::Bool(true),
+        }
+    }
+
+    /// Whether the worker is gone after this error (it exits after a fatal error, and after running
+    /// out of memory).
+    pub(crate) fn ends_worker(&self) -> bool {
+        self.fatal || self.category == "memory"
+    }
+
+    /// The typed error; a memory error reports the sandbox's `memory_bytes` limit.
+    pub(crate) fn to_detector_error(&self, memory_bytes: u64) -> DetectorError {
+        let message = self.message.clone();
+        match self.category.as_str() {
+            "syntax" => DetectorError::Syntax {
+                message,
+                line: self.line,
+                column: self.column,
+            },
+            "forbidden" => DetectorError::Forbidden {
+                message,
+                line: self.line,
+                column: self.column,
+            },
+            "no_find_pattern" => DetectorError::NoFindPattern { message },
+            "runtime" => DetectorError::Runtime {
+                exception: self.exception.clone(),
+                message,
+                line: self.line,
+            },
+            "memory" => DetectorError::Memory {
+                limit_bytes: memory_bytes,
+            },
+            "invalid_output" => DetectorError::InvalidOutput {
+                path: self.path.clone(),
+                message,
+            },
+            other => DetectorError::Crashed {
+                message: format!("worker error {other}: {message}"),
+            },
+        }
+    }
+}
+
+/// Parses a reply frame as JSON, untyped: for the worker's ready message, whose fields only the
+/// spawner reads. Every other reply goes through [`parse_reply`].
+pub(crate) fn parse_json(bytes: &[u8]) -> Result<Value, String> {
+    serde_json::from_slice(bytes).map_err(|e| format!("unreadable reply from the worker: {e}"))
+}
+
+/// Parses a reply: JSON, or a run reply with marshalled patterns. The patterns are decoded under a
+/// budget of `max_output_bytes`; an output the decoder refuses becomes an `invalid_output` failure
+/// with its path, as the worker's own checks produce.
+pub(crate) fn parse_reply(bytes: &[u8], max_output_bytes: usize) -> Result<WorkerReply, String> {
     if bytes.first() != Some(&MARSHAL_REPLY) {
-        return serde_json::from_slice(bytes)
-            .map_err(|e| format!("unreadable reply from the worker: {e}"));
+        return parse_json(bytes).map(WorkerReply::from_json);
     }
     let bad = || "unreadable reply from the worker: a truncated marshal frame".to_string();
     let (wall, cpu) = marshal_times(bytes).ok_or_else(bad)?;
@@ -239,24 +386,27 @@ pub(crate) fn parse_reply(bytes: &[u8], max_output_bytes: usize) -> Result<Value
         .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize)
         .ok_or_else(bad)?;
     let printed = bytes.get(21..21 + n).ok_or_else(bad)?;
-    let mut v = serde_json::json!({
-        "ok": true,
-        "wall": wall,
-        "cpu": cpu,
-        "printed": String::from_utf8_lossy(printed),
-    });
-    match super::marshal::decode(&bytes[21 + n..], max_output_bytes) {
-        Ok(patterns) => v["patterns"] = patterns,
-        Err(e) => {
-            v["ok"] = Value::Bool(false);
-            v["error"] = serde_json::json!({
-                "category": "invalid_output",
-                "path": e.path,
-                "message": e.message,
-            });
-        }
-    }
-    Ok(v)
+    Ok(
+        match super::marshal::decode(&bytes[21 + n..], max_output_bytes) {
+            Ok(patterns) => WorkerReply::Done {
+                wall,
+                cpu,
+                build: 0.0,
+                printed: String::from_utf8_lossy(printed).into_owned(),
+                patterns,
+            },
+            Err(e) => WorkerReply::Failed {
+                wall,
+                cpu,
+                error: WorkerError {
+                    category: "invalid_output".into(),
+                    message: e.message,
+                    path: e.path,
+                    ..WorkerError::default()
+                },
+            },
+        },
+    )
 }
 
 #[cfg(test)]
@@ -268,5 +418,77 @@ mod tests {
         let mut buf = Vec::new();
         write_frame(&mut buf, RUN, b"{}").unwrap();
         assert_eq!(buf, b"\x03\x00\x00\x00R{}");
+    }
+
+    #[test]
+    fn replies_parse_into_done_or_failed_with_their_fields() {
+        let done = parse_reply(
+            br#"{"ok":true,"wall":0.5,"cpu":0.25,"printed":"hi","patterns":[1]}"#,
+            0,
+        )
+        .unwrap();
+        assert_eq!(
+            done,
+            WorkerReply::Done {
+                wall: 0.5,
+                cpu: 0.25,
+                build: 0.0,
+                printed: "hi".into(),
+                patterns: serde_json::json!([1]),
+            }
+        );
+        assert_eq!(done.times(), (0.5, 0.25));
+        let failed = parse_reply(
+            br#"{"ok":false,"error":{"category":"runtime","message":"boom","line":3,"exception":"KeyError","wall":1.0}}"#,
+            0,
+        )
+        .unwrap();
+        let WorkerReply::Failed { wall, error, .. } = failed else {
+            panic!("{failed:?}");
+        };
+        assert_eq!(wall, 0.0);
+        assert!(!error.ends_worker());
+        assert_eq!(
+            error.to_detector_error(7),
+            DetectorError::Runtime {
+                exception: Some("KeyError".into()),
+                message: "boom".into(),
+                line: Some(3),
+            }
+        );
+        // No "ok": a failure; a memory error ends the worker and reports the limit.
+        let WorkerReply::Failed { error, .. } =
+            parse_reply(br#"{"error":{"category":"memory"}}"#, 0).unwrap()
+        else {
+            panic!("not a failure");
+        };
+        assert!(error.ends_worker());
+        assert_eq!(
+            error.to_detector_error(7),
+            DetectorError::Memory { limit_bytes: 7 }
+        );
+        assert!(parse_reply(b"{", 0).is_err());
+    }
+
+    #[test]
+    fn a_marshal_reply_carries_its_times_and_printed_text() {
+        let mut frame = vec![MARSHAL_REPLY];
+        frame.extend(1.5f64.to_le_bytes());
+        frame.extend(0.5f64.to_le_bytes());
+        frame.extend(2u32.to_le_bytes());
+        frame.extend(b"ok");
+        frame.extend([b'[', 0, 0, 0, 0]); // marshal: an empty list
+        let reply = parse_reply(&frame, 1 << 20).unwrap();
+        assert_eq!(reply.times(), (1.5, 0.5));
+        match reply {
+            WorkerReply::Done {
+                printed, patterns, ..
+            } => {
+                assert_eq!(printed, "ok");
+                assert_eq!(patterns, serde_json::json!([]));
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(parse_reply(&frame[..10], 1 << 20).is_err());
     }
 }

@@ -17,10 +17,8 @@ use std::sync::{Arc, Mutex};
 use std::thread;
 use std::time::{Duration, Instant};
 
-use serde_json::Value;
-
 use super::error::DetectError;
-use super::protocol::{self, write_frame};
+use super::protocol::{self, WorkerReply, write_frame};
 use super::sandbox::{SandboxLayers, SandboxLimits, worker_command};
 
 /// The worker's Python source, embedded at build time.
@@ -152,7 +150,7 @@ impl Worker {
         };
         let ready = match w.wait_reply(START_TIMEOUT) {
             Reply::Frame(f) => {
-                protocol::parse_reply(&f, 0).map_err(|m| DetectError::Spawn { message: m })?
+                protocol::parse_json(&f).map_err(|m| DetectError::Spawn { message: m })?
             }
             Reply::Timeout => {
                 return Err(DetectError::Spawn {
@@ -398,7 +396,7 @@ fn readable(_out: &ChildStdout, _left: Duration) -> Result<bool, Wait> {
 }
 
 /// Parses a reply frame; marshalled patterns are decoded under a budget of `max_output_bytes`.
-pub(crate) fn parse(frame: &[u8], max_output_bytes: usize) -> Result<Value, DetectError> {
+pub(crate) fn parse(frame: &[u8], max_output_bytes: usize) -> Result<WorkerReply, DetectError> {
     protocol::parse_reply(frame, max_output_bytes).map_err(DetectError::Internal)
 }
 

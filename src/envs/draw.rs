@@ -84,6 +84,14 @@ pub(crate) fn strip(
     Ok(strip)
 }
 
+/// The RGB colour of pixel (`x`, `y`) of a PNG: what the renderers' tests read back.
+#[cfg(test)]
+pub(crate) fn png_pixel(png: &[u8], x: u32, y: u32) -> [u8; 3] {
+    let p = Pixmap::decode_png(png).unwrap();
+    let c = p.pixel(x, y).unwrap();
+    [c.red(), c.green(), c.blue()]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -33,10 +33,7 @@ pub fn set_id(ids: &[String], samples: usize) -> String {
         h.update(id.as_bytes());
         h.update([0]);
     }
-    h.finalize()[..8]
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
+    crate::digest::hex(&h.finalize()[..8])
 }
 
 /// The rows of `m` (NaN distances as nulls).

@@ -6,13 +6,7 @@
 
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-/// splitmix64: a fast, well-mixed hash of a 64-bit value.
-pub(crate) fn splitmix64(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
+use crate::rng::{splitmix64, unit_f64};
 
 /// The delay before retry `retry` (1-based).
 pub(crate) fn delay(
@@ -24,8 +18,9 @@ pub(crate) fn delay(
 ) -> Duration {
     let exp = base.saturating_mul(1u32 << (retry.saturating_sub(1)).min(20));
     let capped = exp.min(max);
-    let u = (splitmix64(seed ^ u64::from(retry).wrapping_mul(0x2545_f491_4f6c_dd1d)) >> 11) as f64
-        / (1u64 << 53) as f64;
+    let u = unit_f64(splitmix64(
+        seed ^ u64::from(retry).wrapping_mul(0x2545_f491_4f6c_dd1d),
+    ));
     let jittered = capped.mul_f64(0.5 + 0.5 * u);
     match retry_after {
         Some(ra) => jittered.max(ra.min(max)),

@@ -14,9 +14,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Condvar, Mutex};
 use std::time::{Duration, Instant, SystemTime};
 
-use sha2::{Digest, Sha256};
-
-use super::backoff::{delay, parse_retry_after, splitmix64};
+use super::backoff::{delay, parse_retry_after};
 use super::budget::{Meter, Usage};
 use super::config::{LlmConfig, endpoint_url, redact_url};
 use super::error::LlmError;
@@ -24,6 +22,8 @@ use super::message::{ChatReply, ChatRequest, excerpt, parse_answer};
 use super::record::{CallLog, CallRecord, now_ms, status};
 use super::replay::ReplayIndex;
 use crate::detect::count_tokens;
+use crate::digest::sha256_hex;
+use crate::rng::splitmix64;
 use crate::store::RunDir;
 
 /// Keys shorter than this are not scrubbed from recorded text (replacing every `x` would mangle the
@@ -95,6 +95,18 @@ impl Drop for SlotGuard<'_> {
     }
 }
 
+/// One call of [`LlmClient::chat`]: the request, its id and the body sent on every attempt.
+struct Call<'r> {
+    req: &'r ChatRequest,
+    /// `<session>-<n>`.
+    call_id: String,
+    body_text: String,
+    /// SHA-256 of `body_text`: the replay key.
+    request_hash: String,
+    /// SHA-256 of the messages alone.
+    prompt_hash: String,
+}
+
 /// What one HTTP attempt gave.
 enum Attempt {
     Ok {
@@ -112,13 +124,6 @@ enum Attempt {
         retry_after: Option<Duration>,
         retryable: bool,
     },
-}
-
-fn sha_hex(s: &str) -> String {
-    Sha256::digest(s.as_bytes())
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
 }
 
 impl LlmClient {
@@ -206,7 +211,7 @@ impl LlmClient {
 
     /// The SHA-256 of the body this client would send for `req` (the replay key).
     pub fn request_hash(&self, req: &ChatRequest) -> String {
-        sha_hex(&self.body(req).to_string())
+        sha256_hex(self.body(req).to_string().as_bytes())
     }
 
     fn body(&self, req: &ChatRequest) -> serde_json::Value {
@@ -239,6 +244,20 @@ impl LlmClient {
 
     /// Asks for one completion. See the module docs for the order of checks, retries and recording.
     pub fn chat(&self, req: &ChatRequest) -> Result<ChatReply, LlmError> {
+        let call = self.prepare(req)?;
+        if let Some(reply) = self.replayed(&call)? {
+            return Ok(reply);
+        }
+        let (Some(http), Some(endpoint)) = (&self.http, &self.endpoint) else {
+            return Err(LlmError::Config(
+                "no endpoint configured (ANNOTRACE_LLM_BASE_URL)".into(),
+            ));
+        };
+        self.send_with_retries(&call, http, endpoint)
+    }
+
+    /// Checks the request, reserves a call from the budget and names the call.
+    fn prepare<'r>(&self, req: &'r ChatRequest) -> Result<Call<'r>, LlmError> {
         if req.messages.is_empty() {
             return Err(LlmError::Config(format!(
                 "request {:?} has no messages",
@@ -247,25 +266,37 @@ impl LlmClient {
         }
         let body = self.body(req);
         let body_text = body.to_string();
-        let request_hash = sha_hex(&body_text);
-        let prompt_hash = sha_hex(&body["messages"].to_string());
+        let request_hash = sha256_hex(body_text.as_bytes());
+        let prompt_hash = sha256_hex(body["messages"].to_string().as_bytes());
         self.meter.reserve()?;
         let call_id = format!(
             "{}-{}",
             self.session,
             self.seq.fetch_add(1, Ordering::Relaxed)
         );
-        let row = |attempt: i32, started_at_ms: i64| CallRecord {
-            call_id: call_id.clone(),
+        Ok(Call {
+            req,
+            call_id,
+            body_text,
+            request_hash,
+            prompt_hash,
+        })
+    }
+
+    /// The `llm_calls` row of attempt `attempt` (0: replayed) of `call`, started at
+    /// `started_at_ms`, before its outcome is filled in.
+    fn row(&self, call: &Call<'_>, attempt: i32, started_at_ms: i64) -> CallRecord {
+        CallRecord {
+            call_id: call.call_id.clone(),
             session: self.session.clone(),
             attempt,
-            purpose: req.purpose.clone(),
+            purpose: call.req.purpose.clone(),
             model: self.config.model.clone(),
             endpoint: self.shown.clone(),
-            request_hash: request_hash.clone(),
-            prompt_hash: prompt_hash.clone(),
-            seed: req.seed,
-            request_json: body_text.clone(),
+            request_hash: call.request_hash.clone(),
+            prompt_hash: call.prompt_hash.clone(),
+            seed: call.req.seed,
+            request_json: call.body_text.clone(),
             response_json: None,
             content: None,
             status: status::OK.into(),
@@ -277,55 +308,65 @@ impl LlmClient {
             latency_ms: 0.0,
             replayed: false,
             started_at_ms,
-        };
-
-        if let Some(replay) = &self.replay {
-            if let Some(ans) = replay.take(&request_hash) {
-                self.meter.add_tokens(ans.tokens_in, ans.tokens_out, true);
-                if self.record_replayed {
-                    self.record(CallRecord {
-                        response_json: ans.response_json.clone(),
-                        content: Some(ans.content.clone()),
-                        tokens_in: ans.tokens_in as i64,
-                        tokens_out: ans.tokens_out as i64,
-                        usage_estimated: ans.usage_estimated,
-                        latency_ms: ans.latency_ms,
-                        replayed: true,
-                        ..row(0, now_ms())
-                    })?;
-                }
-                return Ok(ChatReply {
-                    content: ans.content,
-                    finish_reason: None,
-                    tokens_in: ans.tokens_in,
-                    tokens_out: ans.tokens_out,
-                    usage_estimated: ans.usage_estimated,
-                    latency: Duration::from_secs_f64(ans.latency_ms.max(0.0) / 1e3),
-                    attempts: 0,
-                    replayed: true,
-                    request_hash,
-                    call_id,
-                });
-            }
-            if self.config.replay.as_ref().is_some_and(|r| r.strict) {
-                return Err(LlmError::ReplayMiss {
-                    request_hash,
-                    purpose: req.purpose.clone(),
-                    source_dir: replay.run().to_path_buf(),
-                });
-            }
         }
+    }
 
-        let (Some(http), Some(endpoint)) = (&self.http, &self.endpoint) else {
-            return Err(LlmError::Config(
-                "no endpoint configured (ANNOTRACE_LLM_BASE_URL)".into(),
-            ));
+    /// The recorded answer to `call` when replaying (recorded again as a replayed row when the
+    /// configuration asks); a miss is an error under strict replay, else `None`.
+    fn replayed(&self, call: &Call<'_>) -> Result<Option<ChatReply>, LlmError> {
+        let Some(replay) = &self.replay else {
+            return Ok(None);
         };
+        if let Some(ans) = replay.take(&call.request_hash) {
+            self.meter.add_tokens(ans.tokens_in, ans.tokens_out, true);
+            if self.record_replayed {
+                self.record(CallRecord {
+                    response_json: ans.response_json.clone(),
+                    content: Some(ans.content.clone()),
+                    tokens_in: ans.tokens_in as i64,
+                    tokens_out: ans.tokens_out as i64,
+                    usage_estimated: ans.usage_estimated,
+                    latency_ms: ans.latency_ms,
+                    replayed: true,
+                    ..self.row(call, 0, now_ms())
+                })?;
+            }
+            return Ok(Some(ChatReply {
+                content: ans.content,
+                finish_reason: None,
+                tokens_in: ans.tokens_in,
+                tokens_out: ans.tokens_out,
+                usage_estimated: ans.usage_estimated,
+                latency: Duration::from_secs_f64(ans.latency_ms.max(0.0) / 1e3),
+                attempts: 0,
+                replayed: true,
+                request_hash: call.request_hash.clone(),
+                call_id: call.call_id.clone(),
+            }));
+        }
+        if self.config.replay.as_ref().is_some_and(|r| r.strict) {
+            return Err(LlmError::ReplayMiss {
+                request_hash: call.request_hash.clone(),
+                purpose: call.req.purpose.clone(),
+                source_dir: replay.run().to_path_buf(),
+            });
+        }
+        Ok(None)
+    }
+
+    /// Sends `call` until it succeeds, fails for good or runs out of retries, recording every
+    /// attempt; waits between attempts with seeded jitter.
+    fn send_with_retries(
+        &self,
+        call: &Call<'_>,
+        http: &reqwest::blocking::Client,
+        endpoint: &str,
+    ) -> Result<ChatReply, LlmError> {
         let jitter_seed = splitmix64(
             self.config.seed
-                ^ req
-                    .seed
-                    .unwrap_or_else(|| u64::from_str_radix(&request_hash[..16], 16).unwrap_or(0)),
+                ^ call.req.seed.unwrap_or_else(|| {
+                    u64::from_str_radix(&call.request_hash[..16], 16).unwrap_or(0)
+                }),
         );
         let mut attempt: u32 = 0;
         loop {
@@ -335,10 +376,11 @@ impl LlmClient {
             let outcome = {
                 let _slot = self.slots.acquire();
                 self.meter.add_request();
-                self.send_once(http, endpoint, &body_text)
+                self.send_once(http, endpoint, &call.body_text)
             };
             let latency = t0.elapsed();
             let latency_ms = latency.as_secs_f64() * 1e3;
+            let row = self.row(call, attempt as i32, started_at_ms);
             match outcome {
                 Attempt::Ok {
                     http_status,
@@ -349,7 +391,11 @@ impl LlmClient {
                 } => {
                     let (tokens_in, tokens_out, usage_estimated) = match usage {
                         Some((i, o)) => (i, o, false),
-                        None => (estimate_prompt(req), count_tokens(&content) as u64, true),
+                        None => (
+                            estimate_prompt(call.req),
+                            count_tokens(&content) as u64,
+                            true,
+                        ),
                     };
                     self.meter.add_tokens(tokens_in, tokens_out, false);
                     self.record(CallRecord {
@@ -360,7 +406,7 @@ impl LlmClient {
                         tokens_out: tokens_out as i64,
                         usage_estimated,
                         latency_ms,
-                        ..row(attempt as i32, started_at_ms)
+                        ..row
                     })?;
                     return Ok(ChatReply {
                         content,
@@ -371,8 +417,8 @@ impl LlmClient {
                         latency,
                         attempts: attempt,
                         replayed: false,
-                        request_hash,
-                        call_id,
+                        request_hash: call.request_hash.clone(),
+                        call_id: call.call_id.clone(),
                     });
                 }
                 Attempt::Failed {
@@ -389,7 +435,7 @@ impl LlmClient {
                         http_status: http_status.map(i32::from),
                         error: Some(message.clone()),
                         latency_ms,
-                        ..row(attempt as i32, started_at_ms)
+                        ..row
                     })?;
                     if retryable && attempt <= self.config.max_retries {
                         let wait = delay(
@@ -408,31 +454,43 @@ impl LlmClient {
                         std::thread::sleep(wait);
                         continue;
                     }
-                    let url = self.shown.clone();
-                    return Err(match (st, http_status) {
-                        (status::HTTP_ERROR, Some(code)) => LlmError::Status {
-                            status: code,
-                            url,
-                            body_excerpt: self.scrub(&excerpt(body.as_deref().unwrap_or(""), 300)),
-                            attempts: attempt,
-                        },
-                        (status::TIMEOUT, _) => LlmError::Timeout {
-                            url,
-                            seconds: self.config.timeout.as_secs_f64(),
-                            attempts: attempt,
-                        },
-                        (status::BAD_RESPONSE, _) => LlmError::BadResponse {
-                            url,
-                            message: self.scrub(&message),
-                        },
-                        _ => LlmError::Connection {
-                            url,
-                            message: self.scrub(&message),
-                            attempts: attempt,
-                        },
-                    });
+                    return Err(self.final_error(st, http_status, body, message, attempt));
                 }
             }
+        }
+    }
+
+    /// The error of a call whose last attempt failed with `st` (after `attempts` attempts).
+    fn final_error(
+        &self,
+        st: &'static str,
+        http_status: Option<u16>,
+        body: Option<String>,
+        message: String,
+        attempts: u32,
+    ) -> LlmError {
+        let url = self.shown.clone();
+        match (st, http_status) {
+            (status::HTTP_ERROR, Some(code)) => LlmError::Status {
+                status: code,
+                url,
+                body_excerpt: self.scrub(&excerpt(body.as_deref().unwrap_or(""), 300)),
+                attempts,
+            },
+            (status::TIMEOUT, _) => LlmError::Timeout {
+                url,
+                seconds: self.config.timeout.as_secs_f64(),
+                attempts,
+            },
+            (status::BAD_RESPONSE, _) => LlmError::BadResponse {
+                url,
+                message: self.scrub(&message),
+            },
+            _ => LlmError::Connection {
+                url,
+                message: self.scrub(&message),
+                attempts,
+            },
         }
     }
 

@@ -339,7 +339,7 @@ mod tests {
         ];
         let mut state = 0x5eed_u64;
         let mut next = || {
-            state = crate::llm::backoff::splitmix64(state);
+            state = crate::rng::splitmix64(state);
             state
         };
         for _ in 0..3000 {

@@ -10,7 +10,7 @@
 //! proposal is accepted, so the chain is a random walk until it finds a success. The best sample so
 //! far (first reached, ties keep the earlier) is tracked.
 
-use crate::envs::pool::rack::SplitMix64;
+use crate::rng::SplitMix64;
 
 /// One dimension of the search box.
 #[derive(Debug, Clone, Copy, PartialEq)]

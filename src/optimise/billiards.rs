@@ -271,72 +271,20 @@ pub fn run_chains(
         let xs: Vec<Vec<f64>> = states.iter_mut().map(|s| s.annealer.propose()).collect();
         let shots: Vec<Shot> = xs.iter().map(|x| settings.bounds.shot(x)).collect();
         let t0 = Instant::now();
-        let traces: Vec<Option<Trace>> = chains
-            .par_iter()
-            .zip(shots.par_iter())
-            .enumerate()
-            .map(|(i, (c, shot))| {
-                let mut t = settings.env.simulate(&c.scene, shot).ok()?;
-                t.trace_id = format!("opt-{i}-{step}");
-                Some(t)
-            })
-            .collect();
+        let traces = simulate_all(settings, chains, &shots, step);
         timings.simulate_s += t0.elapsed().as_secs_f64();
         timings.failed_simulations += traces.iter().filter(|t| t.is_none()).count() as u64;
 
         // Annotate the dense chains' traces, one pool call per goal.
         let t1 = Instant::now();
-        let mut anns: Vec<Vec<Annotation>> = vec![Vec::new(); chains.len()];
-        if let Some(pool) = pool {
-            for (g, goal) in goals.iter().enumerate() {
-                let idx: Vec<usize> = (0..chains.len())
-                    .filter(|&i| {
-                        chains[i].goal == g
-                            && chains[i].kind == RewardKind::Dense
-                            && traces[i].is_some()
-                    })
-                    .collect();
-                if idx.is_empty() {
-                    continue;
-                }
-                let batch: Vec<Trace> = idx.iter().filter_map(|&i| traces[i].clone()).collect();
-                let (found, failed) = annotate(pool, &goal.detectors, &batch);
-                timings.failed_calls += failed as u64;
-                timings.dense_samples += idx.len() as u64;
-                for a in found {
-                    if let Some(&i) = idx
-                        .iter()
-                        .find(|&&i| traces[i].as_ref().is_some_and(|t| t.trace_id == a.trace_id))
-                    {
-                        anns[i].push(a);
-                    }
-                }
-            }
-        }
+        let anns = match pool {
+            Some(pool) => annotate_dense(pool, goals, chains, &traces, &mut timings),
+            None => vec![Vec::new(); chains.len()],
+        };
         timings.annotate_s += t1.elapsed().as_secs_f64();
 
         let t2 = Instant::now();
-        let scored: Vec<(f64, bool, bool)> = chains
-            .par_iter()
-            .enumerate()
-            .map(|(i, c)| {
-                let Some(trace) = &traces[i] else {
-                    return (0.0, false, false);
-                };
-                let goal = &goals[c.goal];
-                let verified = goal.rule.holds(trace).unwrap_or(false);
-                match c.kind {
-                    RewardKind::Sparse => (if verified { 1.0 } else { 0.0 }, verified, false),
-                    RewardKind::Dense => {
-                        let at = AnnotatedTrace::new(trace, &anns[i]);
-                        match evaluate(&goal.program, &at) {
-                            Ok(e) => (e.score, verified, false),
-                            Err(_) => (0.0, verified, true),
-                        }
-                    }
-                }
-            })
-            .collect();
+        let scored = score_all(goals, chains, &traces, &anns);
         timings.score_s += t2.elapsed().as_secs_f64();
         timings.program_errors += scored.iter().filter(|s| s.2).count() as u64;
         timings.samples += chains.len() as u64;
@@ -357,22 +305,122 @@ pub fn run_chains(
         }
         let done = step + 1;
         if done % every == 0 || done == budget {
-            for (c, st) in chains.iter().zip(&states) {
-                let (_, best, k) = st.annealer.best().unwrap_or((&[], 0.0, 0));
-                rows.push(CheckpointRow {
-                    goal: goals[c.goal].id.clone(),
-                    scene: c.scene.scene_id.clone(),
-                    seed: c.seed,
-                    kind: c.kind,
-                    budget: done,
-                    best_reward: best,
-                    success: st.best_success,
-                    best_sample: k,
-                    shot: st.best_shot,
-                });
-            }
+            rows.extend(checkpoint(goals, chains, &states, done));
         }
         on_step(done);
     }
     Ok((rows, timings))
+}
+
+/// Step `step`'s shot of every chain, simulated in parallel (`None` where the simulation failed);
+/// trace `i` is named `opt-<i>-<step>`.
+fn simulate_all(
+    settings: &Settings,
+    chains: &[Chain],
+    shots: &[Shot],
+    step: usize,
+) -> Vec<Option<Trace>> {
+    chains
+        .par_iter()
+        .zip(shots.par_iter())
+        .enumerate()
+        .map(|(i, (c, shot))| {
+            let mut t = settings.env.simulate(&c.scene, shot).ok()?;
+            t.trace_id = format!("opt-{i}-{step}");
+            Some(t)
+        })
+        .collect()
+}
+
+/// The annotations of the dense chains' traces (one pool call per goal, with that goal's
+/// detectors), by chain; sparse chains and failed simulations get none.
+fn annotate_dense(
+    pool: &WorkerPool,
+    goals: &[GoalTask],
+    chains: &[Chain],
+    traces: &[Option<Trace>],
+    timings: &mut Timings,
+) -> Vec<Vec<Annotation>> {
+    let mut anns: Vec<Vec<Annotation>> = vec![Vec::new(); chains.len()];
+    for (g, goal) in goals.iter().enumerate() {
+        let idx: Vec<usize> = (0..chains.len())
+            .filter(|&i| {
+                chains[i].goal == g && chains[i].kind == RewardKind::Dense && traces[i].is_some()
+            })
+            .collect();
+        if idx.is_empty() {
+            continue;
+        }
+        let batch: Vec<Trace> = idx.iter().filter_map(|&i| traces[i].clone()).collect();
+        let (found, failed) = annotate(pool, &goal.detectors, &batch);
+        timings.failed_calls += failed as u64;
+        timings.dense_samples += idx.len() as u64;
+        for a in found {
+            if let Some(&i) = idx
+                .iter()
+                .find(|&&i| traces[i].as_ref().is_some_and(|t| t.trace_id == a.trace_id))
+            {
+                anns[i].push(a);
+            }
+        }
+    }
+    anns
+}
+
+/// Every chain's (reward, verified success, program error) for its trace: sparse chains score
+/// the goal's rule, dense chains its reward program over the annotations.
+fn score_all(
+    goals: &[GoalTask],
+    chains: &[Chain],
+    traces: &[Option<Trace>],
+    anns: &[Vec<Annotation>],
+) -> Vec<(f64, bool, bool)> {
+    chains
+        .par_iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let Some(trace) = &traces[i] else {
+                return (0.0, false, false);
+            };
+            let goal = &goals[c.goal];
+            let verified = goal.rule.holds(trace).unwrap_or(false);
+            match c.kind {
+                RewardKind::Sparse => (if verified { 1.0 } else { 0.0 }, verified, false),
+                RewardKind::Dense => {
+                    let at = AnnotatedTrace::new(trace, &anns[i]);
+                    match evaluate(&goal.program, &at) {
+                        Ok(e) => (e.score, verified, false),
+                        Err(_) => (0.0, verified, true),
+                    }
+                }
+            }
+        })
+        .collect()
+}
+
+/// Every chain's best shot so far, as the checkpoint rows after `done` steps.
+fn checkpoint(
+    goals: &[GoalTask],
+    chains: &[Chain],
+    states: &[State],
+    done: usize,
+) -> Vec<CheckpointRow> {
+    chains
+        .iter()
+        .zip(states)
+        .map(|(c, st)| {
+            let (_, best, k) = st.annealer.best().unwrap_or((&[], 0.0, 0));
+            CheckpointRow {
+                goal: goals[c.goal].id.clone(),
+                scene: c.scene.scene_id.clone(),
+                seed: c.seed,
+                kind: c.kind,
+                budget: done,
+                best_reward: best,
+                success: st.best_success,
+                best_sample: k,
+                shot: st.best_shot,
+            }
+        })
+        .collect()
 }

@@ -3,8 +3,9 @@
 //! ball first hits ball k" cannot happen, since k is buried in the cluster).
 
 use crate::envs::Environment;
-use crate::envs::pool::rack::{SplitMix64, scene_seed};
+use crate::envs::pool::rack::scene_seed;
 use crate::envs::pool::{Goal, PoolEnv, Scene, SceneBall};
+use crate::rng::SplitMix64;
 
 /// How the balls of a scene are laid out.
 #[derive(

@@ -26,7 +26,7 @@ pub use registry::{BuildError, STAGE_KINDS, StageKind, find_kind, kind_names, pa
 pub use runner::{
     Action, PlannedStage, RunError, RunOptions, RunReport, StageReport, error_chain, explain, run,
 };
-pub use spec::{PipelineSpec, StageDef, hex, project_dir_of, valid_id};
+pub use spec::{PipelineSpec, StageDef, project_dir_of, valid_id};
 pub use stage::{FaultAction, FaultPlan, FaultPoint, Stage, StageContext, StageError, StageOutput};
 
 /// A pipeline file is invalid. Every variant names the file and line.

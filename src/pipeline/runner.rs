@@ -26,8 +26,9 @@ use sha2::{Digest, Sha256};
 use super::SpecError;
 use super::manifest::{Manifest, PipelineInfo, StageRecord, StageStatus, now};
 use super::progress::Progress;
-use super::spec::{PipelineSpec, hex};
+use super::spec::PipelineSpec;
 use super::stage::{FaultPlan, Stage, StageContext, StageError};
+use crate::digest::hex;
 use crate::store::{RunDir, StoreError, remove_files};
 
 /// Options of one `annotrace run`.

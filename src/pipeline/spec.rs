@@ -33,6 +33,7 @@ use super::params::StageParams;
 use super::registry::{BuildError, StageKind, find_kind, kind_names};
 use super::toml_doc::{self, Entry, Node, NodeValue};
 use super::{SpecError, params};
+use crate::digest::hex;
 
 /// A validated pipeline.
 #[derive(Clone, Debug)]
@@ -539,11 +540,6 @@ impl PipelineSpec {
             .clone()
             .unwrap_or_else(|| self.project_dir.join("runs").join(&self.name))
     }
-}
-
-/// Lower-case hex of bytes.
-pub fn hex(bytes: &[u8]) -> String {
-    bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
 /// The closest known name, if it is close enough to be a typo.

@@ -220,32 +220,7 @@ impl Checker<'_> {
         let upper = name.to_ascii_uppercase();
         let f = upper.as_str();
         let kind = match f {
-            "AND" | "OR" => {
-                if let Some(a) = args.iter().find(|a| a.name.is_some()) {
-                    let (k, p) = a.name.as_ref().expect("checked");
-                    return Err(err(
-                        ErrorCategory::Arity,
-                        *p,
-                        format!("{f} takes expressions only, not the keyword `{k}`"),
-                    ));
-                }
-                if args.is_empty() {
-                    return Err(err(
-                        ErrorCategory::Arity,
-                        e.pos,
-                        format!("{f} needs at least one expression"),
-                    ));
-                }
-                let xs = args
-                    .iter()
-                    .map(|a| self.node(&a.value))
-                    .collect::<Result<Vec<_>, _>>()?;
-                if f == "AND" {
-                    NodeKind::And(xs)
-                } else {
-                    NodeKind::Or(xs)
-                }
-            }
+            "AND" | "OR" => self.junction(f, e.pos, args)?,
             "NOT" => {
                 let b = bind(f, e.pos, args, &["expr"], 1, false)?;
                 NodeKind::Not(Box::new(self.node(b.slots[0].expect("required"))?))
@@ -279,87 +254,9 @@ impl Checker<'_> {
                     cmp,
                 }
             }
-            "CUE_HIT" | "POCKETED" => {
-                if self.schema.env != Env::Pooltool {
-                    return Err(err(
-                        ErrorCategory::UnknownFunction,
-                        e.pos,
-                        format!(
-                            "{f} is a billiards fact; it does not exist for {}",
-                            self.schema.env
-                        ),
-                    ));
-                }
-                if f == "POCKETED" {
-                    let b = bind(f, e.pos, args, &["ball", "pocket"], 1, false)?;
-                    let pocket = match b.get(1) {
-                        None => None,
-                        Some(x) => match &x.kind {
-                            ExprKind::Str(s) => Some(s.clone()),
-                            _ => {
-                                return Err(err(
-                                    ErrorCategory::ArgumentType,
-                                    x.pos,
-                                    format!(
-                                        "POCKETED: `pocket` is a pocket id string (lb, lc, lt, rb, rc, rt), found {}",
-                                        x.type_name()
-                                    ),
-                                ));
-                            }
-                        },
-                    };
-                    NodeKind::Pocketed {
-                        ball: self.obj(f, b.slots[0].expect("required"))?,
-                        pocket,
-                    }
-                } else {
-                    let b = bind(f, e.pos, args, &["ball"], 1, false)?;
-                    NodeKind::CueHit(self.obj(f, b.slots[0].expect("required"))?)
-                }
-            }
+            "CUE_HIT" | "POCKETED" => self.billiards_fact(f, e.pos, args)?,
             "AFTER" | "WITHIN" => self.after(f, e.pos, args)?,
-            "NEARBY_AT" => {
-                let b = bind(
-                    f,
-                    e.pos,
-                    args,
-                    &["obj_id", "x", "y", "t", "threshold_strength"],
-                    4,
-                    false,
-                )?;
-                let x = number(f, "x", b.slots[1].expect("required"))?;
-                let y = number(f, "y", b.slots[2].expect("required"))?;
-                let te = b.slots[3].expect("required");
-                let t = number(f, "t", te)?;
-                if !(0.0..=1.0).contains(&t) {
-                    return Err(err(
-                        ErrorCategory::ArgumentType,
-                        te.pos,
-                        format!("NEARBY_AT: `t` is normalised time in [0, 1], found {t}"),
-                    ));
-                }
-                let threshold = match b.get(4) {
-                    Some(x) => {
-                        let v = number(f, "threshold_strength", x)?;
-                        if v <= 0.0 {
-                            return Err(err(
-                                ErrorCategory::ArgumentType,
-                                x.pos,
-                                format!("NEARBY_AT: `threshold_strength` must be > 0, found {v}"),
-                            ));
-                        }
-                        v
-                    }
-                    None => 0.1,
-                };
-                NodeKind::NearbyAt {
-                    obj: self.obj(f, b.slots[0].expect("required"))?,
-                    x,
-                    y,
-                    t,
-                    threshold,
-                }
-            }
+            "NEARBY_AT" => self.nearby_at(f, e.pos, args)?,
             "OBJECT_ID" => {
                 return Err(err(
                     ErrorCategory::ArgumentType,
@@ -383,6 +280,121 @@ impl Checker<'_> {
             kind,
             pos: e.pos,
             span: e.span,
+        })
+    }
+
+    /// `AND(...)` and `OR(...)`: one or more expressions, no keywords.
+    fn junction(&self, f: &str, pos: Pos, args: &[Arg]) -> Result<NodeKind, RewardError> {
+        if let Some(a) = args.iter().find(|a| a.name.is_some()) {
+            let (k, p) = a.name.as_ref().expect("checked");
+            return Err(err(
+                ErrorCategory::Arity,
+                *p,
+                format!("{f} takes expressions only, not the keyword `{k}`"),
+            ));
+        }
+        if args.is_empty() {
+            return Err(err(
+                ErrorCategory::Arity,
+                pos,
+                format!("{f} needs at least one expression"),
+            ));
+        }
+        let xs = args
+            .iter()
+            .map(|a| self.node(&a.value))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(if f == "AND" {
+            NodeKind::And(xs)
+        } else {
+            NodeKind::Or(xs)
+        })
+    }
+
+    /// `CUE_HIT(ball)` and `POCKETED(ball, pocket)`: billiards facts, unknown in other environments.
+    fn billiards_fact(&self, f: &str, pos: Pos, args: &[Arg]) -> Result<NodeKind, RewardError> {
+        if self.schema.env != Env::Pooltool {
+            return Err(err(
+                ErrorCategory::UnknownFunction,
+                pos,
+                format!(
+                    "{f} is a billiards fact; it does not exist for {}",
+                    self.schema.env
+                ),
+            ));
+        }
+        if f == "POCKETED" {
+            let b = bind(f, pos, args, &["ball", "pocket"], 1, false)?;
+            let pocket = match b.get(1) {
+                None => None,
+                Some(x) => match &x.kind {
+                    ExprKind::Str(s) => Some(s.clone()),
+                    _ => {
+                        return Err(err(
+                            ErrorCategory::ArgumentType,
+                            x.pos,
+                            format!(
+                                "POCKETED: `pocket` is a pocket id string (lb, lc, lt, rb, rc, rt), found {}",
+                                x.type_name()
+                            ),
+                        ));
+                    }
+                },
+            };
+            Ok(NodeKind::Pocketed {
+                ball: self.obj(f, b.slots[0].expect("required"))?,
+                pocket,
+            })
+        } else {
+            let b = bind(f, pos, args, &["ball"], 1, false)?;
+            Ok(NodeKind::CueHit(
+                self.obj(f, b.slots[0].expect("required"))?,
+            ))
+        }
+    }
+
+    /// `NEARBY_AT(obj_id, x, y, t, threshold_strength)`: `t` in [0, 1], the threshold above 0
+    /// (default 0.1).
+    fn nearby_at(&self, f: &str, pos: Pos, args: &[Arg]) -> Result<NodeKind, RewardError> {
+        let b = bind(
+            f,
+            pos,
+            args,
+            &["obj_id", "x", "y", "t", "threshold_strength"],
+            4,
+            false,
+        )?;
+        let x = number(f, "x", b.slots[1].expect("required"))?;
+        let y = number(f, "y", b.slots[2].expect("required"))?;
+        let te = b.slots[3].expect("required");
+        let t = number(f, "t", te)?;
+        if !(0.0..=1.0).contains(&t) {
+            return Err(err(
+                ErrorCategory::ArgumentType,
+                te.pos,
+                format!("NEARBY_AT: `t` is normalised time in [0, 1], found {t}"),
+            ));
+        }
+        let threshold = match b.get(4) {
+            Some(x) => {
+                let v = number(f, "threshold_strength", x)?;
+                if v <= 0.0 {
+                    return Err(err(
+                        ErrorCategory::ArgumentType,
+                        x.pos,
+                        format!("NEARBY_AT: `threshold_strength` must be > 0, found {v}"),
+                    ));
+                }
+                v
+            }
+            None => 0.1,
+        };
+        Ok(NodeKind::NearbyAt {
+            obj: self.obj(f, b.slots[0].expect("required"))?,
+            x,
+            y,
+            t,
+            threshold,
         })
     }
 

@@ -224,6 +224,126 @@ impl<'a> Verifier<'a> {
             })
     }
 
+    /// `HIT(a, b, state=, min_cut=, max_speed=)`: ball–ball events between `a` and `b` (either
+    /// order) that pass the keyword filters.
+    fn ball_hits(&self, args: &[Arg]) -> Result<Vec<Hit>, RewardError> {
+        let (a, b) = (text(&args[0].value)?, text(&args[1].value)?);
+        let mut state = None;
+        let (mut min_cut, mut max_speed) = (None, None);
+        for x in &args[2..] {
+            match x.name.as_ref().map(|n| n.0.as_str()) {
+                Some("state") => state = Some(text(&x.value)?),
+                Some("min_cut") => min_cut = Some(number(&x.value)?),
+                Some("max_speed") => max_speed = Some(number(&x.value)?),
+                _ => {
+                    return Err(err(
+                        ErrorCategory::Arity,
+                        x.value.pos,
+                        "HIT takes two ball ids and the keywords state=, min_cut=, max_speed=",
+                    ));
+                }
+            }
+        }
+        let mut hits = Vec::new();
+        for (i, t, ids, payload) in self.events(&["physics_ball_ball"]) {
+            if ids.len() != 2 {
+                continue;
+            }
+            let (x, y) = if is(&ids[0], &a) && is(&ids[1], &b) {
+                (&ids[0], &ids[1])
+            } else if is(&ids[1], &a) && is(&ids[0], &b) {
+                (&ids[1], &ids[0])
+            } else {
+                continue;
+            };
+            if let Some(s) = &state
+                && !self
+                    .ball_at(x, t)
+                    .is_some_and(|ba| ba.motion_state.eq_ignore_ascii_case(s))
+            {
+                continue;
+            }
+            if let Some(m) = max_speed {
+                let v = payload
+                    .and_then(|p| p.get("approach_speed"))
+                    .and_then(Value::as_f64)
+                    .map(f64::abs);
+                if !v.is_some_and(|v| v <= m) {
+                    continue;
+                }
+            }
+            if let Some(m) = min_cut
+                && !self.cut_angle(x, y, t).is_some_and(|c| c >= m)
+            {
+                continue;
+            }
+            hits.push((t, i));
+        }
+        Ok(hits)
+    }
+
+    /// `CUSHION(b)`: cushion contacts of `b`, a run of contacts less than 0.05 s apart counting
+    /// once.
+    fn cushion_hits(&self, b: &str) -> Vec<Hit> {
+        let mut last = f64::NEG_INFINITY;
+        let mut hits = Vec::new();
+        for (i, t, ids, _) in self.events(&[
+            "physics_ball_linear_cushion",
+            "physics_ball_circular_cushion",
+        ]) {
+            if ids.first().is_some_and(|x| is(x, b)) {
+                if t - last > 0.05 {
+                    hits.push((t, i));
+                }
+                last = t;
+            }
+        }
+        hits
+    }
+
+    /// `SUCCESS`: the `success` event, else the end of a successful trace.
+    fn success_hits(&self) -> Vec<Hit> {
+        let t = self
+            .trace
+            .events
+            .iter()
+            .enumerate()
+            .find(|(_, ev)| ev.kind == "success")
+            .and_then(|(i, ev)| Some((ev.t?, i)));
+        match t {
+            Some(h) => vec![h],
+            None if self.trace.outcome.success => {
+                vec![(
+                    self.trace.timesteps.last().map(|s| s.t).unwrap_or(0.0),
+                    usize::MAX,
+                )]
+            }
+            None => Vec::new(),
+        }
+    }
+
+    /// `SEQ(e1, e2, …)`: the last hit of the first chain of distinct occurrences in time order, or
+    /// none when the chain breaks.
+    fn seq_hits(&self, args: &[Arg]) -> Result<Vec<Hit>, RewardError> {
+        let mut prev: Option<Hit> = None;
+        let mut used: Vec<(usize, f64, usize)> = Vec::new();
+        for (k, a) in args.iter().enumerate() {
+            let occ = self.occurrences(&a.value)?;
+            let next = occ.into_iter().find(|h| {
+                prev.is_none_or(|p| h.0 >= p.0)
+                    && !used.iter().any(|(_, t, i)| *i == h.1 && *t == h.0)
+            });
+            match next {
+                Some(h) => {
+                    used.push((k, h.0, h.1));
+                    prev = Some(h);
+                }
+                None => return Ok(Vec::new()),
+            }
+        }
+        Ok(prev.into_iter().collect())
+    }
+
     fn occurrences(&self, e: &Expr) -> Result<Vec<Hit>, RewardError> {
         let (name, args) = name_of(e).expect("checked");
         let arg = |i: usize| text(&args[i].value);
@@ -241,77 +361,11 @@ impl<'a> Verifier<'a> {
             }
             "HIT" => {
                 self.require_env(e, &name, true)?;
-                let (a, b) = (arg(0)?, arg(1)?);
-                let mut state = None;
-                let (mut min_cut, mut max_speed) = (None, None);
-                for x in &args[2..] {
-                    match x.name.as_ref().map(|n| n.0.as_str()) {
-                        Some("state") => state = Some(text(&x.value)?),
-                        Some("min_cut") => min_cut = Some(number(&x.value)?),
-                        Some("max_speed") => max_speed = Some(number(&x.value)?),
-                        _ => {
-                            return Err(err(
-                                ErrorCategory::Arity,
-                                x.value.pos,
-                                "HIT takes two ball ids and the keywords state=, min_cut=, max_speed=",
-                            ));
-                        }
-                    }
-                }
-                let mut hits = Vec::new();
-                for (i, t, ids, payload) in self.events(&["physics_ball_ball"]) {
-                    if ids.len() != 2 {
-                        continue;
-                    }
-                    let (x, y) = if is(&ids[0], &a) && is(&ids[1], &b) {
-                        (&ids[0], &ids[1])
-                    } else if is(&ids[1], &a) && is(&ids[0], &b) {
-                        (&ids[1], &ids[0])
-                    } else {
-                        continue;
-                    };
-                    if let Some(s) = &state
-                        && !self
-                            .ball_at(x, t)
-                            .is_some_and(|ba| ba.motion_state.eq_ignore_ascii_case(s))
-                    {
-                        continue;
-                    }
-                    if let Some(m) = max_speed {
-                        let v = payload
-                            .and_then(|p| p.get("approach_speed"))
-                            .and_then(Value::as_f64)
-                            .map(f64::abs);
-                        if !v.is_some_and(|v| v <= m) {
-                            continue;
-                        }
-                    }
-                    if let Some(m) = min_cut
-                        && !self.cut_angle(x, y, t).is_some_and(|c| c >= m)
-                    {
-                        continue;
-                    }
-                    hits.push((t, i));
-                }
-                hits
+                self.ball_hits(args)?
             }
             "CUSHION" => {
                 self.require_env(e, &name, true)?;
-                let b = arg(0)?;
-                let mut last = f64::NEG_INFINITY;
-                let mut hits = Vec::new();
-                for (i, t, ids, _) in self.events(&[
-                    "physics_ball_linear_cushion",
-                    "physics_ball_circular_cushion",
-                ]) {
-                    if ids.first().is_some_and(|x| is(x, &b)) {
-                        if t - last > 0.05 {
-                            hits.push((t, i));
-                        }
-                        last = t;
-                    }
-                }
-                hits
+                self.cushion_hits(&arg(0)?)
             }
             "POCKET" => {
                 self.require_env(e, &name, true)?;
@@ -370,44 +424,8 @@ impl<'a> Verifier<'a> {
                     .map(|(i, t, _, _)| (t, i))
                     .collect()
             }
-            "SUCCESS" => {
-                let t = self
-                    .trace
-                    .events
-                    .iter()
-                    .enumerate()
-                    .find(|(_, ev)| ev.kind == "success")
-                    .and_then(|(i, ev)| Some((ev.t?, i)));
-                match t {
-                    Some(h) => vec![h],
-                    None if self.trace.outcome.success => {
-                        vec![(
-                            self.trace.timesteps.last().map(|s| s.t).unwrap_or(0.0),
-                            usize::MAX,
-                        )]
-                    }
-                    None => Vec::new(),
-                }
-            }
-            "SEQ" => {
-                let mut prev: Option<Hit> = None;
-                let mut used: Vec<(usize, f64, usize)> = Vec::new();
-                for (k, a) in args.iter().enumerate() {
-                    let occ = self.occurrences(&a.value)?;
-                    let next = occ.into_iter().find(|h| {
-                        prev.is_none_or(|p| h.0 >= p.0)
-                            && !used.iter().any(|(_, t, i)| *i == h.1 && *t == h.0)
-                    });
-                    match next {
-                        Some(h) => {
-                            used.push((k, h.0, h.1));
-                            prev = Some(h);
-                        }
-                        None => return Ok(Vec::new()),
-                    }
-                }
-                prev.into_iter().collect()
-            }
+            "SUCCESS" => self.success_hits(),
+            "SEQ" => self.seq_hits(args)?,
             _ => {
                 return Err(err(
                     ErrorCategory::ArgumentType,

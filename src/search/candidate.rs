@@ -13,10 +13,7 @@ use crate::fitness::FitnessTerms;
 
 /// Hash of a program's source: the first 16 hex digits of its SHA-256.
 pub fn code_hash(code: &str) -> String {
-    Sha256::digest(code.as_bytes())[..8]
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
+    crate::digest::hex(&Sha256::digest(code.as_bytes())[..8])
 }
 
 /// A candidate's status: `ok` (scored), `seed` (g₀, scored), `duplicate` (same code as an earlier

@@ -161,10 +161,7 @@ impl Evaluator<'_> {
             h.update((a.len() as u64).to_le_bytes());
             h.update(a.iter().map(|&b| u8::from(b)).collect::<Vec<u8>>());
         }
-        let signature: String = h.finalize()[..8]
-            .iter()
-            .map(|b| format!("{b:02x}"))
-            .collect();
+        let signature = crate::digest::hex(&h.finalize()[..8]);
         if let Some(of) = known.get(&signature) {
             return Evaluation::SameBehaviour {
                 of: of.clone(),

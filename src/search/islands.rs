@@ -16,8 +16,8 @@
 
 use std::collections::BTreeMap;
 
-use crate::envs::pool::rack::SplitMix64;
 use crate::fitness::FitnessTerms;
+use crate::rng::SplitMix64;
 
 /// How a search picks parents and keeps programs.
 #[derive(

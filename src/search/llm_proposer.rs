@@ -18,6 +18,7 @@ use crate::llm::{
     ChatReply, ChatRequest, EvolveContext, LlmClient, LlmConfig, LlmError, LlmSettings, ParentView,
     Prompts, RepairContext, extract_code,
 };
+use crate::rng;
 use crate::store::RunDir;
 
 /// Purpose tags of this proposer's calls in `llm_calls`.
@@ -119,11 +120,10 @@ fn map_error(e: LlmError) -> ProposeError {
 }
 
 /// The repair seed: the request's seed mixed with the attempt, so each repair asks a new question.
+/// Uses SplitMix64's output function without its increment ([`rng::finalize`], not
+/// [`rng::splitmix64`]); the recorded replays key on these seeds, so it stays that way.
 fn repair_seed(seed: u64, attempt: u32) -> u64 {
-    let mut z = seed ^ (u64::from(attempt)).wrapping_mul(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
+    rng::finalize(seed ^ u64::from(attempt).wrapping_mul(rng::GOLDEN))
 }
 
 /// (message, column) of a validator error; the line comes from [`DetectorError::line`].

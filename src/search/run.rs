@@ -16,14 +16,13 @@ use std::collections::{BTreeMap, HashMap};
 use std::sync::Mutex;
 use std::time::Instant;
 
-use sha2::{Digest, Sha256};
-
 use super::candidate::{CandidateRecord, code_hash};
 use super::evaluator::{Evaluation, Evaluator};
 use super::islands::{Database, Program, Strategy, Temperatures};
 use super::proposer::{Parent, Proposal, ProposalRequest, ProposeError, Proposer, count_lines};
 use crate::detect::DetectorError;
-use crate::envs::pool::rack::SplitMix64;
+use crate::digest::words_u64;
+use crate::rng::SplitMix64;
 
 /// The knobs of a search (the paper's I, s, T_r, budget and δ, and ours).
 #[derive(Clone, Debug, PartialEq)]
@@ -169,17 +168,9 @@ pub struct LabelOutcome {
     pub budget_exhausted: bool,
 }
 
-fn mix(parts: &[u64]) -> u64 {
-    let mut h = Sha256::new();
-    for p in parts {
-        h.update(p.to_le_bytes());
-    }
-    u64::from_le_bytes(h.finalize()[..8].try_into().expect("8 bytes"))
-}
-
 /// The generator of step `step` of label `label_index`'s search.
 pub fn step_rng(seed: u64, label_index: u32, step: u64) -> SplitMix64 {
-    SplitMix64::new(mix(&[seed, u64::from(label_index), step, 0x57E9]))
+    SplitMix64::new(words_u64(&[seed, u64::from(label_index), step, 0x57E9]))
 }
 
 fn repairable(e: &DetectorError) -> bool {
@@ -198,6 +189,16 @@ struct State {
 }
 
 impl State {
+    /// No record applied yet.
+    fn empty() -> Self {
+        State {
+            db: None,
+            seen: HashMap::new(),
+            known: HashMap::new(),
+            best_by_step: Vec::new(),
+        }
+    }
+
     fn apply(&mut self, r: &CandidateRecord, cfg: &SearchConfig, label_index: u32) {
         if !r.code.is_empty() {
             self.seen
@@ -237,8 +238,12 @@ impl State {
             if let Some(db) = &mut self.db {
                 self.best_by_step.push(db.best().terms.nu);
                 if cfg.reset_period > 0 && (step + 1).is_multiple_of(cfg.reset_period) {
-                    let mut rng =
-                        SplitMix64::new(mix(&[cfg.seed, u64::from(label_index), step, 0x4E5E7]));
+                    let mut rng = SplitMix64::new(words_u64(&[
+                        cfg.seed,
+                        u64::from(label_index),
+                        step,
+                        0x4E5E7,
+                    ]));
                     db.reset(&mut rng);
                 }
             }
@@ -446,45 +451,92 @@ impl LabelSearch<'_> {
         Ok(rec)
     }
 
+    /// Round 0: the seed programs, scored (and checkpointed when any scored), or replayed from
+    /// the checkpoint. A scored seed's status is `seed`.
+    fn seed_round(&self) -> Result<Vec<CandidateRecord>, SearchError> {
+        if let Some(r) = self.checkpoint.load(self.label_index, 0)? {
+            return Ok(r);
+        }
+        // Seeds are scored against each other (a repeated seed is a duplicate); the caller
+        // rebuilds its state from the records.
+        let mut state = State::empty();
+        let mut out = Vec::new();
+        for code in &self.seeds {
+            let mut rec = self.base_record(-1, -1);
+            self.score_into(&mut rec, code.clone(), &state);
+            if rec.status == "ok" {
+                rec.status = "seed".into();
+            }
+            state.apply(&rec, self.config, self.label_index);
+            out.push(rec);
+        }
+        if out.iter().any(CandidateRecord::scored) {
+            self.checkpoint.save(self.label_index, 0, &out)?;
+        }
+        Ok(out)
+    }
+
+    /// One round of proposals for `steps`: parents are sampled per step from its own generator,
+    /// every proposal is requested at once, and each child is scored as soon as its proposal is
+    /// back (in step order) while later proposals are still in flight. Applies the records to
+    /// `state`; sets `exhausted` when the proposer's budget ran out.
+    fn round(
+        &self,
+        steps: std::ops::Range<u64>,
+        state: &mut State,
+        propose_s: &mut f64,
+        exhausted: &mut bool,
+    ) -> Result<Vec<CandidateRecord>, SearchError> {
+        let cfg = self.config;
+        let db = state.db.as_ref().expect("seeded");
+        let plans: Vec<(u64, usize, Vec<Program>, u64)> = steps
+            .map(|step| {
+                let mut rng = step_rng(cfg.seed, self.label_index, step);
+                let (island, parents) = db.sample(cfg.prompt_size, &mut rng);
+                (step, island, parents, rng.next_u64())
+            })
+            .collect();
+        let proposer = self.proposer;
+        let mut records = Vec::new();
+        std::thread::scope(|sc| -> Result<(), SearchError> {
+            let handles: Vec<_> = plans
+                .iter()
+                .map(|(step, island, parents, seed)| {
+                    let req = self.request(*island, parents, *seed, *step);
+                    sc.spawn(move || {
+                        let t = Instant::now();
+                        (proposer.propose(&req), t.elapsed().as_secs_f64())
+                    })
+                })
+                .collect();
+            for (plan, handle) in plans.into_iter().zip(handles) {
+                let waited = Instant::now();
+                let (proposal, took) = handle.join().unwrap_or_else(|_| {
+                    (
+                        Err(ProposeError::Other("the proposer panicked".into())),
+                        0.0,
+                    )
+                });
+                *propose_s += waited.elapsed().as_secs_f64();
+                let rec = self.settle(plan, proposal, took, state, propose_s)?;
+                *exhausted |= rec.status == "budget_exhausted";
+                state.apply(&rec, cfg, self.label_index);
+                records.push(rec);
+            }
+            Ok(())
+        })?;
+        Ok(records)
+    }
+
     /// Runs (or resumes) the search.
     pub fn run(&self) -> Result<LabelOutcome, SearchError> {
         let cfg = self.config;
         let started = Instant::now();
         let mut propose_s = 0.0;
-        let mut state = State {
-            db: None,
-            seen: HashMap::new(),
-            known: HashMap::new(),
-            best_by_step: Vec::new(),
-        };
+        let mut state = State::empty();
         let mut all = Vec::new();
         let label = self.evaluator.label.clone();
-        // Round 0: the seed programs.
-        let seeds = match self.checkpoint.load(self.label_index, 0)? {
-            Some(r) => r,
-            None => {
-                let mut out = Vec::new();
-                for code in &self.seeds {
-                    let mut rec = self.base_record(-1, -1);
-                    self.score_into(&mut rec, code.clone(), &state);
-                    if rec.status == "ok" {
-                        rec.status = "seed".into();
-                    }
-                    state.apply(&rec, cfg, self.label_index);
-                    out.push(rec);
-                }
-                state = State {
-                    db: None,
-                    seen: HashMap::new(),
-                    known: HashMap::new(),
-                    best_by_step: Vec::new(),
-                };
-                if out.iter().any(CandidateRecord::scored) {
-                    self.checkpoint.save(self.label_index, 0, &out)?;
-                }
-                out
-            }
-        };
+        let seeds = self.seed_round()?;
         for r in &seeds {
             state.apply(r, cfg, self.label_index);
         }
@@ -512,48 +564,8 @@ impl LabelSearch<'_> {
             if exhausted {
                 break;
             }
-            let steps: Vec<u64> =
-                ((round - 1) * per_round..(round * per_round).min(cfg.budget)).collect();
-            let db = state.db.as_ref().expect("seeded");
-            let plans: Vec<(u64, usize, Vec<Program>, u64)> = steps
-                .iter()
-                .map(|&step| {
-                    let mut rng = step_rng(cfg.seed, self.label_index, step);
-                    let (island, parents) = db.sample(cfg.prompt_size, &mut rng);
-                    (step, island, parents, rng.next_u64())
-                })
-                .collect();
-            // Every proposal of the round is requested at once; each child is scored as soon as its
-            // proposal is back (in step order), while later proposals are still in flight.
-            let proposer = self.proposer;
-            let mut records = Vec::new();
-            std::thread::scope(|sc| -> Result<(), SearchError> {
-                let handles: Vec<_> = plans
-                    .iter()
-                    .map(|(step, island, parents, seed)| {
-                        let req = self.request(*island, parents, *seed, *step);
-                        sc.spawn(move || {
-                            let t = Instant::now();
-                            (proposer.propose(&req), t.elapsed().as_secs_f64())
-                        })
-                    })
-                    .collect();
-                for (plan, handle) in plans.into_iter().zip(handles) {
-                    let waited = Instant::now();
-                    let (proposal, took) = handle.join().unwrap_or_else(|_| {
-                        (
-                            Err(ProposeError::Other("the proposer panicked".into())),
-                            0.0,
-                        )
-                    });
-                    propose_s += waited.elapsed().as_secs_f64();
-                    let rec = self.settle(plan, proposal, took, &state, &mut propose_s)?;
-                    exhausted |= rec.status == "budget_exhausted";
-                    state.apply(&rec, cfg, self.label_index);
-                    records.push(rec);
-                }
-                Ok(())
-            })?;
+            let steps = (round - 1) * per_round..(round * per_round).min(cfg.budget);
+            let records = self.round(steps, &mut state, &mut propose_s, &mut exhausted)?;
             self.checkpoint.save(self.label_index, round, &records)?;
             all.extend(records);
         }

@@ -398,11 +398,21 @@ impl TraceBatchBuilder {
         scene_id: &str,
         source: &str,
     ) -> Result<TraceBatches, ArrowError> {
-        let mut b = TraceBatchBuilder::new();
+        TraceBatchBuilder::new().push_trace(trace, scene_id, source)
+    }
+
+    /// Converts a whole in-memory trace with this builder (whose buffers a writer of many traces
+    /// keeps): every timestep, then the trace's row and events.
+    pub fn push_trace(
+        &mut self,
+        trace: &Trace,
+        scene_id: &str,
+        source: &str,
+    ) -> Result<TraceBatches, ArrowError> {
         for ts in &trace.timesteps {
-            b.push_timestep(ts);
+            self.push_timestep(ts);
         }
-        b.finish(&TraceMeta {
+        self.finish(&TraceMeta {
             trace_id: &trace.trace_id,
             scene_id,
             task_id: &trace.task_id,
@@ -631,7 +641,8 @@ pub struct TraceRows<'a> {
     pub events: &'a RecordBatch,
 }
 
-/// Rebuilds a trace from its rows: the inverse of [`TraceBatchBuilder`].
+/// Rebuilds a trace from its rows: the inverse of [`TraceBatchBuilder`]. Reads the `traces` row,
+/// the timesteps, the frames into their timesteps and the events, in that order.
 pub fn decode_trace(rows: &TraceRows<'_>) -> Result<Trace, DecodeError> {
     let env = rows.env;
     let tr = Cols {
@@ -642,6 +653,24 @@ pub fn decode_trace(rows: &TraceRows<'_>) -> Result<Trace, DecodeError> {
         return Err(DecodeError::NotFound(String::new()));
     }
     let trace_id = tr.str("trace_id")?.value(0).to_string();
+    let (outcome, top_extra) = decode_outcome(&tr, &trace_id)?;
+    let mut timesteps = decode_timesteps(rows.timesteps, &trace_id)?;
+    let frames = FrameCols::read(rows.frames, env, &trace_id)?;
+    frames.fill(&mut timesteps)?;
+    let events = decode_events(rows.events, &trace_id)?;
+    Ok(Trace {
+        trace_id,
+        env,
+        task_id: tr.str("task_id")?.value(0).to_string(),
+        timesteps,
+        events,
+        outcome,
+        extra: top_extra,
+    })
+}
+
+/// The outcome and the unknown top-level fields of a trace's `traces` row.
+fn decode_outcome(tr: &Cols<'_>, trace_id: &str) -> Result<(Outcome, JsonMap), DecodeError> {
     let outcome_extra = tr.str("outcome_extra")?;
     let extra = tr.str("extra")?;
     let outcome = Outcome {
@@ -651,26 +680,29 @@ pub fn decode_trace(rows: &TraceRows<'_>) -> Result<Trace, DecodeError> {
             Some(tr.str("metrics")?.value(0)),
             "traces",
             "metrics",
-            &trace_id,
+            trace_id,
         )?,
         extra: parse_map(
             opt(&outcome_extra, 0, |i| outcome_extra.value(i)),
             "traces",
             "outcome_extra",
-            &trace_id,
+            trace_id,
         )?,
     };
     let top_extra = parse_map(
         opt(&extra, 0, |i| extra.value(i)),
         "traces",
         "extra",
-        &trace_id,
+        trace_id,
     )?;
+    Ok((outcome, top_extra))
+}
 
-    // Timesteps.
+/// The trace's timesteps, without their objects (see [`FrameCols::fill`]).
+fn decode_timesteps(batch: &RecordBatch, trace_id: &str) -> Result<Vec<Timestep>, DecodeError> {
     let ts = Cols {
         table: "timesteps",
-        batch: rows.timesteps,
+        batch,
     };
     let (steps, times, step_extra) = (ts.i64("step")?, ts.f64("t")?, ts.str("extra")?);
     let mut timesteps: Vec<Timestep> = Vec::with_capacity(steps.len());
@@ -683,154 +715,18 @@ pub fn decode_trace(rows: &TraceRows<'_>) -> Result<Trace, DecodeError> {
                 opt(&step_extra, i, |i| step_extra.value(i)),
                 "timesteps",
                 "extra",
-                &trace_id,
+                trace_id,
             )?,
         });
     }
+    Ok(timesteps)
+}
 
-    // Frames: rows arrive sorted by (step, slot); walk them alongside the timesteps.
-    let fr = Cols {
-        table: "frames",
-        batch: rows.frames,
-    };
-    let fstep = fr.i64("step")?;
-    let oid = fr.str("object_id")?;
-    let (x, y, z) = (fr.f64("x")?, fr.f64("y")?, fr.f64("z")?);
-    let (vx, vy, vz) = (fr.f64("vx")?, fr.f64("vy")?, fr.f64("vz")?);
-    let (angle, wx, wy, wz) = (
-        fr.f64("angle")?,
-        fr.f64("wx")?,
-        fr.f64("wy")?,
-        fr.f64("wz")?,
-    );
-    let (kind, msc, ms) = (
-        fr.str("kind")?,
-        fr.i32("motion_state_code")?,
-        fr.str("motion_state")?,
-    );
-    let (radius, diameter, shape, color) = (
-        fr.f64("radius")?,
-        fr.f64("diameter")?,
-        fr.str("shape")?,
-        fr.str("color")?,
-    );
-    let user = fr.bool("is_user_input")?;
-    let (x1, y1, x2, y2) = (fr.f64("x1")?, fr.f64("y1")?, fr.f64("x2")?, fr.f64("y2")?);
-    let (elim, dynamic, joint, spring) = (
-        fr.f64("eliminable")?,
-        fr.f64("dynamic")?,
-        fr.i64("joint")?,
-        fr.i64("spring")?,
-    );
-    let fextra = fr.str("extra")?;
-
-    let need_f = |a: &Float64Array, col: &str, i: usize| -> Result<f64, DecodeError> {
-        if a.is_null(i) {
-            Err(DecodeError::Null {
-                table: "frames",
-                column: col.into(),
-                row: i,
-                trace_id: trace_id.clone(),
-                env,
-            })
-        } else {
-            Ok(a.value(i))
-        }
-    };
-    let need_s = |a: &StringArray, col: &str, i: usize| -> Result<String, DecodeError> {
-        if a.is_null(i) {
-            Err(DecodeError::Null {
-                table: "frames",
-                column: col.into(),
-                row: i,
-                trace_id: trace_id.clone(),
-                env,
-            })
-        } else {
-            Ok(a.value(i).to_string())
-        }
-    };
-    let null = |col: &str, i: usize| DecodeError::Null {
-        table: "frames",
-        column: col.into(),
-        row: i,
-        trace_id: trace_id.clone(),
-        env,
-    };
-
-    let mut cursor = 0usize;
-    for i in 0..fstep.len() {
-        let step = fstep.value(i);
-        while cursor < timesteps.len() && timesteps[cursor].index < step {
-            cursor += 1;
-        }
-        let Some(target) = timesteps.get_mut(cursor).filter(|t| t.index == step) else {
-            return Err(null("step", i));
-        };
-        let body = match env {
-            Env::Pooltool => Body::Pool(PoolBall {
-                kind: need_s(&kind, "kind", i)?,
-                ball_id: oid.value(i).to_string(),
-                position: [x.value(i), y.value(i), need_f(z, "z", i)?],
-                velocity: [
-                    need_f(vx, "vx", i)?,
-                    need_f(vy, "vy", i)?,
-                    need_f(vz, "vz", i)?,
-                ],
-                angular_velocity: [
-                    need_f(wx, "wx", i)?,
-                    need_f(wy, "wy", i)?,
-                    need_f(wz, "wz", i)?,
-                ],
-                motion_state_code: opt(msc, i, |i| msc.value(i) as i64)
-                    .ok_or_else(|| null("motion_state_code", i))?,
-                motion_state: need_s(&ms, "motion_state", i)?,
-                radius: need_f(radius, "radius", i)?,
-            }),
-            Env::Phyre => Body::Phyre(PhyreObject {
-                object_index: oid.value(i).parse().map_err(|_| null("object_id", i))?,
-                shape: need_s(&shape, "shape", i)?,
-                color: need_s(&color, "color", i)?,
-                diameter: need_f(diameter, "diameter", i)?,
-                x: x.value(i),
-                y: y.value(i),
-                angle: need_f(angle, "angle", i)?,
-                vx: need_f(vx, "vx", i)?,
-                vy: need_f(vy, "vy", i)?,
-                angular_velocity: need_f(wz, "wz", i)?,
-                is_user_input: opt(user, i, |i| user.value(i))
-                    .ok_or_else(|| null("is_user_input", i))?,
-            }),
-            Env::Iphyre => Body::Iphyre(IphyreObject {
-                index: oid.value(i).parse().map_err(|_| null("object_id", i))?,
-                x1: need_f(x1, "x1", i)?,
-                y1: need_f(y1, "y1", i)?,
-                x2: need_f(x2, "x2", i)?,
-                y2: need_f(y2, "y2", i)?,
-                radius: need_f(radius, "radius", i)?,
-                eliminable: need_f(elim, "eliminable", i)?,
-                dynamic: need_f(dynamic, "dynamic", i)?,
-                joint: opt(joint, i, |i| joint.value(i)).ok_or_else(|| null("joint", i))?,
-                spring: opt(spring, i, |i| spring.value(i)).ok_or_else(|| null("spring", i))?,
-                angle: opt(angle, i, |i| angle.value(i)),
-                vx: opt(vx, i, |i| vx.value(i)),
-                vy: opt(vy, i, |i| vy.value(i)),
-                angular_velocity: opt(wz, i, |i| wz.value(i)),
-            }),
-        };
-        let extra = parse_map(
-            opt(&fextra, i, |i| fextra.value(i)),
-            "frames",
-            "extra",
-            &trace_id,
-        )?;
-        target.objects.push(Object { body, extra });
-    }
-
-    // Events.
+/// The trace's events, in table order.
+fn decode_events(batch: &RecordBatch, trace_id: &str) -> Result<Vec<Event>, DecodeError> {
     let ev = Cols {
         table: "events",
-        batch: rows.events,
+        batch,
     };
     let (ekind, et, payload, eextra) = (
         ev.str("kind")?,
@@ -845,7 +741,7 @@ pub fn decode_trace(rows: &TraceRows<'_>) -> Result<Trace, DecodeError> {
             Some(s) => Some(serde_json::from_str(s).map_err(|source| DecodeError::Json {
                 table: "events",
                 column: "payload",
-                trace_id: trace_id.clone(),
+                trace_id: trace_id.to_string(),
                 source,
             })?),
         };
@@ -857,18 +753,218 @@ pub fn decode_trace(rows: &TraceRows<'_>) -> Result<Trace, DecodeError> {
                 opt(&eextra, i, |i| eextra.value(i)),
                 "events",
                 "extra",
-                &trace_id,
+                trace_id,
             )?,
         });
     }
+    Ok(events)
+}
 
-    Ok(Trace {
-        trace_id,
-        env,
-        task_id: tr.str("task_id")?.value(0).to_string(),
-        timesteps,
-        events,
-        outcome,
-        extra: top_extra,
-    })
+/// The columns of a trace's `frames` rows, read once; a row becomes an object of its
+/// environment's kind, and a value that kind needs but the row lacks is [`DecodeError::Null`].
+struct FrameCols<'a> {
+    env: Env,
+    trace_id: &'a str,
+    step: &'a Int64Array,
+    oid: StringArray,
+    x: &'a Float64Array,
+    y: &'a Float64Array,
+    z: &'a Float64Array,
+    vx: &'a Float64Array,
+    vy: &'a Float64Array,
+    vz: &'a Float64Array,
+    angle: &'a Float64Array,
+    wx: &'a Float64Array,
+    wy: &'a Float64Array,
+    wz: &'a Float64Array,
+    kind: StringArray,
+    msc: &'a Int32Array,
+    ms: StringArray,
+    radius: &'a Float64Array,
+    diameter: &'a Float64Array,
+    shape: StringArray,
+    color: StringArray,
+    user: &'a BooleanArray,
+    x1: &'a Float64Array,
+    y1: &'a Float64Array,
+    x2: &'a Float64Array,
+    y2: &'a Float64Array,
+    elim: &'a Float64Array,
+    dynamic: &'a Float64Array,
+    joint: &'a Int64Array,
+    spring: &'a Int64Array,
+    extra: StringArray,
+}
+
+impl<'a> FrameCols<'a> {
+    /// Every column of `batch` (the `frames` rows of trace `trace_id` of `env`).
+    fn read(batch: &'a RecordBatch, env: Env, trace_id: &'a str) -> Result<Self, DecodeError> {
+        let fr = Cols {
+            table: "frames",
+            batch,
+        };
+        Ok(FrameCols {
+            env,
+            trace_id,
+            step: fr.i64("step")?,
+            oid: fr.str("object_id")?,
+            x: fr.f64("x")?,
+            y: fr.f64("y")?,
+            z: fr.f64("z")?,
+            vx: fr.f64("vx")?,
+            vy: fr.f64("vy")?,
+            vz: fr.f64("vz")?,
+            angle: fr.f64("angle")?,
+            wx: fr.f64("wx")?,
+            wy: fr.f64("wy")?,
+            wz: fr.f64("wz")?,
+            kind: fr.str("kind")?,
+            msc: fr.i32("motion_state_code")?,
+            ms: fr.str("motion_state")?,
+            radius: fr.f64("radius")?,
+            diameter: fr.f64("diameter")?,
+            shape: fr.str("shape")?,
+            color: fr.str("color")?,
+            user: fr.bool("is_user_input")?,
+            x1: fr.f64("x1")?,
+            y1: fr.f64("y1")?,
+            x2: fr.f64("x2")?,
+            y2: fr.f64("y2")?,
+            elim: fr.f64("eliminable")?,
+            dynamic: fr.f64("dynamic")?,
+            joint: fr.i64("joint")?,
+            spring: fr.i64("spring")?,
+            extra: fr.str("extra")?,
+        })
+    }
+
+    /// Appends every row's object to its timestep. Rows arrive sorted by (step, slot), so they
+    /// are walked alongside the timesteps; a row whose step has no timestep is an error.
+    fn fill(&self, timesteps: &mut [Timestep]) -> Result<(), DecodeError> {
+        let mut cursor = 0usize;
+        for i in 0..self.step.len() {
+            let step = self.step.value(i);
+            while cursor < timesteps.len() && timesteps[cursor].index < step {
+                cursor += 1;
+            }
+            let Some(target) = timesteps.get_mut(cursor).filter(|t| t.index == step) else {
+                return Err(self.null("step", i));
+            };
+            let body = match self.env {
+                Env::Pooltool => Body::Pool(self.pool_ball(i)?),
+                Env::Phyre => Body::Phyre(self.phyre_object(i)?),
+                Env::Iphyre => Body::Iphyre(self.iphyre_object(i)?),
+            };
+            let extra = parse_map(
+                opt(&self.extra, i, |i| self.extra.value(i)),
+                "frames",
+                "extra",
+                self.trace_id,
+            )?;
+            target.objects.push(Object { body, extra });
+        }
+        Ok(())
+    }
+
+    fn null(&self, col: &str, i: usize) -> DecodeError {
+        DecodeError::Null {
+            table: "frames",
+            column: col.into(),
+            row: i,
+            trace_id: self.trace_id.to_string(),
+            env: self.env,
+        }
+    }
+
+    /// Row `i` of a float column the object needs.
+    fn need_f(&self, a: &Float64Array, col: &str, i: usize) -> Result<f64, DecodeError> {
+        if a.is_null(i) {
+            Err(self.null(col, i))
+        } else {
+            Ok(a.value(i))
+        }
+    }
+
+    /// Row `i` of a string column the object needs.
+    fn need_s(&self, a: &StringArray, col: &str, i: usize) -> Result<String, DecodeError> {
+        if a.is_null(i) {
+            Err(self.null(col, i))
+        } else {
+            Ok(a.value(i).to_string())
+        }
+    }
+
+    fn pool_ball(&self, i: usize) -> Result<PoolBall, DecodeError> {
+        let msc = self.msc;
+        Ok(PoolBall {
+            kind: self.need_s(&self.kind, "kind", i)?,
+            ball_id: self.oid.value(i).to_string(),
+            position: [
+                self.x.value(i),
+                self.y.value(i),
+                self.need_f(self.z, "z", i)?,
+            ],
+            velocity: [
+                self.need_f(self.vx, "vx", i)?,
+                self.need_f(self.vy, "vy", i)?,
+                self.need_f(self.vz, "vz", i)?,
+            ],
+            angular_velocity: [
+                self.need_f(self.wx, "wx", i)?,
+                self.need_f(self.wy, "wy", i)?,
+                self.need_f(self.wz, "wz", i)?,
+            ],
+            motion_state_code: opt(msc, i, |i| msc.value(i) as i64)
+                .ok_or_else(|| self.null("motion_state_code", i))?,
+            motion_state: self.need_s(&self.ms, "motion_state", i)?,
+            radius: self.need_f(self.radius, "radius", i)?,
+        })
+    }
+
+    fn phyre_object(&self, i: usize) -> Result<PhyreObject, DecodeError> {
+        let user = self.user;
+        Ok(PhyreObject {
+            object_index: self
+                .oid
+                .value(i)
+                .parse()
+                .map_err(|_| self.null("object_id", i))?,
+            shape: self.need_s(&self.shape, "shape", i)?,
+            color: self.need_s(&self.color, "color", i)?,
+            diameter: self.need_f(self.diameter, "diameter", i)?,
+            x: self.x.value(i),
+            y: self.y.value(i),
+            angle: self.need_f(self.angle, "angle", i)?,
+            vx: self.need_f(self.vx, "vx", i)?,
+            vy: self.need_f(self.vy, "vy", i)?,
+            angular_velocity: self.need_f(self.wz, "wz", i)?,
+            is_user_input: opt(user, i, |i| user.value(i))
+                .ok_or_else(|| self.null("is_user_input", i))?,
+        })
+    }
+
+    fn iphyre_object(&self, i: usize) -> Result<IphyreObject, DecodeError> {
+        let (joint, spring) = (self.joint, self.spring);
+        let (angle, vx, vy, wz) = (self.angle, self.vx, self.vy, self.wz);
+        Ok(IphyreObject {
+            index: self
+                .oid
+                .value(i)
+                .parse()
+                .map_err(|_| self.null("object_id", i))?,
+            x1: self.need_f(self.x1, "x1", i)?,
+            y1: self.need_f(self.y1, "y1", i)?,
+            x2: self.need_f(self.x2, "x2", i)?,
+            y2: self.need_f(self.y2, "y2", i)?,
+            radius: self.need_f(self.radius, "radius", i)?,
+            eliminable: self.need_f(self.elim, "eliminable", i)?,
+            dynamic: self.need_f(self.dynamic, "dynamic", i)?,
+            joint: opt(joint, i, |i| joint.value(i)).ok_or_else(|| self.null("joint", i))?,
+            spring: opt(spring, i, |i| spring.value(i)).ok_or_else(|| self.null("spring", i))?,
+            angle: opt(angle, i, |i| angle.value(i)),
+            vx: opt(vx, i, |i| vx.value(i)),
+            vy: opt(vy, i, |i| vy.value(i)),
+            angular_velocity: opt(wz, i, |i| wz.value(i)),
+        })
+    }
 }

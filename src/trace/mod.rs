@@ -19,4 +19,5 @@ pub use batch::{TraceBatchBuilder, TraceBatches, TraceMeta, TraceRows, decode_tr
 pub use env::{Env, UnknownEnv};
 pub use model::{
     Body, Event, IphyreObject, JsonMap, Object, Outcome, PhyreObject, PoolBall, Timestep, Trace,
+    json_map,
 };

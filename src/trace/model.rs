@@ -11,6 +11,15 @@ use super::Env;
 /// A JSON object that keeps its keys in input order.
 pub type JsonMap = Map<String, Value>;
 
+/// The fields of a JSON object; any other value gives no fields (how simulators build the
+/// metrics and `extra` of the traces they write from a `json!` literal).
+pub fn json_map(v: Value) -> JsonMap {
+    match v {
+        Value::Object(m) => m,
+        _ => JsonMap::new(),
+    }
+}
+
 /// One simulated episode.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Trace {
@@ -156,6 +165,18 @@ pub struct Event {
     pub payload: Option<serde_json::Value>,
     /// Event fields other than `kind`, `t` and `payload`, kept verbatim.
     pub extra: JsonMap,
+}
+
+impl Event {
+    /// An event of `kind` at time `t` with `payload` and no other fields, as simulators log them.
+    pub fn at(kind: &str, t: f64, payload: Value) -> Event {
+        Event {
+            kind: kind.to_string(),
+            t: Some(t),
+            payload: Some(payload),
+            extra: JsonMap::new(),
+        }
+    }
 }
 
 /// How an episode ended.

@@ -361,14 +361,9 @@ fn text(p: &mut Pixmap, x: f32, y: f32, h: f32, s: &str, colour: [u8; 3]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::envs::draw::png_pixel as pixel;
     use crate::envs::iphyre::Games;
     use crate::envs::iphyre::to_trace::support_episode;
-
-    fn pixel(png: &[u8], x: u32, y: u32) -> [u8; 3] {
-        let p = Pixmap::decode_png(png).unwrap();
-        let c = p.pixel(x, y).unwrap();
-        [c.red(), c.green(), c.blue()]
-    }
 
     #[test]
     fn scene_has_the_original_colours_where_the_objects_are() {

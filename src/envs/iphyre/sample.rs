@@ -1,11 +1,11 @@
 //! Seeded random click sets for datasets, in the style of iphyre's `utils.generate_actions` (reference
 //! §2.7): every eliminable block is clicked at its centre at a time drawn from {0.1, 0.2, …, 6.9} s, and
-//! skipped with probability 0.2. The RNG is the billiards environment's [`SplitMix64`], seeded from
+//! skipped with probability 0.2. The RNG is the crate's [`SplitMix64`] ([`keyed_stream`]), seeded from
 //! (`seed`, game index, sample number) alone, so a dataset does not depend on sharding or thread count.
 
 use super::action::Click;
 use super::game::Game;
-use crate::envs::pool::rack::SplitMix64;
+use crate::rng::{SplitMix64, keyed_stream};
 
 /// Probability that a block is left alone in a random click set.
 pub const SKIP_PROBABILITY: f64 = 0.2;
@@ -15,12 +15,7 @@ pub const MAX_TENTHS: u64 = 69;
 
 /// The RNG of click set `sample` on game `game_index` of a dataset seeded with `seed`.
 pub fn clicks_rng(seed: u64, game_index: u64, sample: u64) -> SplitMix64 {
-    let mut base = SplitMix64::new(seed ^ 0x1F4E_7A3D_0000_0000);
-    let a = base.next_u64();
-    SplitMix64::new(
-        a ^ game_index.wrapping_mul(0x9E37_79B9_7F4A_7C15)
-            ^ sample.wrapping_mul(0xD1B5_4A32_D192_ED03),
-    )
+    keyed_stream(seed ^ 0x1F4E_7A3D_0000_0000, game_index, sample)
 }
 
 /// A random click set for `game`, sorted by time; always valid for a 15 s episode (may be empty).

@@ -14,27 +14,36 @@ use serde_json::{Value, json};
 
 use super::game::Game;
 use super::step::{EpisodeEvent, EpisodeResult};
-use crate::trace::{Body, Env, Event, IphyreObject, JsonMap, Object, Outcome, Timestep, Trace};
-
-fn map(v: Value) -> JsonMap {
-    match v {
-        Value::Object(m) => m,
-        _ => JsonMap::new(),
-    }
-}
-
-fn event(kind: &str, t: f64, payload: Value) -> Event {
-    Event {
-        kind: kind.to_string(),
-        t: Some(t),
-        payload: Some(payload),
-        extra: JsonMap::new(),
-    }
-}
+use crate::trace::{
+    Body, Env, Event, IphyreObject, JsonMap, Object, Outcome, Timestep, Trace, json_map,
+};
 
 /// The trace of `result`, played on `game`, named `trace_id`.
 pub fn trace_of(result: &EpisodeResult, game: &Game, trace_id: &str) -> Trace {
-    let timesteps = result
+    let clicks: Vec<Value> = result
+        .clicks
+        .iter()
+        .map(|c| json!({"x": c.x, "y": c.y, "t": c.t}))
+        .collect();
+    Trace {
+        trace_id: trace_id.to_string(),
+        env: Env::Iphyre,
+        task_id: game.name.clone(),
+        timesteps: timesteps_of(result, game),
+        events: events_of(result, game),
+        outcome: outcome_of(result),
+        extra: json_map(json!({
+            "task_index": game.index,
+            "fold": game.fold,
+            "actions": clicks,
+            "simulator": {"engine": "rapier2d", "fps": result.fps, "screen": [600, 600]},
+        })),
+    }
+}
+
+/// A timestep per recorded frame, each object with its game's fixed properties.
+fn timesteps_of(result: &EpisodeResult, game: &Game) -> Vec<Timestep> {
+    result
         .frames
         .iter()
         .map(|f| Timestep {
@@ -68,18 +77,22 @@ pub fn trace_of(result: &EpisodeResult, game: &Game, trace_id: &str) -> Trace {
                 .collect(),
             extra: JsonMap::new(),
         })
-        .collect();
+        .collect()
+}
+
+/// The episode's events in the paper's form, each naming its objects as `agents`.
+fn events_of(result: &EpisodeResult, game: &Game) -> Vec<Event> {
     let ids = |objects: &[usize]| objects.iter().map(|i| i.to_string()).collect::<Vec<_>>();
-    let events = result
+    result
         .events
         .iter()
         .map(|e| match e {
-            EpisodeEvent::ScheduledAction(c) => event(
+            EpisodeEvent::ScheduledAction(c) => Event::at(
                 "scheduled_action",
                 c.t,
                 json!({"agents": [], "x": c.x, "y": c.y}),
             ),
-            EpisodeEvent::ActionIgnoredT0(c) => event(
+            EpisodeEvent::ActionIgnoredT0(c) => Event::at(
                 "action_ignored_t0",
                 c.t,
                 json!({"agents": [], "x": c.x, "y": c.y}),
@@ -89,7 +102,7 @@ pub fn trace_of(result: &EpisodeResult, game: &Game, trace_id: &str) -> Trace {
                 t,
                 click,
                 block,
-            } => event(
+            } => Event::at(
                 "action_applied",
                 *t,
                 json!({
@@ -98,35 +111,39 @@ pub fn trace_of(result: &EpisodeResult, game: &Game, trace_id: &str) -> Trace {
                     "eliminated_object": block, "effective": block.is_some(),
                 }),
             ),
-            EpisodeEvent::ContactBegin { step, t, objects } => event(
+            EpisodeEvent::ContactBegin { step, t, objects } => Event::at(
                 "contact_begin",
                 *t,
                 json!({"agents": ids(objects), "objects": objects, "step": step}),
             ),
-            EpisodeEvent::ContactEnd { step, t, objects } => event(
+            EpisodeEvent::ContactEnd { step, t, objects } => Event::at(
                 "contact_end",
                 *t,
                 json!({"agents": ids(objects), "objects": objects, "step": step}),
             ),
-            EpisodeEvent::BallExit { step, t, object } => event(
+            EpisodeEvent::BallExit { step, t, object } => Event::at(
                 "ball_exit",
                 *t,
                 json!({"agents": ids(&[*object]), "object": object, "step": step}),
             ),
             EpisodeEvent::Success { step, t } => {
                 let balls: Vec<usize> = game.balls().map(|b| b.index).collect();
-                event("success", *t, json!({"agents": ids(&balls), "step": step}))
+                Event::at("success", *t, json!({"agents": ids(&balls), "step": step}))
             }
         })
-        .collect();
+        .collect()
+}
+
+/// Success, the time it came and I-PHYRE's reward as the trace's outcome.
+fn outcome_of(result: &EpisodeResult) -> Outcome {
     let success_time = result.events.iter().find_map(|e| match e {
         EpisodeEvent::Success { t, .. } => Some(*t),
         _ => None,
     });
-    let outcome = Outcome {
+    Outcome {
         success: result.success,
         terminal_status: if result.success { "success" } else { "timeout" }.to_string(),
-        metrics: map(json!({
+        metrics: json_map(json!({
             "success_time_s": success_time,
             "steps_simulated": result.steps,
             "sim_time_s": result.time,
@@ -135,25 +152,6 @@ pub fn trace_of(result: &EpisodeResult, game: &Game, trace_id: &str) -> Trace {
             "fps": result.fps,
         })),
         extra: JsonMap::new(),
-    };
-    let clicks: Vec<Value> = result
-        .clicks
-        .iter()
-        .map(|c| json!({"x": c.x, "y": c.y, "t": c.t}))
-        .collect();
-    Trace {
-        trace_id: trace_id.to_string(),
-        env: Env::Iphyre,
-        task_id: game.name.clone(),
-        timesteps,
-        events,
-        outcome,
-        extra: map(json!({
-            "task_index": game.index,
-            "fold": game.fold,
-            "actions": clicks,
-            "simulator": {"engine": "rapier2d", "fps": result.fps, "screen": [600, 600]},
-        })),
     }
 }
 

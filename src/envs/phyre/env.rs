@@ -8,6 +8,7 @@ use super::params::PhysicsParams;
 use super::task::Task;
 use super::tasks::TaskSet;
 use super::to_trace::trace_of;
+use crate::digest::hex;
 use crate::envs::{ActionDim, EnvError, Environment};
 use crate::trace::{Env, Trace};
 
@@ -24,8 +25,7 @@ impl PhyreEnv {
     /// The trace id of a replayed action: `phyre-<template>-<variant>-<8 hex digits of the action>`.
     pub fn trace_id(task_id: &str, action: &BallAction) -> String {
         let h = Sha256::digest(format!("{:?} {:?} {:?}", action.x, action.y, action.r).as_bytes());
-        let hex: String = h[..4].iter().map(|b| format!("{b:02x}")).collect();
-        format!("phyre-{}-{hex}", task_id.replace(':', "-"))
+        format!("phyre-{}-{}", task_id.replace(':', "-"), hex(&h[..4]))
     }
 
     /// The trace id of sample `k` on task `task_id` in a dataset seeded with `seed`.

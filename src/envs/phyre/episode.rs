@@ -168,6 +168,87 @@ fn snapshot(world: &World, step: usize) -> Frame {
     Frame { step, bodies }
 }
 
+/// An action whose ball does not fit: the scene as it stands and why the action is invalid.
+fn record_invalid(
+    task: &Task,
+    placement: Placement,
+    params: &PhysicsParams,
+    result: &mut EpisodeResult,
+) -> Result<()> {
+    let world = World::new(task, None, params)?;
+    result.frames.push(snapshot(&world, 0));
+    let (reason, body) = match placement {
+        Placement::Occludes { body } => ("occludes_body", Some(body)),
+        _ => ("outside_scene", None),
+    };
+    result
+        .events
+        .push(EpisodeEvent::InvalidInput { reason, body });
+    Ok(())
+}
+
+/// Steps the world to `step`, recording its contact changes and (every `stride` steps) a frame
+/// when recording; returns whether the goal relation holds.
+fn advance(
+    world: &mut World,
+    step: usize,
+    changes: &mut Vec<ContactChange>,
+    opts: &RecordOptions,
+    result: &mut EpisodeResult,
+) -> bool {
+    changes.clear();
+    world.step(changes);
+    result.computed_steps += 1;
+    if opts.record {
+        for c in changes.iter() {
+            result.events.push(if c.began {
+                EpisodeEvent::ContactBegin {
+                    step,
+                    objects: c.objects,
+                }
+            } else {
+                EpisodeEvent::ContactEnd {
+                    step,
+                    objects: c.objects,
+                }
+            });
+        }
+        if opts.stride > 0 && step.is_multiple_of(opts.stride) {
+            result.frames.push(snapshot(world, step));
+        }
+    }
+    world.goal_holds()
+}
+
+/// Counts the run of steps in which the goal holds (`run_len`) and records where a run begins
+/// (also the first goal step) and ends; `prev` is whether it held the step before.
+fn track_goal(
+    holds: bool,
+    prev: bool,
+    run_len: &mut usize,
+    step: usize,
+    opts: &RecordOptions,
+    result: &mut EpisodeResult,
+) {
+    if holds {
+        *run_len += 1;
+        if !prev {
+            result.goal_first_step = Some(step);
+            if opts.record {
+                result.events.push(EpisodeEvent::GoalRelationBegin { step });
+            }
+        }
+    } else {
+        if prev && opts.record {
+            result.events.push(EpisodeEvent::GoalRelationEnd {
+                step,
+                held_steps: *run_len,
+            });
+        }
+        *run_len = 0;
+    }
+}
+
 /// Plays `action` on `task`. Errors only for an action outside [0, 1]³ or non-finite, or bad parameters;
 /// a ball that does not fit gives an `INVALID_INPUT` result.
 pub fn run(
@@ -194,15 +275,7 @@ pub fn run(
         Placement::Valid(b) => b,
         Placement::OutsideScene | Placement::Occludes { .. } => {
             if opts.record {
-                let world = World::new(task, None, params)?;
-                result.frames.push(snapshot(&world, 0));
-                let (reason, body) = match placement {
-                    Placement::Occludes { body } => ("occludes_body", Some(body)),
-                    _ => ("outside_scene", None),
-                };
-                result
-                    .events
-                    .push(EpisodeEvent::InvalidInput { reason, body });
+                record_invalid(task, placement, params, &mut result)?;
             }
             return Ok(result);
         }
@@ -232,46 +305,9 @@ pub fn run(
             }
             prev
         } else {
-            changes.clear();
-            world.step(&mut changes);
-            result.computed_steps += 1;
-            if opts.record {
-                for c in &changes {
-                    result.events.push(if c.began {
-                        EpisodeEvent::ContactBegin {
-                            step,
-                            objects: c.objects,
-                        }
-                    } else {
-                        EpisodeEvent::ContactEnd {
-                            step,
-                            objects: c.objects,
-                        }
-                    });
-                }
-                if opts.stride > 0 && step % opts.stride == 0 {
-                    result.frames.push(snapshot(&world, step));
-                }
-            }
-            world.goal_holds()
+            advance(&mut world, step, &mut changes, opts, &mut result)
         };
-        if holds {
-            run_len += 1;
-            if !prev {
-                result.goal_first_step = Some(step);
-                if opts.record {
-                    result.events.push(EpisodeEvent::GoalRelationBegin { step });
-                }
-            }
-        } else {
-            if prev && opts.record {
-                result.events.push(EpisodeEvent::GoalRelationEnd {
-                    step,
-                    held_steps: run_len,
-                });
-            }
-            run_len = 0;
-        }
+        track_goal(holds, prev, &mut run_len, step, opts, &mut result);
         prev = holds;
         if run_len >= params.steps_for_solution {
             status = Status::Solved;

@@ -325,17 +325,12 @@ pub fn render_task_png(task: &Task, opts: &RenderOptions) -> Result<Vec<u8>, Env
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::envs::draw::png_pixel as pixel;
     use crate::envs::phyre::action::BallAction;
     use crate::envs::phyre::episode::{RecordOptions, run};
     use crate::envs::phyre::params::PhysicsParams;
     use crate::envs::phyre::tasks::TaskSet;
     use crate::envs::phyre::to_trace::trace_of;
-
-    fn pixel(png: &[u8], x: u32, y: u32) -> [u8; 3] {
-        let p = Pixmap::decode_png(png).unwrap();
-        let c = p.pixel(x, y).unwrap();
-        [c.red(), c.green(), c.blue()]
-    }
 
     #[test]
     fn scene_colours_grid_and_strip() {

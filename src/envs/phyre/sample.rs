@@ -1,24 +1,19 @@
 //! Seeded random actions for datasets: uniform draws from [0, 1]³ until one is valid for the task, as
 //! PHYRE's `ActionSimulator.sample()` does (about a quarter of draws overlap a body). The RNG is the
-//! billiards environment's [`SplitMix64`], seeded from (`seed`, task, sample number) alone, so a
+//! crate's [`SplitMix64`] ([`keyed_stream`]), seeded from (`seed`, task, sample number) alone, so a
 //! dataset does not depend on sharding or thread count.
 
 use super::action::{BallAction, Placement};
 use super::error::Result;
 use super::task::Task;
-use crate::envs::pool::rack::SplitMix64;
+use crate::rng::{SplitMix64, keyed_stream};
 
 /// Draws tried before giving up on a task whose free space is tiny.
 pub const MAX_DRAWS: usize = 10_000;
 
 /// The RNG of sample `sample` on the task at sorted position `task_index`, for dataset seed `seed`.
 pub fn action_rng(seed: u64, task_index: u64, sample: u64) -> SplitMix64 {
-    let mut base = SplitMix64::new(seed ^ 0x5048_5952_4500_0000);
-    let a = base.next_u64();
-    SplitMix64::new(
-        a ^ task_index.wrapping_mul(0x9E37_79B9_7F4A_7C15)
-            ^ sample.wrapping_mul(0xD1B5_4A32_D192_ED03),
-    )
+    keyed_stream(seed ^ 0x5048_5952_4500_0000, task_index, sample)
 }
 
 /// A uniformly drawn action whose ball fits in `task` (or `None` after [`MAX_DRAWS`] invalid draws).

@@ -9,28 +9,14 @@
 //! `contact_begin` / `contact_end` (`objects`, `step`), `goal_relation_begin` / `goal_relation_end`
 //! (`step`, `held_steps`) and `success` (`step`).
 
-use serde_json::{Value, json};
+use serde_json::json;
 
 use super::episode::{EpisodeEvent, EpisodeResult, Status};
 use super::params::PIXELS_PER_METRE;
 use super::task::{Color, Task};
-use crate::trace::{Body, Env, Event, JsonMap, Object, Outcome, PhyreObject, Timestep, Trace};
-
-fn map(v: Value) -> JsonMap {
-    match v {
-        Value::Object(m) => m,
-        _ => JsonMap::new(),
-    }
-}
-
-fn event(kind: &str, t: f64, payload: Value) -> Event {
-    Event {
-        kind: kind.to_string(),
-        t: Some(t),
-        payload: Some(payload),
-        extra: JsonMap::new(),
-    }
-}
+use crate::trace::{
+    Body, Env, Event, JsonMap, Object, Outcome, PhyreObject, Timestep, Trace, json_map,
+};
 
 /// The trace's shape name of a body: PHYRE's shape type, `wall` for the four walls.
 fn shape_name(task: &Task, index: usize) -> &str {
@@ -43,6 +29,35 @@ fn shape_name(task: &Task, index: usize) -> &str {
 
 /// The trace of `result`, played on `task`, named `trace_id`.
 pub fn trace_of(result: &EpisodeResult, task: &Task, trace_id: &str) -> Trace {
+    let a = result.action;
+    let ball = result
+        .placement
+        .ball()
+        .map(|b| json!({"x": b.x, "y": b.y, "radius": b.radius}));
+    Trace {
+        trace_id: trace_id.to_string(),
+        env: Env::Phyre,
+        task_id: task.task_id.clone(),
+        timesteps: timesteps_of(result, task),
+        events: events_of(result, task),
+        outcome: outcome_of(result),
+        extra: json_map(json!({
+            "template_id": task.template_id,
+            "description": task.description,
+            "goal": {"body1": task.body1, "body2": task.body2, "relationships": task.relationships},
+            "action": {"x": a.x, "y": a.y, "r": a.r},
+            "user_ball": ball,
+            "simulator": {
+                "engine": "rapier2d", "fps": 1.0 / result.dt, "stride": result.stride,
+                "pixels_per_metre": PIXELS_PER_METRE, "scene": [task.width, task.height],
+                "coordinates": "pixels, origin bottom-left, y up",
+            },
+        })),
+    }
+}
+
+/// A timestep per recorded frame; the user's ball is the object after the task's bodies.
+fn timesteps_of(result: &EpisodeResult, task: &Task) -> Vec<Timestep> {
     let n = task.bodies.len();
     let user_diameter = result.placement.ball().map_or(0.0, |b| 2.0 * b.radius);
     let statics: Vec<(String, &'static str, f64)> = (0..=n)
@@ -51,7 +66,7 @@ pub fn trace_of(result: &EpisodeResult, task: &Task, trace_id: &str) -> Trace {
             None => ("ball".to_string(), Color::Red.name(), user_diameter),
         })
         .collect();
-    let timesteps = result
+    result
         .frames
         .iter()
         .map(|f| Timestep {
@@ -82,68 +97,73 @@ pub fn trace_of(result: &EpisodeResult, task: &Task, trace_id: &str) -> Trace {
                 .collect(),
             extra: JsonMap::new(),
         })
-        .collect();
+        .collect()
+}
+
+/// The episode's events in the paper's form, each naming its objects as `agents`.
+fn events_of(result: &EpisodeResult, task: &Task) -> Vec<Event> {
     let t = |step: usize| step as f64 * result.dt;
     let ids = |objects: &[usize]| objects.iter().map(|i| i.to_string()).collect::<Vec<_>>();
     let goal = [task.body1, task.body2];
     let a = result.action;
-    let events = result
+    result
         .events
         .iter()
         .map(|e| match e {
-            EpisodeEvent::UserBallPlaced { index, ball } => event(
+            EpisodeEvent::UserBallPlaced { index, ball } => Event::at(
                 "user_ball_placed",
                 0.0,
                 json!({"agents": ids(&[*index]), "x": ball.x, "y": ball.y, "radius": ball.radius,
                        "action": [a.x, a.y, a.r]}),
             ),
-            EpisodeEvent::InvalidInput { reason, body } => event(
+            EpisodeEvent::InvalidInput { reason, body } => Event::at(
                 "invalid_input",
                 0.0,
                 json!({"agents": body.map(|b| ids(&[b])).unwrap_or_default(), "reason": reason,
                        "body": body, "action": [a.x, a.y, a.r]}),
             ),
-            EpisodeEvent::ContactBegin { step, objects } => event(
+            EpisodeEvent::ContactBegin { step, objects } => Event::at(
                 "contact_begin",
                 t(*step),
                 json!({"agents": ids(objects), "objects": objects, "step": step}),
             ),
-            EpisodeEvent::ContactEnd { step, objects } => event(
+            EpisodeEvent::ContactEnd { step, objects } => Event::at(
                 "contact_end",
                 t(*step),
                 json!({"agents": ids(objects), "objects": objects, "step": step}),
             ),
-            EpisodeEvent::GoalRelationBegin { step } => event(
+            EpisodeEvent::GoalRelationBegin { step } => Event::at(
                 "goal_relation_begin",
                 t(*step),
                 json!({"agents": ids(&goal), "objects": goal, "step": step}),
             ),
-            EpisodeEvent::GoalRelationEnd { step, held_steps } => event(
+            EpisodeEvent::GoalRelationEnd { step, held_steps } => Event::at(
                 "goal_relation_end",
                 t(*step),
                 json!({"agents": ids(&goal), "objects": goal, "step": step, "held_steps": held_steps}),
             ),
-            EpisodeEvent::Success { step } => event(
+            EpisodeEvent::Success { step } => Event::at(
                 "success",
                 t(*step),
                 json!({"agents": ids(&goal), "objects": goal, "step": step}),
             ),
         })
-        .collect();
+        .collect()
+}
+
+/// PHYRE's status as the trace's outcome.
+fn outcome_of(result: &EpisodeResult) -> Outcome {
+    let t = |step: usize| step as f64 * result.dt;
     let solved = result.status == Status::Solved;
     let terminal = match result.status {
         Status::Solved => "success",
         Status::NotSolved => "timeout",
         Status::InvalidInput => "INVALID_INPUT",
     };
-    let ball = result
-        .placement
-        .ball()
-        .map(|b| json!({"x": b.x, "y": b.y, "radius": b.radius}));
-    let outcome = Outcome {
+    Outcome {
         success: solved,
         terminal_status: terminal.to_string(),
-        metrics: map(json!({
+        metrics: json_map(json!({
             "status": result.status.name(),
             "status_code": result.status.code(),
             "steps_simulated": result.steps,
@@ -152,26 +172,6 @@ pub fn trace_of(result: &EpisodeResult, task: &Task, trace_id: &str) -> Trace {
             "goal_first_step": result.goal_first_step,
         })),
         extra: JsonMap::new(),
-    };
-    Trace {
-        trace_id: trace_id.to_string(),
-        env: Env::Phyre,
-        task_id: task.task_id.clone(),
-        timesteps,
-        events,
-        outcome,
-        extra: map(json!({
-            "template_id": task.template_id,
-            "description": task.description,
-            "goal": {"body1": task.body1, "body2": task.body2, "relationships": task.relationships},
-            "action": {"x": a.x, "y": a.y, "r": a.r},
-            "user_ball": ball,
-            "simulator": {
-                "engine": "rapier2d", "fps": 1.0 / result.dt, "stride": result.stride,
-                "pixels_per_metre": PIXELS_PER_METRE, "scene": [task.width, task.height],
-                "coordinates": "pixels, origin bottom-left, y up",
-            },
-        })),
     }
 }
 

@@ -15,6 +15,24 @@ use super::events::EventKind;
 /// Marker for "not computed / invalidated".
 const STALE: f64 = f64::NAN;
 
+/// One of a ball's rows of cushion-like obstacles, each cached whole.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Row {
+    /// Ball–jaw (circular cushion) times.
+    Circular,
+    /// Ball–linear-cushion times.
+    Linear,
+    /// Ball–pocket times.
+    Pocket,
+}
+
+/// The earliest entry of a row: (time, sequence number, obstacle index); ties go to the lower
+/// sequence number.
+pub type RowMin = (f64, u64, usize);
+
+/// No entry: later than every time.
+const NO_MIN: RowMin = (f64::INFINITY, u64::MAX, 0);
+
 /// Cached absolute collision times; NaN = stale.
 #[derive(Debug, Clone)]
 pub struct CollisionCache {
@@ -24,20 +42,20 @@ pub struct CollisionCache {
     n_pock: usize,
     /// row-major n×n, only i < j used
     pub ball_ball: Vec<f64>,
-    pub linear: Vec<f64>,
-    pub circular: Vec<f64>,
-    pub pocket: Vec<f64>,
+    linear: Vec<f64>,
+    circular: Vec<f64>,
+    pocket: Vec<f64>,
     /// insertion sequence numbers (pooltool dict order) of the entries above
     pub ball_ball_seq: Vec<u64>,
-    pub linear_seq: Vec<u64>,
-    pub circular_seq: Vec<u64>,
-    pub pocket_seq: Vec<u64>,
+    linear_seq: Vec<u64>,
+    circular_seq: Vec<u64>,
+    pocket_seq: Vec<u64>,
     /// per ball: are its cushion/jaw/pocket rows up to date? (rows are invalidated whole)
     pub row_fresh: Vec<bool>,
     /// per ball: earliest (time, seq, index) of its jaw / linear / pocket row
-    pub row_min_circular: Vec<(f64, u64, usize)>,
-    pub row_min_linear: Vec<(f64, u64, usize)>,
-    pub row_min_pocket: Vec<(f64, u64, usize)>,
+    row_min_circular: Vec<RowMin>,
+    row_min_linear: Vec<RowMin>,
+    row_min_pocket: Vec<RowMin>,
     counter: u64,
 }
 
@@ -57,9 +75,9 @@ impl CollisionCache {
             circular_seq: vec![0; n * n_circ],
             pocket_seq: vec![0; n * n_pock],
             row_fresh: vec![false; n],
-            row_min_circular: vec![(f64::INFINITY, u64::MAX, 0); n],
-            row_min_linear: vec![(f64::INFINITY, u64::MAX, 0); n],
-            row_min_pocket: vec![(f64::INFINITY, u64::MAX, 0); n],
+            row_min_circular: vec![NO_MIN; n],
+            row_min_linear: vec![NO_MIN; n],
+            row_min_pocket: vec![NO_MIN; n],
             counter: 0,
         }
     }
@@ -87,6 +105,40 @@ impl CollisionCache {
     pub fn next_seq(&mut self) -> u64 {
         self.counter += 1;
         self.counter
+    }
+
+    /// Stores ball `i`'s recomputed row `row`: obstacle `c` collides at `t0 + dts[c]`, each entry
+    /// takes the next sequence number in obstacle order, and the row's earliest entry is kept
+    /// for [`CollisionCache::row_min`]. Marks nothing fresh (a ball has three rows).
+    pub fn store_row(&mut self, row: Row, i: usize, t0: f64, dts: impl IntoIterator<Item = f64>) {
+        let mut m = NO_MIN;
+        for (c, dt) in dts.into_iter().enumerate() {
+            let (t, q) = (t0 + dt, self.next_seq());
+            let (times, seqs, width) = match row {
+                Row::Circular => (&mut self.circular, &mut self.circular_seq, self.n_circ),
+                Row::Linear => (&mut self.linear, &mut self.linear_seq, self.n_lin),
+                Row::Pocket => (&mut self.pocket, &mut self.pocket_seq, self.n_pock),
+            };
+            times[i * width + c] = t;
+            seqs[i * width + c] = q;
+            if t < m.0 || (t == m.0 && q < m.1) {
+                m = (t, q, c);
+            }
+        }
+        match row {
+            Row::Circular => self.row_min_circular[i] = m,
+            Row::Linear => self.row_min_linear[i] = m,
+            Row::Pocket => self.row_min_pocket[i] = m,
+        }
+    }
+
+    /// Every ball's earliest entry of row `row`, by ball.
+    pub fn row_min(&self, row: Row) -> &[RowMin] {
+        match row {
+            Row::Circular => &self.row_min_circular,
+            Row::Linear => &self.row_min_linear,
+            Row::Pocket => &self.row_min_pocket,
+        }
     }
 
     pub fn is_stale(t: f64) -> bool {

@@ -2,8 +2,8 @@
 //! `layouts.py`): a diamond with the 1-ball at the apex (table fraction (0.5, 0.75)), the
 //! 9-ball in the middle, the other balls in random order, every ball jittered by up to
 //! R·0.5e-3 per axis (pooltool: R·1e-3, which can overlap balls) around tight-packed positions; the cue ball behind the head string at (0.85, 0.23)
-//! fractions. Uses a small self-contained SplitMix64 PRNG (positions do not reproduce
-//! pooltool's `random`-based racks bit for bit; replays read positions from traces).
+//! fractions. Draws come from the crate's [`SplitMix64`] (positions do not reproduce pooltool's
+//! `random`-based racks bit for bit; replays read positions from traces).
 
 use std::sync::Arc;
 
@@ -12,37 +12,7 @@ use super::shot::Shot;
 use super::state::{Ball, BallState};
 use super::system::System;
 use super::table::Table;
-
-/// SplitMix64: tiny, seedable, good enough for layouts and random shots.
-#[derive(Debug, Clone)]
-pub struct SplitMix64(u64);
-
-impl SplitMix64 {
-    /// A generator seeded with `seed`.
-    pub fn new(seed: u64) -> Self {
-        SplitMix64(seed)
-    }
-    /// The next 64 random bits.
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    pub fn next_f64(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
-    }
-    /// Uniform in [lo, hi).
-    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next_f64()
-    }
-    /// Uniform in 0..n (0 when n = 0).
-    pub fn below(&mut self, n: usize) -> usize {
-        (self.next_f64() * n as f64) as usize % n.max(1)
-    }
-}
+use crate::rng::{GOLDEN, SplitMix64, splitmix64};
 
 /// Ball positions of a seeded 9-ball rack: ids "cue", "1".."9".
 pub fn nine_ball_positions(table: &Table, r: f64, seed: u64) -> Vec<(String, f64, f64)> {
@@ -124,20 +94,17 @@ pub fn random_shot(rng: &mut SplitMix64) -> Shot {
     }
 }
 
-/// One SplitMix64 step as a pure function: mixes `x` into 64 well-spread bits.
-fn mix(x: u64) -> u64 {
-    SplitMix64::new(x).next_u64()
-}
-
 /// The rack seed of scene `index` of a dataset seeded with `seed`; depends on nothing else, so a
 /// dataset is the same whatever the sharding or thread count.
 pub fn scene_seed(seed: u64, index: u64) -> u64 {
-    mix(mix(seed) ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15))
+    splitmix64(splitmix64(seed) ^ index.wrapping_mul(GOLDEN))
 }
 
 /// The RNG of shot `shot` on scene `index` of a dataset seeded with `seed`.
 pub fn shot_rng(seed: u64, index: u64, shot: u64) -> SplitMix64 {
-    SplitMix64::new(mix(scene_seed(seed, index) ^ mix(shot.wrapping_add(0x5407))))
+    SplitMix64::new(splitmix64(
+        scene_seed(seed, index) ^ splitmix64(shot.wrapping_add(0x5407)),
+    ))
 }
 
 /// A random shot for datasets, like `tools/pooltool/gen_traces.py`: half aimed at a random object ball

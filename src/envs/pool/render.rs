@@ -130,6 +130,9 @@ fn rect(p: &mut Pixmap, x0: f32, y0: f32, x1: f32, y1: f32, colour: [u8; 3]) {
 }
 
 /// Glyphs of the stroke font on a 4 × 6 grid (y down; lower-case letters use rows 2–6).
+///
+/// Long because it is the font: one arm per glyph, the strokes as data; split, the font would be
+/// scattered for nothing.
 fn glyph(c: char) -> &'static [&'static [(f32, f32)]] {
     match c {
         '0' => &[&[
@@ -343,6 +346,50 @@ fn draw_ball(p: &mut Pixmap, cx: f32, cy: f32, r: f32, id: &str) {
     }
 }
 
+/// Cushion width (m) drawn around the playing surface.
+const CUSHION: f64 = 0.0508;
+/// Wooden rail width (m) drawn around the cushions.
+const RAIL: f64 = 0.045;
+/// Cushion plus rail: the table's outer edge beyond the playing surface (m).
+const OUTER: f64 = CUSHION + RAIL;
+
+/// Where things go in a frame of `size` pixels: the view of the table and the text heights.
+struct Layout {
+    view: View,
+    margin: f32,
+    /// Height of pocket labels.
+    label_h: f32,
+    /// Height of the time line above the table.
+    title_h: f32,
+}
+
+impl Layout {
+    /// Fits the outer rail box (w + 2·outer) × (l + 2·outer) into the frame below a title line.
+    fn of(size: u32, config: &PoolConfig) -> Layout {
+        let table = &config.table;
+        let margin = size as f32 * 0.02;
+        let label_h = (size as f32 / 40.0).max(7.0);
+        let title_h = 1.3 * label_h;
+        let avail_h = size as f32 - 3.0 * margin - title_h;
+        let avail_w = size as f32 - 2.0 * margin;
+        let scale = (avail_h / (table.l + 2.0 * OUTER) as f32)
+            .min(avail_w / (table.w + 2.0 * OUTER) as f32);
+        let view = View {
+            scale,
+            ox: size as f32 / 2.0 - table.w as f32 * scale / 2.0,
+            oy: (size as f32 + 2.0 * margin + title_h) / 2.0 + table.l as f32 * scale / 2.0,
+        };
+        Layout {
+            view,
+            margin,
+            label_h,
+            title_h,
+        }
+    }
+}
+
+/// The picture of `trace` at time `t`: the table, the balls of the nearest timestep, the tray of
+/// pocketed balls and the time.
 fn frame(
     trace: &Trace,
     config: &PoolConfig,
@@ -355,50 +402,67 @@ fn frame(
     let size = opts.size.max(64);
     let mut p = new_pixmap(size, size)?;
     p.fill(Color::from_rgba8(236, 236, 232, 255));
+    let layout = Layout::of(size, config);
+    draw_rails(&mut p, &layout.view, config);
+    draw_pockets(&mut p, &layout.view, config, size)?;
+    draw_cushions(&mut p, &layout.view, config);
+    draw_pocket_labels(&mut p, &layout, config);
+    let step = timestep_at(trace, t)
+        .ok_or_else(|| EnvError::Render(format!("trace {} has no timesteps", trace.trace_id)))?;
+    draw_balls(&mut p, &layout.view, trace, step, config, size)?;
+    let label = format!("t={:.2}s", step.t);
+    let w = text_width(&label, layout.title_h);
+    text(
+        &mut p,
+        (size as f32 - w) / 2.0,
+        layout.margin,
+        layout.title_h,
+        &label,
+        [20, 20, 20],
+        None,
+    );
+    Ok(p)
+}
+
+/// Wood, cushion and cloth rectangles, and the diamonds on the rails (quarters of the width,
+/// eighths of the length).
+fn draw_rails(p: &mut Pixmap, view: &View, config: &PoolConfig) {
     let table = &config.table;
-    let cushion = 0.0508;
-    let rail = 0.045;
-    let outer = cushion + rail;
-    // Fit the outer rail box (w + 2·outer) × (l + 2·outer) into the frame below a title line.
-    let margin = size as f32 * 0.02;
-    let label_h = (size as f32 / 40.0).max(7.0);
-    let title_h = 1.3 * label_h;
-    let avail_h = size as f32 - 3.0 * margin - title_h;
-    let avail_w = size as f32 - 2.0 * margin;
-    let scale =
-        (avail_h / (table.l + 2.0 * outer) as f32).min(avail_w / (table.w + 2.0 * outer) as f32);
-    let view = View {
-        scale,
-        ox: size as f32 / 2.0 - table.w as f32 * scale / 2.0,
-        oy: (size as f32 + 2.0 * margin + title_h) / 2.0 + table.l as f32 * scale / 2.0,
-    };
-    let (x0, y0) = view.px(-outer, -outer);
-    let (x1, y1) = view.px(table.w + outer, table.l + outer);
-    rect(&mut p, x0, y0, x1, y1, [110, 64, 32]);
-    let (x0, y0) = view.px(-cushion, -cushion);
-    let (x1, y1) = view.px(table.w + cushion, table.l + cushion);
-    rect(&mut p, x0, y0, x1, y1, [22, 96, 52]);
+    let (x0, y0) = view.px(-OUTER, -OUTER);
+    let (x1, y1) = view.px(table.w + OUTER, table.l + OUTER);
+    rect(p, x0, y0, x1, y1, [110, 64, 32]);
+    let (x0, y0) = view.px(-CUSHION, -CUSHION);
+    let (x1, y1) = view.px(table.w + CUSHION, table.l + CUSHION);
+    rect(p, x0, y0, x1, y1, [22, 96, 52]);
     let (x0, y0) = view.px(0.0, 0.0);
     let (x1, y1) = view.px(table.w, table.l);
-    rect(&mut p, x0, y0, x1, y1, [36, 130, 74]);
-    // Diamonds on the rails: quarters of the width, eighths of the length.
+    rect(p, x0, y0, x1, y1, [36, 130, 74]);
     for i in 1..4 {
         let x = table.w * i as f64 / 4.0;
-        for y in [-cushion - rail / 2.0, table.l + cushion + rail / 2.0] {
+        for y in [-CUSHION - RAIL / 2.0, table.l + CUSHION + RAIL / 2.0] {
             let (cx, cy) = view.px(x, y);
-            fill_circle(&mut p, cx, cy, 1.6, [235, 225, 200]);
+            fill_circle(p, cx, cy, 1.6, [235, 225, 200]);
         }
     }
     for i in 1..8 {
         let y = table.l * i as f64 / 8.0;
-        for x in [-cushion - rail / 2.0, table.w + cushion + rail / 2.0] {
+        for x in [-CUSHION - RAIL / 2.0, table.w + CUSHION + RAIL / 2.0] {
             let (cx, cy) = view.px(x, y);
-            fill_circle(&mut p, cx, cy, 1.6, [235, 225, 200]);
+            fill_circle(p, cx, cy, 1.6, [235, 225, 200]);
         }
     }
-    // Pockets, clipped to the rail box (pooltool's pocket circles reach past the rails).
-    let (x0, y0) = view.px(-outer, -outer);
-    let (x1, y1) = view.px(table.w + outer, table.l + outer);
+}
+
+/// Pockets, clipped to the rail box (pooltool's pocket circles reach past the rails).
+fn draw_pockets(
+    p: &mut Pixmap,
+    view: &View,
+    config: &PoolConfig,
+    size: u32,
+) -> Result<(), EnvError> {
+    let table = &config.table;
+    let (x0, y0) = view.px(-OUTER, -OUTER);
+    let (x1, y1) = view.px(table.w + OUTER, table.l + OUTER);
     let mut clip = Mask::new(size, size)
         .ok_or_else(|| EnvError::Render(format!("cannot make a {size}×{size} mask")))?;
     if let Some(r) = Rect::from_ltrb(x0.min(x1), y0.min(y1), x0.max(x1), y0.max(y1)) {
@@ -411,7 +475,7 @@ fn frame(
     }
     for pk in &table.pockets {
         let (cx, cy) = view.px(pk.center[0], pk.center[1]);
-        if let Some(path) = PathBuilder::from_circle(cx, cy, pk.radius as f32 * scale) {
+        if let Some(path) = PathBuilder::from_circle(cx, cy, pk.radius as f32 * view.scale) {
             p.fill_path(
                 &path,
                 &paint([8, 8, 8]),
@@ -421,7 +485,12 @@ fn frame(
             );
         }
     }
-    // Cushion noses: the linear segments and the jaws, as thin light lines.
+    Ok(())
+}
+
+/// Cushion noses: the linear segments and the jaws, as thin light lines.
+fn draw_cushions(p: &mut Pixmap, view: &View, config: &PoolConfig) {
+    let table = &config.table;
     let mut pb = PathBuilder::new();
     for seg in &table.linear {
         let (ax, ay) = view.px(seg.p1[0], seg.p1[1]);
@@ -445,20 +514,24 @@ fn frame(
     }
     for jaw in &table.circular {
         let (cx, cy) = view.px(jaw.center[0], jaw.center[1]);
-        fill_circle(&mut p, cx, cy, jaw.radius as f32 * scale, [22, 96, 52]);
+        fill_circle(p, cx, cy, jaw.radius as f32 * view.scale, [22, 96, 52]);
     }
-    // Pocket labels outside the rails, on the side of the pocket.
+}
+
+/// Pocket labels outside the rails, on the side of the pocket.
+fn draw_pocket_labels(p: &mut Pixmap, layout: &Layout, config: &PoolConfig) {
+    let (table, view, label_h) = (&config.table, &layout.view, layout.label_h);
     for pk in &table.pockets {
         let (_, cy) = view.px(pk.center[0], pk.center[1]);
         let w = text_width(&pk.id, label_h);
         let right = pk.center[0] > table.w / 2.0;
         let lx = if right {
-            view.px(table.w + outer, 0.0).0 + 0.4 * label_h
+            view.px(table.w + OUTER, 0.0).0 + 0.4 * label_h
         } else {
-            view.px(-outer, 0.0).0 - 0.4 * label_h - w
+            view.px(-OUTER, 0.0).0 - 0.4 * label_h - w
         };
         text(
-            &mut p,
+            p,
             lx,
             cy - label_h / 2.0,
             label_h,
@@ -467,9 +540,19 @@ fn frame(
             None,
         );
     }
+}
 
-    let step = timestep_at(trace, t)
-        .ok_or_else(|| EnvError::Render(format!("trace {} has no timesteps", trace.trace_id)))?;
+/// The balls of `step` on the table, and the pocketed ones in a tray right of the table, top to
+/// bottom.
+fn draw_balls(
+    p: &mut Pixmap,
+    view: &View,
+    trace: &Trace,
+    step: &Timestep,
+    config: &PoolConfig,
+    size: u32,
+) -> Result<(), EnvError> {
+    let table = &config.table;
     let mut pocketed: Vec<&PoolBall> = Vec::new();
     for obj in &step.objects {
         let Body::Pool(b) = &obj.body else {
@@ -483,28 +566,16 @@ fn frame(
             continue;
         }
         let (cx, cy) = view.px(b.position[0], b.position[1]);
-        draw_ball(&mut p, cx, cy, b.radius as f32 * scale, &b.ball_id);
+        draw_ball(p, cx, cy, b.radius as f32 * view.scale, &b.ball_id);
     }
-    // The tray of pocketed balls, top to bottom, right of the table.
-    let r = config.ball.r as f32 * scale;
+    let r = config.ball.r as f32 * view.scale;
     let tray_x =
-        view.px(table.w + outer, 0.0).0 + (size as f32 - view.px(table.w + outer, 0.0).0) / 2.0;
+        view.px(table.w + OUTER, 0.0).0 + (size as f32 - view.px(table.w + OUTER, 0.0).0) / 2.0;
     for (i, b) in pocketed.iter().enumerate() {
         let cy = size as f32 * 0.2 + i as f32 * 2.6 * r;
-        draw_ball(&mut p, tray_x, cy, r, &b.ball_id);
+        draw_ball(p, tray_x, cy, r, &b.ball_id);
     }
-    let label = format!("t={:.2}s", step.t);
-    let w = text_width(&label, title_h);
-    text(
-        &mut p,
-        (size as f32 - w) / 2.0,
-        margin,
-        title_h,
-        &label,
-        [20, 20, 20],
-        None,
-    );
-    Ok(p)
+    Ok(())
 }
 
 #[cfg(test)]

@@ -13,7 +13,7 @@
 
 use std::sync::Arc;
 
-use super::cache::{CollisionCache, TransitionCache};
+use super::cache::{CollisionCache, Row, RowMin, TransitionCache};
 use super::detect::{Trajectory, ball_ball, ball_cushion, ball_pocket, transition};
 use super::error::{PoolError, Result};
 use super::events::{Agent, Event, EventKind};
@@ -102,6 +102,7 @@ impl Simulation {
     }
 }
 
+#[derive(Clone, Copy)]
 struct Candidate {
     time: f64,
     kind: EventKind,
@@ -148,10 +149,23 @@ impl<'a> Engine<'a> {
         self.states[i].energy(&self.params[i])
     }
 
+    /// The earliest ball–ball, jaw, linear-cushion and pocket candidates, after recomputing the
+    /// cached times that the last event made stale.
     fn refresh_and_pick(&mut self) -> [Candidate; 4] {
+        let bb = self.refresh_ball_ball();
+        self.refresh_rows();
+        [
+            bb,
+            self.pick_row(Row::Circular),
+            self.pick_row(Row::Linear),
+            self.pick_row(Row::Pocket),
+        ]
+    }
+
+    /// Recomputes the stale ball–ball times and returns the earliest pair (ties: the earlier
+    /// computed, as in pooltool's dict order).
+    fn refresh_ball_ball(&mut self) -> Candidate {
         let n = self.states.len();
-        let table = self.sys.table.clone();
-        // ball–ball
         let mut bb = Candidate::none();
         let mut bb_seq = u64::MAX;
         for i in 0..n {
@@ -193,18 +207,15 @@ impl<'a> Engine<'a> {
                 }
             }
         }
-        // circular, linear, pocket (pooltool's candidate order). A ball's rows are
-        // invalidated whole, so each is recomputed whole and its minimum kept.
-        let (nl, nc, np) = (
-            table.linear.len(),
-            table.circular.len(),
-            table.pockets.len(),
-        );
-        #[inline]
-        fn better(t: f64, q: u64, best: (f64, u64, usize)) -> bool {
-            t < best.0 || (t == best.0 && q < best.1)
-        }
-        for i in 0..n {
+        bb
+    }
+
+    /// Recomputes the jaw, linear-cushion and pocket rows of every ball whose rows are stale, in
+    /// pooltool's candidate order (circular, linear, pocket). A ball's rows are invalidated whole,
+    /// so each is recomputed whole and its minimum kept.
+    fn refresh_rows(&mut self) {
+        let table = self.sys.table.clone();
+        for i in 0..self.states.len() {
             if self.cc.row_fresh[i] {
                 continue;
             }
@@ -217,94 +228,277 @@ impl<'a> Engine<'a> {
                 Trajectory::default()
             };
             let p = self.params[i];
-            let mut m = (f64::INFINITY, u64::MAX, 0usize);
-            for (c, jaw) in table.circular.iter().enumerate() {
-                let dt = if moving {
+            let t0 = self.t;
+            // A resting ball's row is all ∞ (no time is computed for it).
+            let circular = table.circular.iter().map(|jaw| {
+                if moving {
                     ball_cushion::circular_time(&st, &p, &tr, jaw, h)
                 } else {
                     f64::INFINITY
-                };
-                let (t, q) = (self.t + dt, self.cc.next_seq());
-                self.cc.circular[i * nc + c] = t;
-                self.cc.circular_seq[i * nc + c] = q;
-                if better(t, q, m) {
-                    m = (t, q, c);
                 }
-            }
-            self.cc.row_min_circular[i] = m;
-            let mut m = (f64::INFINITY, u64::MAX, 0usize);
-            for (c, seg) in table.linear.iter().enumerate() {
-                let dt = if moving {
+            });
+            self.cc.store_row(Row::Circular, i, t0, circular);
+            let linear = table.linear.iter().map(|seg| {
+                if moving {
                     ball_cushion::linear_time(&st, &p, &tr, seg, h)
                 } else {
                     f64::INFINITY
-                };
-                let (t, q) = (self.t + dt, self.cc.next_seq());
-                self.cc.linear[i * nl + c] = t;
-                self.cc.linear_seq[i * nl + c] = q;
-                if better(t, q, m) {
-                    m = (t, q, c);
                 }
-            }
-            self.cc.row_min_linear[i] = m;
-            let mut m = (f64::INFINITY, u64::MAX, 0usize);
-            for (c, pk) in table.pockets.iter().enumerate() {
-                let dt = if moving {
+            });
+            self.cc.store_row(Row::Linear, i, t0, linear);
+            let pockets = table.pockets.iter().map(|pk| {
+                if moving {
                     ball_pocket::pocket_time(&st, &p, &tr, pk, h)
                 } else {
                     f64::INFINITY
-                };
-                let (t, q) = (self.t + dt, self.cc.next_seq());
-                self.cc.pocket[i * np + c] = t;
-                self.cc.pocket_seq[i * np + c] = q;
-                if better(t, q, m) {
-                    m = (t, q, c);
                 }
-            }
-            self.cc.row_min_pocket[i] = m;
+            });
+            self.cc.store_row(Row::Pocket, i, t0, pockets);
             self.cc.row_fresh[i] = true;
         }
-        let mut circ = Candidate::none();
-        let mut lin = Candidate::none();
-        let mut pock = Candidate::none();
-        let (mut cm, mut lm, mut pm) = (
-            (f64::INFINITY, u64::MAX, 0usize),
-            (f64::INFINITY, u64::MAX, 0usize),
-            (f64::INFINITY, u64::MAX, 0usize),
-        );
-        for i in 0..n {
-            let r = self.cc.row_min_circular[i];
-            if r.0 < f64::INFINITY && better(r.0, r.1, cm) {
-                cm = r;
-                circ = Candidate {
+    }
+
+    /// The earliest entry of row `row` over all balls (ties: the lower sequence number).
+    fn pick_row(&self, row: Row) -> Candidate {
+        let (kind, obstacle): (EventKind, fn(usize) -> Agent) = match row {
+            Row::Circular => (EventKind::BallCircularCushion, Agent::CircularCushion),
+            Row::Linear => (EventKind::BallLinearCushion, Agent::LinearCushion),
+            Row::Pocket => (EventKind::BallPocket, Agent::Pocket),
+        };
+        let mut best = Candidate::none();
+        let mut m: RowMin = (f64::INFINITY, u64::MAX, 0);
+        for (i, &r) in self.cc.row_min(row).iter().enumerate() {
+            if r.0 < f64::INFINITY && (r.0 < m.0 || (r.0 == m.0 && r.1 < m.1)) {
+                m = r;
+                best = Candidate {
                     time: r.0,
-                    kind: EventKind::BallCircularCushion,
-                    agents: [Agent::Ball(i), Agent::CircularCushion(r.2)],
-                    n_agents: 2,
-                };
-            }
-            let r = self.cc.row_min_linear[i];
-            if r.0 < f64::INFINITY && better(r.0, r.1, lm) {
-                lm = r;
-                lin = Candidate {
-                    time: r.0,
-                    kind: EventKind::BallLinearCushion,
-                    agents: [Agent::Ball(i), Agent::LinearCushion(r.2)],
-                    n_agents: 2,
-                };
-            }
-            let r = self.cc.row_min_pocket[i];
-            if r.0 < f64::INFINITY && better(r.0, r.1, pm) {
-                pm = r;
-                pock = Candidate {
-                    time: r.0,
-                    kind: EventKind::BallPocket,
-                    agents: [Agent::Ball(i), Agent::Pocket(r.2)],
+                    kind,
+                    agents: [Agent::Ball(i), obstacle(r.2)],
                     n_agents: 2,
                 };
             }
         }
-        [bb, circ, lin, pock]
+        best
+    }
+
+    /// The engine at t = 0: every ball's state with t = 0, first transitions cached, no
+    /// collision time known yet.
+    fn new(sys: &'a System) -> Self {
+        let n = sys.balls.len();
+        let table = &sys.table;
+        let states: Vec<BallState> = sys
+            .balls
+            .iter()
+            .map(|b| BallState { t: 0.0, ..b.state })
+            .collect();
+        let params: Vec<BallParams> = sys.balls.iter().map(|b| b.params).collect();
+        let tc = TransitionCache {
+            next: states
+                .iter()
+                .zip(params.iter())
+                .map(|(s, p)| transition::next_transition(s, p))
+                .collect(),
+        };
+        Engine {
+            sys,
+            states,
+            params,
+            cc: CollisionCache::new(
+                n,
+                table.linear.len(),
+                table.circular.len(),
+                table.pockets.len(),
+            ),
+            tc,
+            traj: vec![Trajectory::default(); n],
+            traj_valid: vec![false; n],
+            t: 0.0,
+        }
+    }
+
+    /// Step 1: the earliest of {stick (t = 0 only), cached transition, ball–ball, circular,
+    /// linear, pocket}; exact ties go to the lower tier, then the higher energy, then the
+    /// earlier candidate. `None` when nothing will happen (settled).
+    fn next_event(&mut self, shot: &Shot, cue_idx: usize) -> Option<Candidate> {
+        let mut cands: Vec<Candidate> = Vec::with_capacity(6);
+        if self.t == 0.0 {
+            let has_energy = (0..self.states.len()).any(|i| self.energy(i) != 0.0);
+            let time = if !has_energy && shot.v0 > 0.0 {
+                0.0
+            } else {
+                f64::INFINITY
+            };
+            cands.push(Candidate {
+                time,
+                kind: EventKind::StickBall,
+                agents: [Agent::Cue, Agent::Ball(cue_idx)],
+                n_agents: 2,
+            });
+        }
+        match self.tc.earliest() {
+            Some((i, time, kind)) => cands.push(Candidate {
+                time,
+                kind,
+                agents: [Agent::Ball(i), Agent::Cue],
+                n_agents: 1,
+            }),
+            None => cands.push(Candidate::none()),
+        }
+        cands.extend(self.refresh_and_pick());
+        let min_time = cands.iter().map(|c| c.time).fold(f64::INFINITY, f64::min);
+        if min_time == f64::INFINITY || min_time.is_nan() {
+            return None;
+        }
+        let simultaneous: Vec<&Candidate> = cands.iter().filter(|c| c.time == min_time).collect();
+        let mut best = simultaneous[0];
+        if simultaneous.len() > 1 {
+            let mut bk = self.priority(best, shot);
+            for c in &simultaneous[1..] {
+                let k = self.priority(c, shot);
+                if k.0 < bk.0 || (k.0 == bk.0 && -k.1 < -bk.1) {
+                    best = c;
+                    bk = k;
+                }
+            }
+        }
+        Some(*best)
+    }
+
+    /// Step 2: evolves every ball to `time` in closed form, keeping its motion state (as
+    /// pooltool does), and forgets the cached trajectories.
+    fn evolve_to(&mut self, time: f64) {
+        let dt = time - self.t;
+        let t_evolved = self.t + dt;
+        for i in 0..self.states.len() {
+            let s = self.states[i];
+            let (rvw, _) = evolve::evolve_rvw(
+                s.s,
+                &[s.r, s.v, s.w],
+                &MotionParams::from(&self.params[i]),
+                dt,
+            );
+            self.states[i] = BallState {
+                r: rvw[0],
+                v: rvw[1],
+                w: rvw[2],
+                s: s.s,
+                t: t_evolved,
+            };
+        }
+        self.traj_valid.iter_mut().for_each(|v| *v = false);
+    }
+
+    /// Step 3: applies event `ev` to its balls (`ball_agents`, in agent order). Collisions set
+    /// the balls' time to the event time; transitions keep the evolved time.
+    fn resolve(&mut self, ev: &Candidate, ball_agents: &[usize], shot: &Shot, cue_idx: usize) {
+        let (time, agents) = (ev.time, ev.agents);
+        let system = self.sys;
+        let table = &system.table;
+        let models = &system.models;
+        match ev.kind {
+            EventKind::StickBall => {
+                let i = cue_idx;
+                resolve::stick_ball::resolve(
+                    &mut self.states[i],
+                    &self.params[i],
+                    &system.cue,
+                    models,
+                    shot,
+                );
+                self.states[i].t = time;
+            }
+            EventKind::BallBall => {
+                let (i, j) = (ball_agents[0], ball_agents[1]);
+                let (mut a, mut b) = (self.states[i], self.states[j]);
+                resolve::ball_ball::resolve(
+                    &mut a,
+                    &self.params[i],
+                    &mut b,
+                    &self.params[j],
+                    models,
+                );
+                a.t = time;
+                b.t = time;
+                self.states[i] = a;
+                self.states[j] = b;
+            }
+            EventKind::BallLinearCushion => {
+                let i = ball_agents[0];
+                if let Agent::LinearCushion(c) = agents[1] {
+                    resolve::ball_cushion::resolve_linear(
+                        &mut self.states[i],
+                        &self.params[i],
+                        models,
+                        &table.linear[c],
+                    );
+                }
+                self.states[i].t = time;
+            }
+            EventKind::BallCircularCushion => {
+                let i = ball_agents[0];
+                if let Agent::CircularCushion(c) = agents[1] {
+                    resolve::ball_cushion::resolve_circular(
+                        &mut self.states[i],
+                        &self.params[i],
+                        models,
+                        &table.circular[c],
+                    );
+                }
+                self.states[i].t = time;
+            }
+            EventKind::BallPocket => {
+                let i = ball_agents[0];
+                if let Agent::Pocket(c) = agents[1] {
+                    resolve::ball_pocket::resolve(&mut self.states[i], &table.pockets[c]);
+                }
+                self.states[i].t = time;
+            }
+            k => {
+                let i = ball_agents[0];
+                resolve::transition::resolve(&mut self.states[i], k);
+            }
+        }
+    }
+
+    /// Step 4: moves the clock to the event, appends every ball's state to `history`, and
+    /// returns the event with its balls' states before and after (both stamped at its time).
+    fn record(
+        &mut self,
+        ev: &Candidate,
+        ball_agents: &[usize],
+        before: &[BallState],
+        after: &[BallState],
+        history: &mut [Vec<BallState>],
+    ) -> Event {
+        let time = ev.time;
+        self.t = time;
+        for (i, s) in self.states.iter_mut().enumerate() {
+            s.t = time;
+            history[i].push(*s);
+        }
+        let balls = ball_agents
+            .iter()
+            .zip(before.iter().zip(after.iter()))
+            .map(|(&i, (b, a))| (i, BallState { t: time, ..*b }, BallState { t: time, ..*a }))
+            .collect();
+        Event {
+            kind: ev.kind,
+            time,
+            agents: ev.agents,
+            n_agents: ev.n_agents,
+            balls,
+        }
+    }
+
+    /// The `max_events` cap: every ball on the table stops where it is (pooltool `stop_balls`).
+    fn stop_balls(&mut self) {
+        for s in self.states.iter_mut() {
+            if s.s != MotionState::Pocketed {
+                s.s = MotionState::Stationary;
+            }
+            s.v = [0.0; 3];
+            s.w = [0.0; 3];
+        }
     }
 
     fn priority(&self, c: &Candidate, shot: &Shot) -> (u8, f64) {
@@ -326,7 +520,9 @@ impl<'a> Engine<'a> {
     }
 }
 
-/// Simulate `shot` on `system` until every ball rests (or a cap is hit).
+/// Simulate `shot` on `system` until every ball rests (or a cap is hit). One loop turn is one
+/// event, in the steps of the module doc: `next_event`, `evolve_to`, `resolve`, the transition
+/// cache, `record`, the caps, the collision cache.
 pub fn simulate(system: &System, shot: &Shot, opts: &SimOptions) -> Result<Simulation> {
     shot.validate()?;
     let cue_idx = system.validate()?;
@@ -335,39 +531,7 @@ pub fn simulate(system: &System, shot: &Shot, opts: &SimOptions) -> Result<Simul
     {
         return Err(PoolError::InvalidShot("t_final must be finite".into()));
     }
-    let n = system.balls.len();
-    let table = system.table.clone();
-    let mut states: Vec<BallState> = system
-        .balls
-        .iter()
-        .map(|b| BallState { t: 0.0, ..b.state })
-        .collect();
-    for s in states.iter_mut() {
-        s.t = 0.0;
-    }
-    let params: Vec<BallParams> = system.balls.iter().map(|b| b.params).collect();
-    let tc = TransitionCache {
-        next: states
-            .iter()
-            .zip(params.iter())
-            .map(|(s, p)| transition::next_transition(s, p))
-            .collect(),
-    };
-    let mut eng = Engine {
-        sys: system,
-        states,
-        params,
-        cc: CollisionCache::new(
-            n,
-            table.linear.len(),
-            table.circular.len(),
-            table.pockets.len(),
-        ),
-        tc,
-        traj: vec![Trajectory::default(); n],
-        traj_valid: vec![false; n],
-        t: 0.0,
-    };
+    let mut eng = Engine::new(system);
     let mut history: Vec<Vec<BallState>> = eng.states.iter().map(|s| vec![*s]).collect();
     let mut events: Vec<Event> = Vec::new();
     let mut num_events = 0usize;
@@ -375,80 +539,16 @@ pub fn simulate(system: &System, shot: &Shot, opts: &SimOptions) -> Result<Simul
 
     loop {
         // ---- 1. next event
-        let mut cands: Vec<Candidate> = Vec::with_capacity(6);
-        if eng.t == 0.0 {
-            let has_energy = (0..n).any(|i| eng.energy(i) != 0.0);
-            let time = if !has_energy && shot.v0 > 0.0 {
-                0.0
-            } else {
-                f64::INFINITY
-            };
-            cands.push(Candidate {
-                time,
-                kind: EventKind::StickBall,
-                agents: [Agent::Cue, Agent::Ball(cue_idx)],
-                n_agents: 2,
-            });
-        }
-        match eng.tc.earliest() {
-            Some((i, time, kind)) => cands.push(Candidate {
-                time,
-                kind,
-                agents: [Agent::Ball(i), Agent::Cue],
-                n_agents: 1,
-            }),
-            None => cands.push(Candidate::none()),
-        }
-        let [bb, circ, lin, pock] = eng.refresh_and_pick();
-        cands.push(bb);
-        cands.push(circ);
-        cands.push(lin);
-        cands.push(pock);
-        let min_time = cands.iter().map(|c| c.time).fold(f64::INFINITY, f64::min);
-        if min_time == f64::INFINITY || min_time.is_nan() {
+        let Some(ev) = eng.next_event(shot, cue_idx) else {
             status = Status::Settled;
             break;
-        }
-        let simultaneous: Vec<&Candidate> = cands.iter().filter(|c| c.time == min_time).collect();
-        let ev = if simultaneous.len() == 1 {
-            simultaneous[0]
-        } else {
-            let mut best = simultaneous[0];
-            let mut bk = eng.priority(best, shot);
-            for c in &simultaneous[1..] {
-                let k = eng.priority(c, shot);
-                if k.0 < bk.0 || (k.0 == bk.0 && -k.1 < -bk.1) {
-                    best = c;
-                    bk = k;
-                }
-            }
-            best
         };
-        let (kind, time, agents, n_agents) = (ev.kind, ev.time, ev.agents, ev.n_agents);
 
         // ---- 2. evolve every ball (motion state kept, like pooltool)
-        let dt = time - eng.t;
-        let t_evolved = eng.t + dt;
-        for i in 0..n {
-            let s = eng.states[i];
-            let (rvw, _) = evolve::evolve_rvw(
-                s.s,
-                &[s.r, s.v, s.w],
-                &MotionParams::from(&eng.params[i]),
-                dt,
-            );
-            eng.states[i] = BallState {
-                r: rvw[0],
-                v: rvw[1],
-                w: rvw[2],
-                s: s.s,
-                t: t_evolved,
-            };
-        }
-        eng.traj_valid.iter_mut().for_each(|v| *v = false);
+        eng.evolve_to(ev.time);
 
         // ---- 3. resolve
-        let ball_agents: Vec<usize> = agents[..n_agents as usize]
+        let ball_agents: Vec<usize> = ev.agents[..ev.n_agents as usize]
             .iter()
             .filter_map(|a| {
                 if let Agent::Ball(i) = a {
@@ -459,64 +559,7 @@ pub fn simulate(system: &System, shot: &Shot, opts: &SimOptions) -> Result<Simul
             })
             .collect();
         let before: Vec<BallState> = ball_agents.iter().map(|&i| eng.states[i]).collect();
-        let models = &system.models;
-        match kind {
-            EventKind::StickBall => {
-                let i = cue_idx;
-                resolve::stick_ball::resolve(
-                    &mut eng.states[i],
-                    &eng.params[i],
-                    &system.cue,
-                    models,
-                    shot,
-                );
-                eng.states[i].t = time;
-            }
-            EventKind::BallBall => {
-                let (i, j) = (ball_agents[0], ball_agents[1]);
-                let (mut a, mut b) = (eng.states[i], eng.states[j]);
-                resolve::ball_ball::resolve(&mut a, &eng.params[i], &mut b, &eng.params[j], models);
-                a.t = time;
-                b.t = time;
-                eng.states[i] = a;
-                eng.states[j] = b;
-            }
-            EventKind::BallLinearCushion => {
-                let i = ball_agents[0];
-                if let Agent::LinearCushion(c) = agents[1] {
-                    resolve::ball_cushion::resolve_linear(
-                        &mut eng.states[i],
-                        &eng.params[i],
-                        models,
-                        &table.linear[c],
-                    );
-                }
-                eng.states[i].t = time;
-            }
-            EventKind::BallCircularCushion => {
-                let i = ball_agents[0];
-                if let Agent::CircularCushion(c) = agents[1] {
-                    resolve::ball_cushion::resolve_circular(
-                        &mut eng.states[i],
-                        &eng.params[i],
-                        models,
-                        &table.circular[c],
-                    );
-                }
-                eng.states[i].t = time;
-            }
-            EventKind::BallPocket => {
-                let i = ball_agents[0];
-                if let Agent::Pocket(c) = agents[1] {
-                    resolve::ball_pocket::resolve(&mut eng.states[i], &table.pockets[c]);
-                }
-                eng.states[i].t = time;
-            }
-            k => {
-                let i = ball_agents[0];
-                resolve::transition::resolve(&mut eng.states[i], k);
-            }
-        }
+        eng.resolve(&ev, &ball_agents, shot, cue_idx);
         let after: Vec<BallState> = ball_agents.iter().map(|&i| eng.states[i]).collect();
 
         // ---- 5a. transition cache uses the resolved ("final") states, whose t is the
@@ -526,23 +569,7 @@ pub fn simulate(system: &System, shot: &Shot, opts: &SimOptions) -> Result<Simul
         }
 
         // ---- 4. record
-        eng.t = time;
-        for (i, s) in eng.states.iter_mut().enumerate() {
-            s.t = time;
-            history[i].push(*s);
-        }
-        let balls = ball_agents
-            .iter()
-            .zip(before.iter().zip(after.iter()))
-            .map(|(&i, (b, a))| (i, BallState { t: time, ..*b }, BallState { t: time, ..*a }))
-            .collect();
-        events.push(Event {
-            kind,
-            time,
-            agents,
-            n_agents,
-            balls,
-        });
+        events.push(eng.record(&ev, &ball_agents, &before, &after, &mut history));
 
         if let Some(tf) = opts.t_final
             && eng.t >= tf
@@ -551,13 +578,7 @@ pub fn simulate(system: &System, shot: &Shot, opts: &SimOptions) -> Result<Simul
             break;
         }
         if opts.max_events > 0 && num_events > opts.max_events {
-            for s in eng.states.iter_mut() {
-                if s.s != MotionState::Pocketed {
-                    s.s = MotionState::Stationary;
-                }
-                s.v = [0.0; 3];
-                s.w = [0.0; 3];
-            }
+            eng.stop_balls();
             status = Status::MaxEvents;
             break;
         }
@@ -574,7 +595,7 @@ pub fn simulate(system: &System, shot: &Shot, opts: &SimOptions) -> Result<Simul
         history[i].push(BallState { t: t_end, ..*s });
     }
     Ok(Simulation {
-        table,
+        table: system.table.clone(),
         ball_ids: system.balls.iter().map(|b| b.id.clone()).collect(),
         ball_params: eng.params,
         events,

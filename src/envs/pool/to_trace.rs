@@ -22,7 +22,9 @@ use super::sample::resample;
 use super::scene::Scene;
 use super::shot::Shot;
 use super::simulate::{SimOptions, Simulation, Status, simulate};
-use crate::trace::{Body, Env, Event, JsonMap, Object, Outcome, PoolBall, Timestep, Trace};
+use crate::trace::{
+    Body, Env, Event, JsonMap, Object, Outcome, PoolBall, Timestep, Trace, json_map,
+};
 
 /// Options of the conversion.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -45,13 +47,6 @@ pub fn event_kind_name(kind: EventKind) -> String {
 
 fn shot_json(shot: &Shot) -> Value {
     json!({"V0": shot.v0, "phi": shot.phi, "theta": shot.theta, "a": shot.a, "b": shot.b})
-}
-
-fn map(v: Value) -> JsonMap {
-    match v {
-        Value::Object(m) => m,
-        _ => JsonMap::new(),
-    }
 }
 
 /// Trace `pool-{seed}-{index:06}-000` of a random 9-ball dataset: scene `index` and its first shot as
@@ -254,7 +249,7 @@ pub fn outcome(sim: &Simulation, scene: &Scene, shot: &Shot, dt: f64) -> Outcome
         Status::MaxEvents => "max_events",
         Status::MaxTime => "max_time",
     };
-    let metrics = map(json!({
+    let metrics = json_map(json!({
         "balls_pocketed": pocketed.len(),
         "pocketed": pocketed,
         "cue_ball_pocketed": cue_pocketed,

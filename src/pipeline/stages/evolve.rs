@@ -14,7 +14,6 @@ use std::sync::Arc;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
-use sha2::{Digest, Sha256};
 
 use super::detector_setup::{DetectorSetup, SandboxParams};
 use super::trace_files::{read_traces, trace_file_sets};
@@ -364,10 +363,7 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
 }
 
 fn hash_u64(seed: u64, s: &str) -> u64 {
-    let mut h = Sha256::new();
-    h.update(seed.to_le_bytes());
-    h.update(s.as_bytes());
-    u64::from_le_bytes(h.finalize()[..8].try_into().expect("8 bytes"))
+    crate::digest::sha256_u64(&[&seed.to_le_bytes(), s.as_bytes()])
 }
 
 /// Splits traces into (training, held-out): a trace is held out when the hash of (seed, id) falls in

@@ -253,10 +253,10 @@ fn schema() -> Arc<Schema> {
     ]))
 }
 
-fn mix(mut x: u64) -> u64 {
-    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    x ^ (x >> 31)
+/// SplitMix64's output function without the increment ([`crate::rng::finalize`]): the sample
+/// seeds of existing `optimise` tables were derived with it, so it is not [`crate::rng::splitmix64`].
+fn mix(x: u64) -> u64 {
+    crate::rng::finalize(x)
 }
 
 impl Stage for OptimiseStage {

@@ -21,12 +21,13 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
+use crate::digest::hex;
 use crate::envs::pool::{
     PoolConfig, Scene, Shot, SimOptions, TraceOptions, rack, simulate, trace_of,
 };
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
-use crate::pipeline::spec::{PipelineSpec, StageDef, hex};
+use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
 use crate::store::ParquetSink;
 use crate::trace::batch::scene_batch;

@@ -25,12 +25,13 @@ use sha2::{Digest, Sha256};
 use super::simulate::{
     IphyreSimParams, ShardSinks, SimulateSummary, check_ids_are_new, replay_pair, run_shards,
 };
+use crate::digest::hex;
 use crate::envs::iphyre::{
     Click, Episode, Game, Games, PhysicsParams, click_block, clicks_rng, random_clicks, trace_of,
     validate_clicks,
 };
 use crate::pipeline::registry::BuildError;
-use crate::pipeline::spec::{PipelineSpec, hex};
+use crate::pipeline::spec::PipelineSpec;
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
 use crate::trace::Env;
 use crate::trace::batch::scene_batch;

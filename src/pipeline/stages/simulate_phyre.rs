@@ -25,13 +25,14 @@ use sha2::{Digest, Sha256};
 use super::simulate::{
     PhyreSimParams, ShardSinks, SimulateSummary, check_ids_are_new, replay_pair, run_shards,
 };
+use crate::digest::hex;
 use crate::envs::phyre::{
     BallAction, DEFAULT_STRIDE, DEFAULT_TASKS_GZ, EvalSetup, PhyreEnv, PhysicsParams,
     RecordOptions, Status, Task, TaskSet, action_rng, dataset_tasks, episode, fold,
     random_valid_action, trace_of,
 };
 use crate::pipeline::registry::BuildError;
-use crate::pipeline::spec::{PipelineSpec, hex};
+use crate::pipeline::spec::PipelineSpec;
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
 use crate::trace::Env;
 use crate::trace::batch::scene_batch;
