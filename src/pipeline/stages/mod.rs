@@ -11,8 +11,6 @@ pub mod export;
 pub mod import;
 pub mod optimise;
 pub mod simulate;
-pub mod simulate_iphyre;
-pub mod simulate_phyre;
 pub mod sql;
 mod trace_files;
 

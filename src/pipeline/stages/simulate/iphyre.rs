@@ -19,12 +19,13 @@
 //! dataset traces are `iphyre-<seed>-<game>-<sample:04>`, a replay is `iphyre-<game>-<first 8 hex digits
 //! of the click list's hash>`.
 
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
-use super::simulate::{
-    IphyreSimParams, ShardSinks, SimulateSummary, check_ids_are_new, replay_pair, run_shards,
-};
+use super::shards::{ShardSinks, ShardTotals, replay_pair};
+use super::{ShardParams, SimulateSummary, Simulation};
 use crate::digest::hex;
 use crate::envs::iphyre::{
     Click, Episode, Game, Games, PhysicsParams, click_block, clicks_rng, random_clicks, trace_of,
@@ -32,9 +33,30 @@ use crate::envs::iphyre::{
 };
 use crate::pipeline::registry::BuildError;
 use crate::pipeline::spec::PipelineSpec;
-use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
+use crate::pipeline::stage::{StageContext, StageError};
 use crate::trace::Env;
 use crate::trace::batch::scene_batch;
+
+/// I-PHYRE `simulate` parameters.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, JsonSchema)]
+#[serde(default)]
+pub struct IphyreSimParams {
+    /// Click sets per game, seed and sharding.
+    #[serde(flatten)]
+    pub shards: ShardParams,
+    /// Dataset mode: comma-separated game and fold names, or all (default all 40).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub games: Option<String>,
+    /// Physics steps per second: 60 (I-PHYRE's default) or 10 (the gym wrappers and DeepPHY).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fps: Option<f64>,
+    /// Replay mode: the game name.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub game: Option<String>,
+    /// Replay mode: `x,y,t;…` clicks (px, s) or `k@t;…` (remove eliminable block k at t).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub clicks: Option<String>,
+}
 
 /// What to simulate.
 #[derive(Debug)]
@@ -49,19 +71,18 @@ enum Work {
     Replay { game: Box<Game>, clicks: Vec<Click> },
 }
 
-/// The `simulate` stage for I-PHYRE.
+/// I-PHYRE episodes for the `simulate` stage.
 #[derive(Debug)]
-pub struct IphyreSimulateStage {
+pub(crate) struct IphyreSimulation {
     params: PhysicsParams,
     work: Work,
-    per_shard: u64,
 }
 
 /// Builds the I-PHYRE `simulate` stage from its parameters.
 pub(super) fn build(
     p: &IphyreSimParams,
     spec: &PipelineSpec,
-) -> Result<Box<dyn Stage>, BuildError> {
+) -> Result<IphyreSimulation, BuildError> {
     let fps = p.fps.unwrap_or(60.0);
     let params = PhysicsParams::with_fps(fps);
     params
@@ -87,11 +108,7 @@ pub(super) fn build(
             seed: p.shards.seed.unwrap_or(spec.seed),
         },
     };
-    Ok(Box::new(IphyreSimulateStage {
-        params,
-        work,
-        per_shard: p.shards.scenes_per_shard.max(1),
-    }))
+    Ok(IphyreSimulation { params, work })
 }
 
 /// The games a `games` list names: `all`, game names and fold names (`basic`, `noisy`,
@@ -171,7 +188,7 @@ pub fn parse_clicks(text: &str, game: &Game, max_time: f64) -> Result<Vec<Click>
     Ok(clicks)
 }
 
-impl IphyreSimulateStage {
+impl IphyreSimulation {
     /// Number of traces.
     fn total(&self) -> u64 {
         match &self.work {
@@ -207,7 +224,7 @@ impl IphyreSimulateStage {
     }
 
     /// Simulates items `lo..hi` into one shard's files; the shard's counts.
-    fn fill_shard(
+    fn fill(
         &self,
         ctx: &StageContext<'_>,
         sinks: &mut ShardSinks<'_, '_>,
@@ -258,7 +275,7 @@ impl IphyreSimulateStage {
     }
 }
 
-impl Stage for IphyreSimulateStage {
+impl Simulation for IphyreSimulation {
     /// The resolved seed, the games and the engine: a changed pipeline seed reruns the stage.
     fn fingerprint_extra(&self) -> Result<Value, StageError> {
         let work = match &self.work {
@@ -284,18 +301,32 @@ impl Stage for IphyreSimulateStage {
         )
     }
 
-    fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
-        let total = self.total();
-        let ids = (0..total).map(|i| self.item(i).2);
-        check_ids_are_new(ctx, Some(Env::Iphyre), ids)?;
-        ctx.progress().set_total(ctx.stage_id(), total);
-        let sums = run_shards(ctx, Env::Iphyre, total, self.per_shard, |sinks, lo, hi| {
-            self.fill_shard(ctx, sinks, lo, hi)
-        })?;
+    fn env(&self) -> Env {
+        Env::Iphyre
+    }
+
+    fn items(&self) -> u64 {
+        self.total()
+    }
+
+    fn trace_ids(&self, i: u64) -> Vec<String> {
+        vec![self.item(i).2]
+    }
+
+    fn fill_shard(
+        &self,
+        ctx: &StageContext<'_>,
+        sinks: &mut ShardSinks<'_, '_>,
+        lo: u64,
+        hi: u64,
+    ) -> Result<Value, StageError> {
+        self.fill(ctx, sinks, lo, hi)
+    }
+
+    fn report(&self, sums: &ShardTotals) -> (SimulateSummary, String) {
         let (traces, successes) = (sums.count("traces"), sums.count("successes"));
         let (eliminations, reward) = (sums.count("eliminations"), sums.sum("reward"));
-        let rows = sums.rows;
-        let frames = rows.get("frames").copied().unwrap_or(0);
+        let frames = sums.rows.get("frames").copied().unwrap_or(0);
         let mean_reward = if traces > 0 {
             reward / traces as f64
         } else {
@@ -305,22 +336,17 @@ impl Stage for IphyreSimulateStage {
             "{traces} iphyre trace(s) at {} fps, {successes} successful, {eliminations} blocks removed, mean reward {mean_reward:.1}; {frames} frame rows",
             self.params.fps
         );
-        Ok(StageOutput {
-            rows,
-            files: Vec::new(),
-            summary: SimulateSummary {
-                env: Env::Iphyre,
-                traces,
-                successes,
-                capped: Some(0),
-                eliminations: Some(eliminations),
-                mean_reward: Some(mean_reward),
-                fps: Some(self.params.fps),
-                ..SimulateSummary::default()
-            }
-            .to_json(),
-            line,
-        })
+        let summary = SimulateSummary {
+            env: Env::Iphyre,
+            traces,
+            successes,
+            capped: Some(0),
+            eliminations: Some(eliminations),
+            mean_reward: Some(mean_reward),
+            fps: Some(self.params.fps),
+            ..SimulateSummary::default()
+        };
+        (summary, line)
     }
 }
 

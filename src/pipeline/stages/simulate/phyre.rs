@@ -19,12 +19,13 @@
 //! traces are `phyre-<seed>-<template>-<variant>-<sample:03>`, a replay `phyre-<template>-<variant>-<8 hex
 //! digits of the action's hash>`.
 
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
-use super::simulate::{
-    PhyreSimParams, ShardSinks, SimulateSummary, check_ids_are_new, replay_pair, run_shards,
-};
+use super::shards::{ShardSinks, ShardTotals, replay_pair};
+use super::{ShardParams, SimulateSummary, Simulation};
 use crate::digest::hex;
 use crate::envs::phyre::{
     BallAction, DEFAULT_STRIDE, DEFAULT_TASKS_GZ, EvalSetup, PhyreEnv, PhysicsParams,
@@ -33,9 +34,48 @@ use crate::envs::phyre::{
 };
 use crate::pipeline::registry::BuildError;
 use crate::pipeline::spec::PipelineSpec;
-use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
+use crate::pipeline::stage::{StageContext, StageError};
 use crate::trace::Env;
 use crate::trace::batch::scene_batch;
+
+/// PHYRE `simulate` parameters.
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(default)]
+pub struct PhyreSimParams {
+    /// Dataset mode: number of tasks, round-robin over the templates `tasks` selects.
+    pub scenes: u64,
+    /// Shots, seed and sharding.
+    #[serde(flatten)]
+    pub shards: ShardParams,
+    /// Dataset mode: comma-separated template ids (00003), task ids (00003:002), fold splits
+    /// (ball_cross_template/0/test) or all (default); `shots` random valid actions per task.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tasks: Option<String>,
+    /// Replay mode: the task id (00004:063).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub task: Option<String>,
+    /// Replay mode: `[x, y, r]` in [0, 1], `{"x", "y", "r"}`, or DeepPHY's `{"cell": 1-64, "radius":
+    /// 1-8}`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub action: Option<String>,
+    /// Keep a frame every this many 60 Hz steps (default 6, i.e. 10 frames/s; events keep every
+    /// step).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stride: Option<u64>,
+}
+
+impl Default for PhyreSimParams {
+    fn default() -> Self {
+        PhyreSimParams {
+            scenes: 10,
+            shards: ShardParams::default(),
+            tasks: None,
+            task: None,
+            action: None,
+            stride: None,
+        }
+    }
+}
 
 /// What to simulate.
 #[derive(Debug)]
@@ -50,17 +90,19 @@ enum Work {
     Replay { task: String, action: BallAction },
 }
 
-/// The `simulate` stage for PHYRE.
+/// PHYRE episodes for the `simulate` stage.
 #[derive(Debug)]
-pub struct PhyreSimulateStage {
+pub(crate) struct PhyreSimulation {
     params: PhysicsParams,
     record: RecordOptions,
     work: Work,
-    per_shard: u64,
 }
 
 /// Builds the PHYRE `simulate` stage from its parameters.
-pub(super) fn build(p: &PhyreSimParams, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
+pub(super) fn build(
+    p: &PhyreSimParams,
+    spec: &PipelineSpec,
+) -> Result<PhyreSimulation, BuildError> {
     let set = TaskSet::default_tasks().map_err(|e| BuildError::param("tasks", e.to_string()))?;
     let stride = p.stride.unwrap_or(DEFAULT_STRIDE as u64);
     let stride = usize::try_from(stride).unwrap_or(usize::MAX);
@@ -94,15 +136,14 @@ pub(super) fn build(p: &PhyreSimParams, spec: &PipelineSpec) -> Result<Box<dyn S
             }
         }
     };
-    Ok(Box::new(PhyreSimulateStage {
+    Ok(PhyreSimulation {
         params: PhysicsParams::default(),
         record: RecordOptions {
             stride,
             record: true,
         },
         work,
-        per_shard: p.shards.scenes_per_shard.max(1),
-    }))
+    })
 }
 
 /// The task ids a `tasks` list selects: comma-separated `all`, template ids (`00003`), task ids
@@ -148,7 +189,7 @@ pub fn select_tasks(set: &TaskSet, list: &str) -> Result<Vec<String>, String> {
     Ok(out)
 }
 
-impl PhyreSimulateStage {
+impl PhyreSimulation {
     /// Number of traces.
     fn total(&self) -> u64 {
         match &self.work {
@@ -197,7 +238,7 @@ impl PhyreSimulateStage {
     }
 
     /// Simulates items `lo..hi` into one shard's files; the shard's counts.
-    fn fill_shard(
+    fn fill(
         &self,
         ctx: &StageContext<'_>,
         sinks: &mut ShardSinks<'_, '_>,
@@ -249,7 +290,7 @@ impl PhyreSimulateStage {
     }
 }
 
-impl Stage for PhyreSimulateStage {
+impl Simulation for PhyreSimulation {
     /// The resolved seed, the tasks, the stride and the task data: a changed pipeline seed reruns.
     fn fingerprint_extra(&self) -> Result<Value, StageError> {
         let work = match &self.work {
@@ -273,38 +314,47 @@ impl Stage for PhyreSimulateStage {
         )
     }
 
-    fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
-        let total = self.total();
-        let ids = (0..total).map(|i| self.item(i).2);
-        check_ids_are_new(ctx, Some(Env::Phyre), ids)?;
-        ctx.progress().set_total(ctx.stage_id(), total);
-        let sums = run_shards(ctx, Env::Phyre, total, self.per_shard, |sinks, lo, hi| {
-            self.fill_shard(ctx, sinks, lo, hi)
-        })?;
+    fn env(&self) -> Env {
+        Env::Phyre
+    }
+
+    fn items(&self) -> u64 {
+        self.total()
+    }
+
+    fn trace_ids(&self, i: u64) -> Vec<String> {
+        vec![self.item(i).2]
+    }
+
+    fn fill_shard(
+        &self,
+        ctx: &StageContext<'_>,
+        sinks: &mut ShardSinks<'_, '_>,
+        lo: u64,
+        hi: u64,
+    ) -> Result<Value, StageError> {
+        self.fill(ctx, sinks, lo, hi)
+    }
+
+    fn report(&self, sums: &ShardTotals) -> (SimulateSummary, String) {
         let (traces, successes) = (sums.count("traces"), sums.count("successes"));
         let (invalid, steps) = (sums.count("invalid"), sums.count("steps"));
-        let rows = sums.rows;
-        let frames = rows.get("frames").copied().unwrap_or(0);
+        let frames = sums.rows.get("frames").copied().unwrap_or(0);
         let line = format!(
             "{traces} phyre trace(s), {successes} solved, {invalid} invalid input; {steps} physics steps, {frames} frame rows (stride {})",
             self.record.stride
         );
-        Ok(StageOutput {
-            rows,
-            files: Vec::new(),
-            summary: SimulateSummary {
-                env: Env::Phyre,
-                traces,
-                successes,
-                capped: Some(0),
-                invalid: Some(invalid),
-                steps: Some(steps),
-                stride: Some(self.record.stride as u64),
-                ..SimulateSummary::default()
-            }
-            .to_json(),
-            line,
-        })
+        let summary = SimulateSummary {
+            env: Env::Phyre,
+            traces,
+            successes,
+            capped: Some(0),
+            invalid: Some(invalid),
+            steps: Some(steps),
+            stride: Some(self.record.stride as u64),
+            ..SimulateSummary::default()
+        };
+        (summary, line)
     }
 }
 
