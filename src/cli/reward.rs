@@ -37,8 +37,8 @@ struct SynthArgs {
     /// The goal in natural language.
     goal: String,
     /// Environment (only billiards has a scene simulator for the execution check here).
-    #[arg(long, default_value = "pooltool", value_parser = ["pooltool", "phyre", "iphyre"])]
-    env: String,
+    #[arg(long, default_value = "pooltool")]
+    env: Env,
     /// Billiards scene: a scene JSON file, or SEED:INDEX for a generated 9-ball rack.
     #[arg(long, default_value = "1000:0")]
     scene: String,
@@ -280,7 +280,7 @@ fn synthesise(a: SynthArgs) -> CliResult {
     use annotrace::llm::LlmClient;
     use annotrace::reward::synth::{SynthRequest, prompt, synthesise as run_synthesis};
 
-    let env: Env = a.env.parse().map_err(CliError::input)?;
+    let env = a.env;
     let lib = load_library(&library_dir(a.library.as_deref(), env))?;
     if lib.env != env {
         return Err(CliError::input(anyhow::anyhow!(

@@ -28,8 +28,8 @@ pub struct Args {
     #[arg(long)]
     library: Option<PathBuf>,
     /// Environment (default: the library's).
-    #[arg(long, value_parser = ["pooltool", "phyre", "iphyre"])]
-    env: Option<String>,
+    #[arg(long)]
+    env: Option<Env>,
     /// How many labels to ask for.
     #[arg(short, long, default_value_t = 5)]
     k: usize,
@@ -61,10 +61,7 @@ pub struct Args {
 fn load_library(args: &Args) -> Result<Library, CliError> {
     let dir = match (&args.library, &args.env) {
         (Some(d), _) => Location::Disk(d.clone()),
-        (None, Some(env)) => {
-            let env: Env = env.parse().map_err(CliError::input)?;
-            Location::default_library(Path::new("."), env)
-        }
+        (None, Some(env)) => Location::default_library(Path::new("."), *env),
         (None, None) => {
             return Err(CliError::input(anyhow!(
                 "give --library DIR or --env (whose default is the built-in library of <env>)"
@@ -72,8 +69,8 @@ fn load_library(args: &Args) -> Result<Library, CliError> {
         }
     };
     let lib = Library::open(&dir).map_err(CliError::input)?;
-    if let Some(env) = &args.env
-        && env.parse::<Env>().ok() != Some(lib.env)
+    if let Some(env) = args.env
+        && env != lib.env
     {
         return Err(CliError::input(anyhow!(
             "{dir}: the library is for {}, not --env {env}",

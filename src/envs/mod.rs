@@ -25,6 +25,32 @@ pub mod rapier;
 
 use crate::trace::{Env, Trace};
 
+/// The facts about an environment that code outside `envs/` needs (trace distances, reward programs,
+/// prompts), one constant per environment module, found through [`facts`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EnvFacts {
+    /// The environment.
+    pub env: Env,
+    /// The length positions are divided by for trace distances: the scene's long side in its units.
+    pub scene_scale: f64,
+    /// The unit length of `NEARBY_AT` thresholds in reward programs (radius = threshold × this).
+    pub nearby_scale: f64,
+    /// How positions are measured, in words for the reward DSL reference given to models.
+    pub units: &'static str,
+}
+
+/// Every environment's facts: adding an environment adds its module's constant here.
+pub static ENVIRONMENTS: [&EnvFacts; 3] = [&pool::FACTS, &phyre::FACTS, &iphyre::FACTS];
+
+/// The facts of `env`.
+pub fn facts(env: Env) -> &'static EnvFacts {
+    ENVIRONMENTS
+        .iter()
+        .copied()
+        .find(|f| f.env == env)
+        .expect("every Env has its facts in ENVIRONMENTS")
+}
+
 /// One dimension of an environment's continuous action space.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ActionDim {

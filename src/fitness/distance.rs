@@ -24,11 +24,7 @@ pub const DEFAULT_SAMPLES: usize = 64;
 /// The length that positions of `env` are divided by: the long side of pooltool's default 7-ft table
 /// (1.9812 m), PHYRE's 256-unit scene, I-PHYRE's 600-pixel scene.
 pub fn scene_scale(env: Env) -> f64 {
-    match env {
-        Env::Pooltool => 1.9812,
-        Env::Phyre => 256.0,
-        Env::Iphyre => 600.0,
-    }
+    crate::envs::facts(env).scene_scale
 }
 
 /// A trace resampled on normalised time: object ids (sorted) and their scaled centres per sample

@@ -37,11 +37,7 @@ pub struct AnnotatedTrace<'a> {
 /// PHYRE scenes are 256 px wide, I-PHYRE screens 600 px; billiards positions are table metres, so a
 /// threshold of 0.1 is 10 cm.
 pub fn nearby_scale(env: Env) -> f64 {
-    match env {
-        Env::Pooltool => 1.0,
-        Env::Phyre => 256.0,
-        Env::Iphyre => 600.0,
-    }
+    crate::envs::facts(env).nearby_scale
 }
 
 /// The time of the last timestep at or before `t` (the first timestep's time when `t` is earlier):

@@ -17,13 +17,7 @@ use super::{compile, evaluate};
 
 /// The DSL reference given to models (our wording of the paper's appendix E reference).
 pub fn dsl_reference(env: Env) -> String {
-    let units = match env {
-        Env::Pooltool => {
-            "table metres (the table is about 0.99 m wide and 1.98 m long); threshold 0.1 is 10 cm"
-        }
-        Env::Phyre => "scene pixels (256 × 256, y up); the radius is threshold_strength × 256",
-        Env::Iphyre => "screen pixels (600 × 600, y down); the radius is threshold_strength × 600",
-    };
+    let units = crate::envs::facts(env).units;
     let mut s = String::from(
         "A reward program is ONE expression built from these functions (names in capitals, labels as strings):\n\
 - PATTERN(\"label\", {\"key\": value}?, key=value...): true when a pattern with that label occurs and its parameters match every given key. ball=\"id\" requires the pattern's subject (first object) to be that object; contains=[\"id\", ...] requires it to name all of them.\n\

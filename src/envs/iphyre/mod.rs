@@ -49,3 +49,11 @@ pub use sample::{MAX_TENTHS, SKIP_PROBABILITY, clicks_rng, random_clicks};
 pub use step::{Episode, EpisodeEvent, EpisodeResult, Frame, play};
 pub use to_trace::trace_of;
 pub use world::{ContactChange, ObjectState, World};
+
+/// What code outside `envs/` needs to know about this environment: the I-PHYRE's 600-pixel square screen.
+pub const FACTS: super::EnvFacts = super::EnvFacts {
+    env: crate::trace::Env::Iphyre,
+    scene_scale: 600.0,
+    nearby_scale: 600.0,
+    units: "screen pixels (600 × 600, y down); the radius is threshold_strength × 600",
+};

@@ -46,3 +46,11 @@ pub use task::{Body, Color, Shape, Task};
 pub use tasks::{DEFAULT_TASKS_GZ, TaskSet};
 pub use to_trace::trace_of;
 pub use world::{BodyState, ContactChange, World};
+
+/// What code outside `envs/` needs to know about this environment: the PHYRE's 256-unit square scene.
+pub const FACTS: super::EnvFacts = super::EnvFacts {
+    env: crate::trace::Env::Phyre,
+    scene_scale: 256.0,
+    nearby_scale: 256.0,
+    units: "scene pixels (256 × 256, y up); the radius is threshold_strength × 256",
+};

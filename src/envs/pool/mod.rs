@@ -60,3 +60,11 @@ pub use system::System;
 pub use table::{CircularCushion, CushionDirection, LinearCushion, Pocket, Table};
 pub use to_trace::{TraceOptions, dataset_trace, outcome, trace_of};
 pub use vec3::V3;
+
+/// What code outside `envs/` needs to know about this environment: the long side of pooltool's default 7-ft table (1.9812 m); positions are table metres.
+pub const FACTS: super::EnvFacts = super::EnvFacts {
+    env: crate::trace::Env::Pooltool,
+    scene_scale: 1.9812,
+    nearby_scale: 1.0,
+    units: "table metres (the table is about 0.99 m wide and 1.98 m long); threshold 0.1 is 10 cm",
+};
