@@ -62,6 +62,21 @@ pub enum StageError {
     /// The input is unusable for another reason the message explains.
     #[error("{0}")]
     Input(String),
+    /// A simulator produced a state that is not finite (NaN or infinite).
+    #[error(
+        "trace {trace}: the simulation produced a non-finite {field} (timestep {step}, object #{object}); \
+         the trace was not written"
+    )]
+    NonFinite {
+        /// The trace.
+        trace: String,
+        /// Its timestep index.
+        step: i64,
+        /// The object's position in the timestep.
+        object: usize,
+        /// The field.
+        field: &'static str,
+    },
     /// A fault injected for testing.
     #[error("injected fault: {0}")]
     Injected(String),

@@ -154,6 +154,27 @@ pub struct IphyreObject {
     pub angular_velocity: Option<f64>,
 }
 
+impl Body {
+    /// The first numeric state field that is not finite (`NaN` or infinite), by name.
+    pub fn non_finite(&self) -> Option<&'static str> {
+        let check = |fields: &[(&'static str, f64)]| {
+            fields.iter().find(|(_, v)| !v.is_finite()).map(|(n, _)| *n)
+        };
+        match self {
+            Body::Pool(b) => {
+                let [p, v, w] = [b.position, b.velocity, b.angular_velocity];
+                check(&[
+                    ("position", p[0] + p[1] + p[2]),
+                    ("velocity", v[0] + v[1] + v[2]),
+                    ("angular_velocity", w[0] + w[1] + w[2]),
+                ])
+            }
+            Body::Phyre(o) => check(&[("x", o.x), ("y", o.y), ("angle", o.angle)]),
+            Body::Iphyre(o) => check(&[("x1", o.x1), ("y1", o.y1), ("x2", o.x2), ("y2", o.y2)]),
+        }
+    }
+}
+
 /// One entry of the sparse event log.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Event {
@@ -230,8 +251,41 @@ impl Body {
 }
 
 impl Trace {
+    /// The first object state that is not finite: (timestep index, object position in the step,
+    /// field). Simulators that blow up produce these; no table may hold them.
+    pub fn first_non_finite(&self) -> Option<(i64, usize, &'static str)> {
+        self.timesteps.iter().find_map(|ts| {
+            ts.objects
+                .iter()
+                .enumerate()
+                .find_map(|(k, o)| o.body.non_finite().map(|f| (ts.index, k, f)))
+        })
+    }
+
     /// Number of object rows over all timesteps (the trace's share of the `frames` table).
     pub fn frame_rows(&self) -> usize {
         self.timesteps.iter().map(|ts| ts.objects.len()).sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testutil::synthetic_trace;
+
+    #[test]
+    fn non_finite_states_are_found_with_their_place() {
+        for env in Env::ALL {
+            let mut t = synthetic_trace(env, 0, 4, 3);
+            assert_eq!(t.first_non_finite(), None, "{env}");
+            match &mut t.timesteps[2].objects[1].body {
+                Body::Pool(b) => b.velocity[1] = f64::NAN,
+                Body::Phyre(o) => o.y = f64::INFINITY,
+                Body::Iphyre(o) => o.x2 = f64::NEG_INFINITY,
+            }
+            let (step, object, field) = t.first_non_finite().expect("found");
+            assert_eq!((step, object), (t.timesteps[2].index, 1), "{env}");
+            assert!(["velocity", "y", "x2"].contains(&field), "{env}: {field}");
+        }
     }
 }

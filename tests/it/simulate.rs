@@ -319,6 +319,49 @@ fn bad_input_names_the_fault_exits_2_and_writes_nothing() {
     assert!(!t.path("r").exists(), "nothing is written on bad input");
 }
 
+/// Numbers that would exhaust the machine (a reliability campaign found each one allocating until the
+/// kernel killed the process, or writing NaN states) are refused before anything is allocated or
+/// written, naming the flag and the limit.
+#[test]
+fn absurd_numbers_are_refused_before_allocating() {
+    let t = TestRun::new();
+    t.write("scene.json", SCENE);
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["--dt", "1e-7"],
+            "--dt: 0.0000001 s gives up to 600000000 timesteps per shot",
+        ),
+        (&["--dt", "1e-9", "--max-time", "5"], "the limit is 1000000"),
+        (
+            &["--scenes", "5000000000000"],
+            "is over the limit of 100000000 traces per stage",
+        ),
+        (
+            &["--scenes", "100000000", "--shots", "100000000"],
+            "--shots: 100000000 is over the limit of 1000000 per scene",
+        ),
+        (
+            &["--env", "phyre", "--scenes", "200000", "--shots", "1000"],
+            "over the limit of 100000000 traces",
+        ),
+        (
+            &[
+                "--scene",
+                "scene.json",
+                "--shot",
+                r#"{"V0": 1e308, "phi": 90}"#,
+            ],
+            "V0 must be in [0, 20] m/s",
+        ),
+    ];
+    for (flags, message) in cases {
+        let mut args = vec!["simulate", "--run", "r"];
+        args.extend_from_slice(flags);
+        t.run(&args).code(2).stderr_has(message);
+    }
+    assert!(!t.path("r").exists(), "nothing is written on bad input");
+}
+
 #[test]
 fn a_second_dataset_with_the_same_seed_is_refused() {
     let t = TestRun::new();

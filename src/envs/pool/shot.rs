@@ -35,6 +35,10 @@ impl Default for Shot {
     }
 }
 
+/// The fastest cue speed a shot may have (m/s): well above a hard break (about 10–12 m/s), far below
+/// speeds at which the event-based solver's states overflow.
+pub const MAX_V0: f64 = 20.0;
+
 impl Shot {
     /// Checks the shot: finite values, V0 ≥ 0, a² + b² < 1, θ within [−90°, 90°]; the error names the field.
     pub fn validate(&self) -> Result<()> {
@@ -44,9 +48,9 @@ impl Shot {
                 "non-finite parameter in {self:?}"
             )));
         }
-        if self.v0 < 0.0 {
+        if !(0.0..=MAX_V0).contains(&self.v0) {
             return Err(PoolError::InvalidShot(format!(
-                "V0 must be >= 0, got {}",
+                "V0 must be in [0, {MAX_V0}] m/s, got {}",
                 self.v0
             )));
         }

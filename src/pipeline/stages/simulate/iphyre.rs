@@ -58,6 +58,9 @@ pub struct IphyreSimParams {
     pub clicks: Option<String>,
 }
 
+/// The most games a dataset can select (I-PHYRE has 40), for the stage's count limits.
+pub(super) const GAMES_AT_MOST: u64 = 40;
+
 /// What to simulate.
 #[derive(Debug)]
 enum Work {

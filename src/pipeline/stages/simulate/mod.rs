@@ -172,8 +172,55 @@ pub struct SimulateStage {
     per_shard: u64,
 }
 
+/// The most traces one `simulate` stage may write (its work list and ids are built in memory).
+pub const MAX_TRACES: u64 = 100_000_000;
+/// The most shots (actions, click sets) per scene.
+pub const MAX_SHOTS: u64 = 1_000_000;
+/// The most scenes per shard (a shard's counts are kept in memory until it commits).
+pub const MAX_SCENES_PER_SHARD: u64 = 1_000_000;
+
+/// Checks the counts every environment shares against [`MAX_TRACES`], [`MAX_SHOTS`] and
+/// [`MAX_SCENES_PER_SHARD`], naming the parameter and the limit.
+fn check_counts(scenes: u64, shards: &ShardParams) -> Result<(), BuildError> {
+    if shards.shots > MAX_SHOTS {
+        return Err(BuildError::param(
+            "shots",
+            format!(
+                "`shots`: {} is over the limit of {MAX_SHOTS} per scene",
+                shards.shots
+            ),
+        ));
+    }
+    if shards.scenes_per_shard > MAX_SCENES_PER_SHARD {
+        return Err(BuildError::param(
+            "scenes_per_shard",
+            format!(
+                "`scenes_per_shard`: {} is over the limit of {MAX_SCENES_PER_SHARD}",
+                shards.scenes_per_shard
+            ),
+        ));
+    }
+    match scenes.checked_mul(shards.shots) {
+        Some(n) if n <= MAX_TRACES => Ok(()),
+        _ => Err(BuildError::param(
+            "scenes",
+            format!(
+                "`scenes`: {scenes} scenes × {} shots is over the limit of {MAX_TRACES} traces per stage \
+                 (split the work over several stages or runs)",
+                shards.shots
+            ),
+        )),
+    }
+}
+
 fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
     let params: SimulateParams = def.params()?;
+    let scenes = match &params {
+        SimulateParams::Pooltool(p) => p.scenes,
+        SimulateParams::Phyre(p) => p.scenes,
+        SimulateParams::Iphyre(_) => iphyre::GAMES_AT_MOST,
+    };
+    check_counts(scenes, params.shards())?;
     let sim: Box<dyn Simulation> = match &params {
         SimulateParams::Pooltool(p) => Box::new(pool::build(p, spec)?),
         SimulateParams::Phyre(p) => Box::new(phyre::build(p, spec)?),

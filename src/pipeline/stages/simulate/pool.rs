@@ -31,6 +31,13 @@ use crate::pipeline::stage::{StageContext, StageError};
 use crate::trace::Env;
 use crate::trace::batch::scene_batch;
 
+/// The most timesteps one billiards trace may have: a trace is built in memory before it is written
+/// (16 balls × 1 M timesteps ≈ 2.4 GB of frame rows).
+pub const MAX_TIMESTEPS: u64 = 1_000_000;
+/// The longest a shot is assumed to last when `max_time` is not given (s), for the memory bound: balls
+/// on pooltool's table stop well within it.
+pub const SHOT_HORIZON_S: f64 = 60.0;
+
 /// Billiards `simulate` parameters.
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default)]
@@ -114,6 +121,20 @@ pub(super) fn build(p: &PoolSimParams, spec: &PipelineSpec) -> Result<PoolSimula
         return Err(BuildError::param(
             "dt",
             format!("dt must be > 0, found {dt}"),
+        ));
+    }
+    // A trace is built in memory before it is written: bound its timesteps before simulating.
+    let horizon = p.max_time.unwrap_or(SHOT_HORIZON_S);
+    let steps = horizon / dt;
+    if steps > MAX_TIMESTEPS as f64 {
+        return Err(BuildError::param(
+            "dt",
+            format!(
+                "`dt`: {dt} s gives up to {steps:.0} timesteps per shot over {horizon} s (`max_time`, \
+                 default horizon {SHOT_HORIZON_S} s); the limit is {MAX_TIMESTEPS} (about 2.4 GB of frames \
+                 for a full rack): use dt >= {:.1e} or a smaller max_time",
+                horizon / MAX_TIMESTEPS as f64
+            ),
         ));
     }
     let max_time = p.max_time;

@@ -165,7 +165,8 @@ impl<'a, 'c> ShardSinks<'a, 'c> {
         &self.source
     }
 
-    /// Appends one trace's rows to the `traces`, `timesteps`, `frames` and `events` files. For the
+    /// Appends one trace's rows to the `traces`, `timesteps`, `frames` and `events` files; a trace with
+    /// a non-finite state (a simulator that blew up) is an error naming it, never NaN in a table. For the
     /// shard's first trace (`first`) the mid-shard fault point fires between the frames and the events,
     /// so a crash test finds some of the shard's files half written.
     pub(crate) fn write_trace(
@@ -174,6 +175,14 @@ impl<'a, 'c> ShardSinks<'a, 'c> {
         scene_id: &str,
         first: bool,
     ) -> Result<(), StageError> {
+        if let Some((step, object, field)) = trace.first_non_finite() {
+            return Err(StageError::NonFinite {
+                trace: trace.trace_id.clone(),
+                step,
+                object,
+                field,
+            });
+        }
         let b = self.builder.push_trace(trace, scene_id, &self.source)?;
         self.write("traces", &b.traces)?;
         self.write("timesteps", &b.timesteps)?;
