@@ -59,6 +59,31 @@ pub enum LibraryError {
     },
 }
 
+/// Checks that file `name` of a library stays inside the library folder: a relative path of plain
+/// components (no `..`, no root), and on disk, after symbolic links are followed, still under the
+/// folder. A manifest naming `../../etc/passwd` or `/etc/hostname` is refused, never read.
+fn inside(dir: &Location, name: &str) -> Result<(), String> {
+    use std::path::Component;
+    let rel = Path::new(name);
+    if name.is_empty() || !rel.components().all(|c| matches!(c, Component::Normal(_))) {
+        return Err(format!(
+            "file {name:?} must be a relative path inside the library folder (no `..`, no leading `/`)"
+        ));
+    }
+    if let Location::Disk(root) = dir {
+        let file = root.join(rel);
+        if let (Ok(root), Ok(file)) = (root.canonicalize(), file.canonicalize())
+            && !file.starts_with(&root)
+        {
+            return Err(format!(
+                "file {name:?} leads outside the library folder (to {})",
+                file.display()
+            ));
+        }
+    }
+    Ok(())
+}
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Manifest {
@@ -123,14 +148,18 @@ impl Library {
 
     /// Reads `library.toml` and the detector files it lists from a folder on disk or a built-in one.
     pub fn open(dir: &Location) -> Result<Library, LibraryError> {
+        let path = dir.join("library.toml").path();
         let read = |name: &str| {
+            inside(dir, name).map_err(|message| LibraryError::Manifest {
+                path: path.clone(),
+                message,
+            })?;
             let file = dir.join(name);
             file.read_to_string().map_err(|source| LibraryError::Io {
                 path: file.path(),
                 source,
             })
         };
-        let path = dir.join("library.toml").path();
         let text = read("library.toml")?;
         let bad = |message: String| LibraryError::Manifest {
             path: path.clone(),
@@ -271,5 +300,29 @@ mod tests {
         .unwrap();
         let e = Library::load(tmp.path()).unwrap_err().to_string();
         assert!(e.contains("a.py"), "{e}");
+    }
+
+    #[test]
+    fn files_outside_the_library_folder_are_refused() {
+        let tmp = tempfile::tempdir().unwrap();
+        let lib = tmp.path().join("lib");
+        std::fs::create_dir(&lib).unwrap();
+        std::fs::write(tmp.path().join("secret.py"), "x = 1\n").unwrap();
+        #[cfg(unix)]
+        std::os::unix::fs::symlink(tmp.path().join("secret.py"), lib.join("link.py")).unwrap();
+        for (file, message) in [
+            ("../secret.py", "must be a relative path inside the library folder"),
+            ("/etc/hostname", "must be a relative path inside the library folder"),
+            ("link.py", "leads outside the library folder"),
+        ] {
+            std::fs::write(
+                lib.join("library.toml"),
+                format!("[library]\nname = \"x\"\nenv = \"pooltool\"\n[[detector]]\nlabel = \"a\"\nfile = \"{file}\"\n"),
+            )
+            .unwrap();
+            let e = Library::load(&lib).unwrap_err().to_string();
+            assert!(e.contains(message), "{file}: {e}");
+            assert!(e.contains("library.toml"), "{e}");
+        }
     }
 }
