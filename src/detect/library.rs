@@ -311,8 +311,14 @@ mod tests {
         #[cfg(unix)]
         std::os::unix::fs::symlink(tmp.path().join("secret.py"), lib.join("link.py")).unwrap();
         for (file, message) in [
-            ("../secret.py", "must be a relative path inside the library folder"),
-            ("/etc/hostname", "must be a relative path inside the library folder"),
+            (
+                "../secret.py",
+                "must be a relative path inside the library folder",
+            ),
+            (
+                "/etc/hostname",
+                "must be a relative path inside the library folder",
+            ),
             ("link.py", "leads outside the library folder"),
         ] {
             std::fs::write(

@@ -222,6 +222,8 @@ impl LlmClient {
         )
     }
 
+    /// `s` with the API key replaced by `[redacted]`: applied to everything the client logs, records or
+    /// returns (an endpoint may echo the key in headers, error bodies or answers).
     fn scrub(&self, s: &str) -> String {
         match &self.config.api_key {
             Some(k) if k.expose().len() >= MIN_SCRUB_LEN => s.replace(k.expose(), "[redacted]"),
@@ -409,7 +411,7 @@ impl LlmClient {
                         ..row
                     })?;
                     return Ok(ChatReply {
-                        content,
+                        content: self.scrub(&content),
                         finish_reason,
                         tokens_in,
                         tokens_out,
@@ -446,8 +448,9 @@ impl LlmClient {
                             retry_after,
                         );
                         tracing::warn!(
-                            "{}: {message}; retry {attempt} of {} in {:.1} s",
+                            "{}: {}; retry {attempt} of {} in {:.1} s",
                             self.shown,
+                            self.scrub(&message),
                             self.config.max_retries,
                             wait.as_secs_f64()
                         );

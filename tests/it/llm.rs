@@ -401,7 +401,10 @@ fn the_api_key_is_sent_but_never_recorded() {
     let client = LlmClient::new(c, Some(&run)).unwrap();
     assert!(!format!("{client:?}").contains(KEY));
     let echoed = ask(&client, "q", 1).unwrap();
-    assert_eq!(echoed.content, format!("Bearer {KEY}"));
+    assert_eq!(
+        echoed.content, "Bearer [redacted]",
+        "answers reach callers scrubbed"
+    );
     assert_eq!(
         server.seen()[0].authorization.as_deref(),
         Some(format!("Bearer {KEY}").as_str())
@@ -428,6 +431,48 @@ fn the_api_key_is_sent_but_never_recorded() {
     out.ok();
     assert!(!out.stdout.contains(KEY));
     assert!(out.stdout.contains("[redacted]"));
+}
+
+/// An endpoint that echoes the key in an error body (retried: the WARN line) and in its answer (the
+/// "it starts: …" extraction error): the key appears nowhere in what the command prints.
+#[test]
+fn an_endpoint_echoing_the_key_never_gets_it_printed() {
+    const KEY: &str = "sk-echo-SECRET-9876543210";
+    let server = ChatServer::start(vec![
+        Reply::Status {
+            code: 500,
+            retry_after: Some("0".into()),
+            body: format!("{{\"error\":\"upstream rejected {KEY}\"}}"),
+        },
+        Reply::EchoAuth,
+    ]);
+    let t = TestRun::new();
+    let lib = crate::common::repo().join("data/libraries/pooltool");
+    let env = [
+        ("ANNOTRACE_LLM_BASE_URL", server.url()),
+        ("ANNOTRACE_LLM_MODEL", "m".to_string()),
+        ("ANNOTRACE_LLM_API_KEY", KEY.to_string()),
+    ];
+    let env_ref: Vec<(&str, &str)> = env.iter().map(|(k, v)| (*k, v.as_str())).collect();
+    let out = cli(
+        &t,
+        &[
+            "suggest-labels",
+            "--library",
+            lib.to_str().unwrap(),
+            "--run",
+            "run",
+        ],
+        &env_ref,
+    );
+    assert_ne!(out.code, Some(0), "an answer without labels fails");
+    assert!(
+        !out.stderr.contains(KEY) && !out.stdout.contains(KEY),
+        "the key was printed: {}{}",
+        out.stdout,
+        out.stderr
+    );
+    assert!(out.stderr.contains("[redacted]"), "{}", out.stderr);
 }
 
 fn proposal_request() -> ProposalRequest {
