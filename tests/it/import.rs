@@ -277,6 +277,30 @@ fn skip_invalid_imports_the_rest_and_prints_the_rejections() {
     );
 }
 
+/// A JSON Lines record cut short at its end is reported on its own line, whether the import stops at it
+/// or skips it (the fail-fast message used to name the next line).
+#[test]
+fn a_truncated_record_is_named_by_its_own_line_in_both_modes() {
+    let t = TestRun::new();
+    let good =
+        annotrace::trace::json::to_value(&synthetic_trace(Env::Pooltool, 0, 4, 2)).to_string();
+    t.write("cut.jsonl", &format!("{good}\n{{\"broken\": \n"));
+    t.run(&["import", "--env", "pooltool", "cut.jsonl", "--run", "a"])
+        .code(2)
+        .stderr_has("cut.jsonl:2:");
+    let r = t.run(&[
+        "import",
+        "--env",
+        "pooltool",
+        "cut.jsonl",
+        "--run",
+        "b",
+        "--skip-invalid",
+    ]);
+    r.code(1).stdout_has("cut.jsonl:2 ");
+    assert!(!r.stdout.contains("cut.jsonl:3"), "{}", r.stdout);
+}
+
 /// Folders are imported recursively in sorted order; a trace id already in the run is refused.
 #[test]
 fn folders_arrays_and_duplicate_ids() {

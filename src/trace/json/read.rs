@@ -360,7 +360,16 @@ fn read_lines(
         }
         st.line = Some(line_no);
         st.line_base = line_no - 1;
-        let mut de = serde_json::Deserializer::from_slice(&buf);
+        // Parse the line without its terminator: an error at its end is then on this line, not on
+        // the next (the same line number whether the import stops or skips the record).
+        let end = buf.len()
+            - buf
+                .iter()
+                .rev()
+                .take_while(|b| matches!(b, b'\n' | b'\r'))
+                .count();
+        let line = &buf[..end];
+        let mut de = serde_json::Deserializer::from_slice(line);
         let res = TraceSeed { st: &mut st }
             .deserialize(&mut de)
             .and_then(|()| de.end());
@@ -368,7 +377,7 @@ fn read_lines(
             return Ok(());
         }
         if let Err(e) = res {
-            let text = String::from_utf8_lossy(&buf).into_owned();
+            let text = String::from_utf8_lossy(line).into_owned();
             st.syntax(e, |_| Some(text));
             if st.stopped {
                 return Ok(());
