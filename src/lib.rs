@@ -25,7 +25,10 @@
 //!   its manifest.
 //!
 //! The `annotrace` binary (`src/main.rs`, `src/cli/`) turns command lines into calls to these modules.
-#![warn(missing_docs)]
+#![deny(missing_docs)]
+// `pipeline::SpecError` carries the file, line, key and suggestion a user needs to fix a pipeline file;
+// it is built once per failed run, never on a hot path, so its size is not worth boxing.
+#![allow(clippy::result_large_err)]
 
 pub mod builtin;
 pub mod detect;
