@@ -1,9 +1,9 @@
 //! I-PHYRE episodes per second, single-threaded, at 60 fps: with full trace recording (every step's
 //! object states, the events, conversion into a `Trace`), and outcome only. The games are the eight of
-//! the original's speed script (`shared/tools/phyre/iphyre_speed.py`: support, hole, angle, pendulum,
+//! the original's speed script (`tools/phyre/iphyre_speed.py`: support, hole, angle, pendulum,
 //! spring, hinder_fill, multi_ball_stack, multi_ball_spring), each with `PER_GAME` seeded random click
 //! sets in iphyre's `generate_actions` style (`envs::iphyre::random_clicks`), so the work is that of the
-//! script's `simulate()` column (reference §2.7: 105 episodes/s mean over these games, pymunk 6.11.1).
+//! script's `simulate()` column (docs/envs/iphyre.md §R6: 105 episodes/s mean over these games, pymunk 6.11.1).
 //!
 //! `cargo bench --bench iphyre`. A one-off pass before criterion prints, per game, episodes/s and
 //! steps/s with recording, and the mean over games (the figure the original's table reports), then

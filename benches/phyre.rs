@@ -1,6 +1,6 @@
 //! PHYRE episodes per second, single-threaded: status only and with full trace recording (default stride,
 //! events, conversion into a `Trace`), over a fixed set of 50 tasks (two per template) × 4 seeded valid
-//! actions. Compare with PHYRE 0.2.2's 222 episodes/s status-only (reference §3.7).
+//! actions. Compare with PHYRE 0.2.2's 222 episodes/s status-only (docs/envs/phyre.md §R7).
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 

@@ -1,7 +1,7 @@
 //! Replay every pooltool reference trace in a directory and report the agreement rate.
 //!
 //! `cargo run --example pool_agreement -- DIR [--verbose]`, where DIR holds the output of
-//! `shared/tools/pooltool/gen_traces.py` (e.g. `--n 120 --seed 12345`). A shot agrees when its ordered
+//! `tools/pooltool/gen_traces.py` (e.g. `--n 120 --seed 12345`). A shot agrees when its ordered
 //! ball–ball / cushion / pocket events (kinds and ids) are identical and every final position is within
 //! 1 mm; each disagreeing shot is listed with where it diverged and whether inside a chatter burst.
 
@@ -9,7 +9,7 @@ use annotrace::envs::pool::reference::{RefTrace, compare};
 use annotrace::envs::pool::{EventKind, SimOptions, simulate};
 
 /// Ball–ball contacts of the reference that repeat the same pair within 50 ms
-/// ("chatter", reference §2.9), and whether `t` falls inside such a burst.
+/// ("chatter", docs/envs/pool.md §P9), and whether `t` falls inside such a burst.
 fn chatter(r: &RefTrace, t: Option<f64>) -> (usize, bool) {
     let mut last: std::collections::HashMap<Vec<String>, f64> = Default::default();
     let mut n = 0;

@@ -4,19 +4,31 @@
 //! as Parquet tables in a **run directory**. Pipelines of **stages** read tables and write tables; SQL
 //! over a run's tables makes the paper's figures and tables.
 //!
-//! Modules, bottom to top (each depends only on those above it in this list):
+//! Modules, bottom to top (each uses only modules above it in this list; `docs/architecture.md` has the
+//! data path, what each module may not touch, and how to add a stage kind or an environment):
 //! - [`rng`]: the seeded SplitMix64 generator every seeded draw comes from (its streams are output format);
 //! - [`digest`]: hex and SHA-256 helpers for ids, fingerprints and string-keyed seeds;
 //! - [`trace`]: the trace model, its Arrow schemas and the paper's JSON format;
 //! - [`store`]: the run directory on disk — atomic files, Parquet datasets, staging and commit;
-//! - [`envs`]: simulators behind one `Environment` trait (billiards: pooltool 0.6.0 physics), producing traces;
+//! - [`envs`]: simulators behind one `Environment` trait (billiards after pooltool 0.6.0, PHYRE and
+//!   I-PHYRE on rapier2d), producing traces;
 //! - [`builtin`]: the built-in data compiled into the binary (libraries, goal files), and whether a
 //!   path means a file on disk or a built-in;
 //! - [`detect`]: sandboxed Python workers that run detector programs over traces, annotations and libraries;
+//! - [`fitness`]: trace and annotation distances and the Evaluate function (ν = ρ + η − λ − ψ);
 //! - [`llm`]: OpenAI-compatible chat client (retries, budget, `llm_calls` recording and replay), prompt templates;
 //! - [`query`]: DataFusion over a run's tables, and result formats (table, CSV, Markdown, LaTeX, JSON);
-//! - [`pipeline`]: pipeline files, the stage registry, fingerprints, the runner and its manifest.
-#![warn(missing_docs)]
+//! - [`search`]: the evolutionary search for detectors (proposers, islands, rounds, Algorithm 2);
+//! - [`reward`]: the reward-program DSL over annotated traces, goal files, verification rules, synthesis;
+//! - [`optimise`]: simulated annealing of actions for reward programs and the billiards experiment;
+//! - [`pipeline`]: pipeline files, the stage registry and every stage kind, fingerprints, the runner and
+//!   its manifest.
+//!
+//! The `annotrace` binary (`src/main.rs`, `src/cli/`) turns command lines into calls to these modules.
+#![deny(missing_docs)]
+// `pipeline::SpecError` carries the file, line, key and suggestion a user needs to fix a pipeline file;
+// it is built once per failed run, never on a hot path, so its size is not worth boxing.
+#![allow(clippy::result_large_err)]
 
 pub mod builtin;
 pub mod detect;

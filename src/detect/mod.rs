@@ -11,8 +11,8 @@
 //! folders ([`Library`]), annotations and the N×J annotation matrix ([`AnnotationMatrix`]), and the Arrow
 //! schemas of the `detectors`, `detector_calls` and `annotations` tables ([`tables`]), and annotated
 //! traces as text for language models with a token estimate ([`annotated_text`], [`count_tokens`]).
-//! **Does not:** read or write Parquet (`store/`, the `annotate` stage), choose detectors (`search/`) or
-//! score them (`fitness/`).
+//! **Does not:** write tables to a run (the `annotate` stage does; [`tables::read_annotations`] reads
+//! them back through `store/`), choose detectors (`search/`) or score them (`fitness/`).
 //!
 //! Entry point: [`WorkerPool::new`] then [`WorkerPool::run`]`(&detectors, &traces)`.
 

@@ -5,7 +5,8 @@
 //! (I-PHYRE on rapier2d) and [`phyre`] (PHYRE's ball tier on rapier2d), which share the rapier state of
 //! [`rapier`]. Their renderers share the pixmap, PNG and strip plumbing of the private `draw` module.
 //! **Does not:** write run folders or order stages (`pipeline/`), parse command lines (`cli/`). It uses
-//! only [`crate::trace`] below it.
+//! only [`crate::trace`], [`crate::rng`] and [`crate::digest`] below it. The physics each simulator
+//! follows is written out in `docs/envs/{pool,phyre,iphyre}.md`.
 //!
 //! **Entry point:** [`pool::PoolEnv`]:
 //!

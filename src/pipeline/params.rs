@@ -278,13 +278,11 @@ fn object_docs(root: &Value, object: &Value, skip: Option<&str>) -> Vec<ParamDoc
 /// The parameter type of a property schema (`Option` is read through: absence is the `None`).
 fn type_of(root: &Value, s: &Value) -> ParamType {
     let s = resolve_ref(root, s);
-    if let Some(any) = s.get("anyOf").and_then(Value::as_array) {
-        if let Some(inner) = any
-            .iter()
+    if let Some(inner) = s.get("anyOf").and_then(Value::as_array).and_then(|any| {
+        any.iter()
             .find(|a| a.get("type").and_then(Value::as_str) != Some("null"))
-        {
-            return type_of(root, inner);
-        }
+    }) {
+        return type_of(root, inner);
     }
     let choices = choices_of(s);
     if !choices.is_empty() {

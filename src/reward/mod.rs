@@ -11,7 +11,12 @@
 //! DSL reference's reading: "a occurs after b"); see `docs/reward.md`.
 //!
 //! **Owns:** the DSL, its checker and interpreter, goal files and verification rules ([`goals`],
-//! [`verify`]), synthesis from goal sentences with repair ([`synth`], through `llm::LlmClient`). **Does not:** run detectors (`detect/`), simulate (`envs/`), optimise (`optimise/`).
+//! [`verify`]), synthesis from goal sentences with repair ([`synth`], through `llm::LlmClient`), and
+//! the bridge from reward programs to the detector runtime ([`annotate`]): it batches traces through a
+//! `detect::WorkerPool` it is given, and [`annotate::probe_schema`] learns a library's parameter keys
+//! by simulating eight billiards shots (`envs::pool`) and annotating them.
+//! **Does not:** start or own worker pools (`detect/`), implement physics (`envs/`), search actions
+//! (`optimise/`), or write tables (the `optimise` stage does).
 
 pub mod annotate;
 pub mod check;

@@ -11,7 +11,9 @@
 //!   [`tables`]: the other evolution tables.
 //!
 //! **Owns:** everything above. **Does not:** run candidate code in this process (`detect/` workers do),
-//! compute distances (`fitness/`), talk to LLMs (`llm/`), or read/write the run (the `evolve` stage).
+//! compute distances (`fitness/`), make HTTP requests (`llm/` does, and records each call in the run's
+//! `llm_calls` table), or decide where its tables go (the `evolve` stage writes them and names the folder
+//! [`library_out`] writes the grown library into).
 
 pub mod candidate;
 pub mod discover;

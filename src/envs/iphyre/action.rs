@@ -1,5 +1,5 @@
 //! Actions: clicks `(x, y, t)` that remove the eliminable block under the point, the discrete adapter
-//! "remove eliminable block k at time t", and click validation (reference §2.4).
+//! "remove eliminable block k at time t", and click validation (docs/envs/iphyre.md §R3).
 //!
 //! I-PHYRE's quirks are kept, each where it happens: a click whose time is exactly 0 is dropped
 //! ([`ClickSchedule::due`]), at most one click is applied per physics step, and the time compared
@@ -115,7 +115,7 @@ impl ClickSchedule {
             return Due::Nothing;
         }
         self.next += 1;
-        // NOTE: I-PHYRE's `simulate` skips actions whose time is exactly 0 (reference §2.4).
+        // NOTE: I-PHYRE's `simulate` skips actions whose time is exactly 0 (docs/envs/iphyre.md §R3).
         if click.t == 0.0 {
             Due::DroppedAtZero(click)
         } else {

@@ -1,6 +1,6 @@
 //! The 40 I-PHYRE games as data: blocks (capsule segments), balls, pin joints and springs, loaded from
-//! the JSON written by `shared/tools/phyre/iphyre_export.py games` (iphyre 0.2.3, MIT; the committed copy
-//! is `data/games/iphyre_games.json`, reference §2.2 and §2.8).
+//! the JSON written by `tools/phyre/iphyre_export.py games` (iphyre 0.2.3, MIT; the committed copy
+//! is `data/games/iphyre_games.json`, docs/envs/iphyre.md §R1 and §R7).
 
 use serde::Deserialize;
 

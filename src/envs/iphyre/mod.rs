@@ -1,7 +1,7 @@
 //! I-PHYRE (interactive physical reasoning, Li et al. ICLR 2024): 40 games of capsule blocks and balls on
 //! a 600×600 screen, where an agent removes eliminable blocks at chosen times so that every ball falls out
 //! of the bottom. Re-implemented on rapier2d after iphyre 0.2.3 (pymunk 6.11.1), following
-//! `shared/reference/phyre-iphyre.md` §2 and §5.
+//! `docs/envs/iphyre.md` §R1–§R9.
 //!
 //! **Owns:** the games as data ([`Games`], default `data/games/iphyre_games.json`), the physics constants
 //! ([`PhysicsParams`]), the rapier2d world ([`World`]: bodies, capsules, rods, springs, contact events),

@@ -1,4 +1,4 @@
-//! [`PhysicsParams`]: I-PHYRE's physics constants as one knob struct (reference §2.3).
+//! [`PhysicsParams`]: I-PHYRE's physics constants as one knob struct (docs/envs/iphyre.md §R2).
 
 use super::error::{IphyreError, Result};
 
@@ -24,7 +24,7 @@ pub struct PhysicsParams {
     /// Mass of a dynamic block: 1.
     pub block_mass: f64,
     /// Rotational inertia of a dynamic block: `moment_for_segment(1, (0,0), (0,0), 10)` = 66.67,
-    /// independent of its length (an I-PHYRE quirk kept on purpose, reference §2.3).
+    /// independent of its length (an I-PHYRE quirk kept on purpose, docs/envs/iphyre.md §R2).
     pub block_inertia: f64,
     /// Spring rest length (px): 20.
     pub spring_rest_length: f64,
@@ -46,7 +46,7 @@ pub struct PhysicsParams {
     /// distance 0.002·unit, maximum corrective velocity 10·unit per s): 1, i.e. tolerances in pixels.
     /// Chosen by measurement against the original (`docs/fidelity.md`): outcome agreement on 640
     /// held-out pairs is 96.6 % (60 fps) and 92.5 % (10 fps) with 1, against 93.4 % and 90.3 % with
-    /// 100 (the "metre-sized objects" reading of the reference's §5.1); 0.1 breaks contacts (78 %).
+    /// 100 (the "metre-sized objects" reading of docs/envs/iphyre.md §R9); 0.1 breaks contacts (78 %).
     pub length_unit: f64,
 }
 

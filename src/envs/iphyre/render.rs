@@ -4,7 +4,7 @@
 //!
 //! **Owns:** drawing a game's initial scene ([`render_scene_png`]), one instant of a trace
 //! ([`render_png`]) and a strip of instants ([`render_strip_png`]); optionally the eliminable blocks'
-//! action indices 0…k−1 on the blocks, as DeepPHY shows them to a VLM (reference §4.2).
+//! action indices 0…k−1 on the blocks, as DeepPHY shows them to a VLM (docs/envs/iphyre.md §R8).
 //! **Does not:** read run folders (the CLI does) or simulate. Object states come from the trace's
 //! timesteps (the step nearest to the requested time, `pool::render::timestep_at`), so any I-PHYRE
 //! trace in a run can be drawn; removed blocks are simply absent from later steps.

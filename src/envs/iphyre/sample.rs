@@ -1,5 +1,5 @@
-//! Seeded random click sets for datasets, in the style of iphyre's `utils.generate_actions` (reference
-//! §2.7): every eliminable block is clicked at its centre at a time drawn from {0.1, 0.2, …, 6.9} s, and
+//! Seeded random click sets for datasets, in the style of iphyre's `utils.generate_actions` (docs/envs/iphyre.md
+//! §R6): every eliminable block is clicked at its centre at a time drawn from {0.1, 0.2, …, 6.9} s, and
 //! skipped with probability 0.2. The RNG is the crate's [`SplitMix64`] ([`keyed_stream`]), seeded from
 //! (`seed`, game index, sample number) alone, so a dataset does not depend on sharding or thread count.
 

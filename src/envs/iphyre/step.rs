@@ -1,5 +1,5 @@
 //! [`Episode`]: the one loop that moves an I-PHYRE game forward, in I-PHYRE `simulate()`'s order
-//! (reference §2.4): apply the due click → step the physics → advance the time counter → record the
+//! (docs/envs/iphyre.md §R3): apply the due click → step the physics → advance the time counter → record the
 //! frame and events → check success.
 //!
 //! Quirks kept on purpose, as in iphyre 0.2.3: a click at exactly t = 0 is dropped; at most one click is
@@ -392,7 +392,7 @@ mod tests {
 
     #[test]
     fn float_time_counter_fires_late() {
-        // 1.6 s at 60 fps: the accumulated counter first reaches 1.6 after 97 steps (reference §2.4).
+        // 1.6 s at 60 fps: the accumulated counter first reaches 1.6 after 97 steps (docs/envs/iphyre.md §R3).
         let g = support();
         let click = Click {
             t: 1.6,

@@ -1,4 +1,4 @@
-//! Success and reward (reference §2.5): an episode succeeds when every ball's centre is below the
+//! Success and reward (docs/envs/iphyre.md §R4): an episode succeeds when every ball's centre is below the
 //! bottom edge (y > 600, y down) within the episode; the reward is −1/fps per step, −10 per effective
 //! elimination and +1000 on success.
 
@@ -44,7 +44,7 @@ mod tests {
 
     #[test]
     fn reward_arithmetic_matches_the_reference_examples() {
-        // One elimination, success at 8.5 s at 60 fps: 1000 − 8.5 − 10 = 981.5 (reference §2.5).
+        // One elimination, success at 8.5 s at 60 fps: 1000 − 8.5 − 10 = 981.5 (docs/envs/iphyre.md §R4).
         assert!((reward(510, 60.0, 1, true) - 981.5).abs() < 1e-9);
         // A failure with 3 eliminations over the full 15 s: −15 − 30 = −45.
         assert!((reward(900, 60.0, 3, false) + 45.0).abs() < 1e-9);

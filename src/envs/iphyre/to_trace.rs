@@ -1,5 +1,5 @@
 //! Conversion of an [`EpisodeResult`] into an annotrace [`Trace`] in the paper's I-PHYRE layout
-//! (reference §2.6 and §2.8): one timestep per physics step, objects as
+//! (docs/envs/iphyre.md §R5 and §R7): one timestep per physics step, objects as
 //! `index, x1, y1, x2, y2, radius, eliminable, dynamic, joint, spring` plus `angle, vx, vy,
 //! angular_velocity`; removed objects disappear from later timesteps.
 //!

@@ -6,7 +6,7 @@
 //! **Does not:** decide when to remove a block (`action.rs`, `step.rs`), judge success (`success.rs`)
 //! or build traces (`to_trace.rs`).
 //!
-//! The mapping follows reference §2.3 and §5: screen pixels with y down (gravity `+y`), blocks as
+//! The mapping follows docs/envs/iphyre.md §R2 and §R9: screen pixels with y down (gravity `+y`), blocks as
 //! fixed or dynamic bodies at the segment midpoint carrying `capsule_from_endpoints(a, b, 10)`, balls
 //! as `ball(r)`; masses and inertias are set explicitly (collider density 0 plus additional mass
 //! properties) so that balls weigh 1 with inertia r²/2 and dynamic blocks weigh 1 with inertia 66.67
@@ -127,7 +127,7 @@ impl World {
                     params.block_radius as f32,
                 ),
             };
-            // NOTE: Chipmunk multiplies the shapes' coefficients (reference §2.3, §5.2); rapier picks the
+            // NOTE: Chipmunk multiplies the shapes' coefficients (docs/envs/iphyre.md §R2, §R9); rapier picks the
             // larger of the two colliders' rules, so setting Multiply on every collider gives 0.5·0.5.
             let collider = shape
                 .density(0.0)

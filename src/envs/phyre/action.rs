@@ -2,7 +2,7 @@
 //! user ball ([`UserBall`]) and the validity rules ([`Placement`]); and DeepPHY's `Cell: 1–64, Radius: 1–8`
 //! as an adapter ([`deepphy_action`]).
 //!
-//! As in PHYRE 0.2.2 (`SingleBallActionMapper`, reference §3.4): the centre is `(x·255, y·255)` px and the
+//! As in PHYRE 0.2.2 (`SingleBallActionMapper`, docs/envs/phyre.md §R4): the centre is `(x·255, y·255)` px and the
 //! radius `2 + r·30` px; the ball must lie inside the 256×256 scene (checked before quantisation, borders
 //! allowed); then the radius is rounded (half to even, as Python's `round`) and the centre truncated to
 //! whole pixels. A quantised ball that overlaps any scene body — walls included, touching allowed, with

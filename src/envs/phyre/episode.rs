@@ -1,4 +1,4 @@
-//! [`run`]: one PHYRE episode, in PHYRE's order (reference §3.5): place the red ball (or stop with
+//! [`run`]: one PHYRE episode, in PHYRE's order (docs/envs/phyre.md §R5): place the red ball (or stop with
 //! `INVALID_INPUT`), then up to 1000 times: step the physics → note contact changes → test the goal
 //! relation → stop as soon as it has held for 180 consecutive steps. Frames are kept every `stride` steps
 //! (step 0, the initial scene with the red ball, always; the last step always).

@@ -1,4 +1,4 @@
-//! PHYRE's evaluation folds for the ball tier (`phyre.get_fold`, reference §3.6), reproduced exactly:
+//! PHYRE's evaluation folds for the ball tier (`phyre.get_fold`, docs/envs/phyre.md §R6), reproduced exactly:
 //! the same task ids in train, dev and test for every seed, as PHYRE 0.2.2 computes them.
 //!
 //! PHYRE orders ids with `stable_shuffle`: sort by the MD5 hex digest of `id + salt`. **Within-template**
@@ -149,7 +149,7 @@ mod tests {
         assert_eq!((w.train.len(), w.dev.len(), w.test.len()), (1600, 400, 500));
         let c = fold(set, EvalSetup::CrossTemplate, 0);
         assert_eq!((c.train.len(), c.dev.len(), c.test.len()), (1600, 400, 500));
-        // Reference §3.6: fold 0's test templates.
+        // docs/envs/phyre.md §R6: fold 0's test templates.
         let mut tpls: Vec<&str> = c.test.iter().map(|t| &t[..5]).collect();
         tpls.dedup();
         assert_eq!(tpls, ["00003", "00004", "00014", "00015", "00019"]);

@@ -1,6 +1,6 @@
 //! PHYRE (Bakhtin et al., NeurIPS 2019), ball tier: 2,500 tasks in 25 templates where one red ball, placed
 //! by the agent, must make the green body touch the blue or purple one for 3 s. Re-implemented on
-//! rapier2d after PHYRE 0.2.2 (Box2D), following `shared/reference/phyre-iphyre.md` §3 and §5.
+//! rapier2d after PHYRE 0.2.2 (Box2D), following `docs/envs/phyre.md` §R1–§R7.
 //!
 //! **Owns:** the task set ([`TaskSet`], lazily indexed from the committed `data/tasks/phyre_ball_tasks.jsonl.gz`),
 //! the physics constants ([`PhysicsParams`]), actions and their validity ([`BallAction`], [`Placement`],

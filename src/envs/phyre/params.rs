@@ -1,4 +1,4 @@
-//! [`PhysicsParams`]: PHYRE's physics constants and annotrace's tuning knobs for rapier2d (reference §3.5).
+//! [`PhysicsParams`]: PHYRE's physics constants and annotrace's tuning knobs for rapier2d (docs/envs/phyre.md §R5).
 
 use super::error::{PhyreError, Result};
 

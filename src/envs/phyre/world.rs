@@ -5,7 +5,7 @@
 //! "touching" test for the goal.
 //! **Does not:** decide validity (`action.rs`), run the episode loop (`episode.rs`) or build traces.
 //!
-//! Mapping (reference §3.5, §5): the world is in metres, 6 px per metre, gravity −9.8 m/s², like PHYRE's
+//! Mapping (docs/envs/phyre.md §R5, §R7): the world is in metres, 6 px per metre, gravity −9.8 m/s², like PHYRE's
 //! Box2D world. Each body keeps PHYRE's origin and angle; every polygon or circle becomes one collider on
 //! it (a jar is three convex colliders on one body). Dynamic shapes have density 0.25 kg/m², static ones
 //! none; every shape has friction 0.5 (rapier's `Average` rule gives Box2D's √(f₁f₂) = 0.5) and

@@ -1,4 +1,4 @@
-//! Event-time caches (reference/pooltool-physics.md §2.6 step 5; pooltool
+//! Event-time caches (docs/envs/pool.md §P6 step 5; pooltool
 //! `evolution/event_based/cache.py`): absolute collision times per pair (ball–ball,
 //! ball–linear cushion, ball–jaw, ball–pocket) and each ball's next transition. After an
 //! event only the entries of the balls in that event are invalidated — the other

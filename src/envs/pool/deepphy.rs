@@ -1,4 +1,4 @@
-//! DeepPHY's PoolTool action format as an adapter (`shared/reference/phyre-iphyre.md` §4.3): a discrete
+//! DeepPHY's PoolTool action format as an adapter (`docs/envs/pool.md` "DeepPHY action adapter"): a discrete
 //! speed and strike spot, with φ aimed automatically at the lowest-numbered ball on the table.
 //!
 //! The answer text `Speed: High, Strikespot: Top Left Spin` maps to V0 ∈ {2, 5, 8} m/s and a cue-tip

@@ -1,4 +1,4 @@
-//! Event kinds, agents and the tie-break tiers (reference/pooltool-physics.md §2.5, §2.6;
+//! Event kinds, agents and the tie-break tiers (docs/envs/pool.md §P5, §P6;
 //! pooltool `events/datatypes.py`, `simulate.py::get_event_priority`).
 
 use serde::{Deserialize, Serialize};
@@ -155,7 +155,7 @@ impl Event {
 mod tests {
     use super::*;
 
-    /// Names and tiers from reference §2.5.
+    /// Names and tiers from docs/envs/pool.md §P5.
     #[test]
     fn names_and_tiers() {
         for k in EventKind::ALL {

@@ -1,5 +1,5 @@
 //! Closed-form ball motion between events and the motion-state transition times
-//! (reference/pooltool-physics.md §2.3; pooltool `physics/evolve/__init__.py`,
+//! (docs/envs/pool.md §P3; pooltool `physics/evolve/__init__.py`,
 //! `ptmath/utils.py::get_{slide,roll,spin}_time`).
 //!
 //! The arithmetic follows pooltool's (frame rotation by the heading φ for sliding, the
@@ -233,7 +233,7 @@ mod tests {
     }
 
     /// Hand-computable: a rolling ball stops after d = v0²/(2 μ_r g) in τ = v0/(μ_r g).
-    /// Source: §2.3 rolling row. Tolerance 1e-12 m (closed form, only rounding).
+    /// Source: §P3 rolling row. Tolerance 1e-12 m (closed form, only rounding).
     #[test]
     fn rolling_ball_stop_distance() {
         let p = params();

@@ -1,7 +1,7 @@
 //! Billiards: an event-based pool simulator that re-implements pooltool 0.6.0's default physics.
 //!
 //! **Owns:** the physics (closed-form motion, event detection, resolution models, the event loop in
-//! `simulate.rs`, following `shared/reference/pooltool-physics.md` section by section), table / ball /
+//! `simulate.rs`, following `docs/envs/pool.md` §P1–§P10 section by section), table / ball /
 //! cue parameters as data ([`PoolConfig`], default `data/tables/pooltool_7ft.json`), scenes ([`Scene`]:
 //! seeded 9-ball racks or explicit JSON), shots ([`Shot`] with validation, [`aim`] helpers, the
 //! [`deepphy`] action adapter), the conversion of a [`Simulation`] into an annotrace

@@ -1,4 +1,4 @@
-//! Ball, cue and resolution-model parameters (reference/pooltool-physics.md §2.2, §2.8).
+//! Ball, cue and resolution-model parameters (docs/envs/pool.md §P2, §P8).
 //!
 //! Values are data, not constants: [`BallParams`] and [`CueSpecs`] are read from
 //! `pooltool_table.json` (written by `tools/pooltool/dump_geom.py`) or from a
@@ -153,7 +153,7 @@ impl CueSpecs {
 mod tests {
     use super::*;
 
-    /// Source: reference/pooltool-physics.md §2.2 table (pooltool 0.6.0 POOL_GENERIC).
+    /// Source: docs/envs/pool.md §P2 table (pooltool 0.6.0 POOL_GENERIC).
     #[test]
     fn defaults_match_reference() {
         let p = BallParams::pool_default();

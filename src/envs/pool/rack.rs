@@ -1,4 +1,4 @@
-//! Seeded 9-ball rack (reference/pooltool-physics.md §2.4 "9-ball rack"; pooltool
+//! Seeded 9-ball rack (docs/envs/pool.md §P4 "9-ball rack"; pooltool
 //! `layouts.py`): a diamond with the 1-ball at the apex (table fraction (0.5, 0.75)), the
 //! 9-ball in the middle, the other balls in random order, every ball jittered by up to
 //! R·0.5e-3 per axis (pooltool: R·1e-3, which can overlap balls) around tight-packed positions; the cue ball behind the head string at (0.85, 0.23)

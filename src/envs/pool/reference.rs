@@ -1,5 +1,5 @@
-//! Reading pooltool reference traces (`pooltool-trace/1`, reference/pooltool-physics.md
-//! §3.2, written by `tools/pooltool/gen_traces.py`) and comparing a simulation with them:
+//! Reading pooltool reference traces (`pooltool-trace/1`, docs/envs/pool.md
+//! §P10, written by `tools/pooltool/gen_traces.py`) and comparing a simulation with them:
 //! the ordered list of ball–ball / cushion / pocket events and the final positions.
 
 use std::sync::Arc;

@@ -1,5 +1,5 @@
-//! Fixed-dt resampling of a finished simulation (pooltool `continuize`; reference
-//! §3.1/§3.2 "timesteps"): samples at t = 0, dt, 2dt, … (time accumulated as pooltool
+//! Fixed-dt resampling of a finished simulation (pooltool `continuize`; docs/envs/pool.md
+//! §P10 "timesteps"): samples at t = 0, dt, 2dt, … (time accumulated as pooltool
 //! does) and a last sample at the final event time. States come from the closed-form
 //! motion evolved from the latest recorded state, not from re-simulation.
 
@@ -99,7 +99,7 @@ mod tests {
         }
     }
 
-    /// pooltool: floor(T/dt)+1 grid points plus the final event time (reference §3.2).
+    /// pooltool: floor(T/dt)+1 grid points plus the final event time (docs/envs/pool.md §P10).
     #[test]
     fn grid_matches_continuize() {
         let ts = sample_times(0.035, 0.01);

@@ -1,4 +1,4 @@
-//! The cue shot (reference/pooltool-physics.md §2.8 (a)): `Shot { V0, phi, theta, a, b }`
+//! The cue shot (docs/envs/pool.md §P8 (a)): `Shot { V0, phi, theta, a, b }`
 //! in pooltool's units — V0 in m/s, φ and θ in degrees, (a, b) contact offsets in units
 //! of R (+a = left side, +b = top). Validation returns errors instead of panicking.
 

@@ -1,4 +1,4 @@
-//! The event loop (reference/pooltool-physics.md §2.6; pooltool
+//! The event loop (docs/envs/pool.md §P6; pooltool
 //! `evolution/event_based/simulate.py`). This is the only place that orders the loop:
 //!
 //! 1. next event = earliest of {stick (t = 0 only), cached transition, ball–ball,
@@ -708,7 +708,7 @@ mod tests {
     }
 
     /// Head-on stun shot into an object ball: one ball_ball event, then the object ball
-    /// carries (1+e)/2 of the cue ball's normal speed (§2.8 (b)).
+    /// carries (1+e)/2 of the cue ball's normal speed (§P8 (b)).
     #[test]
     fn head_on_collision_in_the_loop() {
         let p = BallParams::pool_default();

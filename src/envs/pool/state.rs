@@ -1,5 +1,5 @@
 //! Ball kinematic state: position/velocity/angular velocity (`rvw`) plus the motion state
-//! (reference/pooltool-physics.md §2.1, §2.3).
+//! (docs/envs/pool.md §P1, §P3).
 
 use serde::{Deserialize, Serialize};
 

@@ -1,5 +1,5 @@
 //! Table geometry: linear cushion segments, circular jaw segments and pockets
-//! (reference/pooltool-physics.md §2.4), loaded from `pooltool_table.json` or from the
+//! (docs/envs/pool.md §P4), loaded from `pooltool_table.json` or from the
 //! `table` block of a `pooltool-trace/1` file. Keeps the documents' key order, which is
 //! pooltool's dict order (it only matters for exact-time ties).
 
@@ -282,7 +282,7 @@ impl Table {
 mod tests {
     use super::*;
 
-    /// Source: reference/pooltool-physics.md §2.4 (18 linear, 12 jaws, 6 pockets) and the
+    /// Source: docs/envs/pool.md §P4 (18 linear, 12 jaws, 6 pockets) and the
     /// precomputed lx/ly/l0 stored in pooltool_table.json by dump_geom.py (rounded to 1e-6 there).
     #[test]
     fn default_table_geometry() {

@@ -2,7 +2,7 @@
 //!
 //! The operations are written to reproduce numpy's evaluation order where pooltool 0.6.0
 //! relies on it (`ptmath.coordinate_rotation`, `ptmath.angle`, `norm3d`), so results stay
-//! within a few ulps of the reference (reference/pooltool-physics.md §2.9).
+//! within a few ulps of the reference (docs/envs/pool.md §P9).
 
 /// A 3-vector `[x, y, z]` in the table frame (SI units).
 pub type V3 = [f64; 3];

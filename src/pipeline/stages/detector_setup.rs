@@ -2,7 +2,7 @@
 //! `timeout`, `memory_mb`), the library they load, and the worker pool they start.
 //!
 //! **Owns:** [`SandboxParams`] (flattened into the parameter structs of `annotate`, `accuracy`, `evolve`
-//! and `optimise`) and [`DetectorSetup`]. **Does not:** run detectors (`detect::WorkerPool`) or write
+//! and `optimise`) and `DetectorSetup`. **Does not:** run detectors (`detect::WorkerPool`) or write
 //! tables (each stage does, through [`StageContext::write_batch`](crate::pipeline::StageContext)).
 
 use std::path::Path;
@@ -24,7 +24,7 @@ use crate::trace::Env;
 pub struct SandboxParams {
     /// Environment whose traces are used.
     pub env: Env,
-    /// Library folder, relative to the project folder (default: the project's data/libraries/<env>
+    /// Library folder, relative to the project folder (default: the project's `data/libraries/<env>`
     /// when it has one, else the built-in library).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub library: Option<String>,

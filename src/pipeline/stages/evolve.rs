@@ -80,7 +80,7 @@ impl ProposerChoice {
 pub struct EvolveParams {
     /// Environment whose traces are used.
     pub env: Env,
-    /// Starting library folder, relative to the project folder (default: data/libraries/<env>).
+    /// Starting library folder, relative to the project folder (default: `data/libraries/<env>`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub library: Option<String>,
     /// Labels to learn, in order (default: the library's labels).
@@ -95,7 +95,7 @@ pub struct EvolveParams {
     /// temperature, replay, …; docs/llm.md), over the ANNOTRACE_LLM_* variables.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub llm: Option<LlmSettings>,
-    /// Prompt template folder, relative to the project (default: <project>/prompts if present, else
+    /// Prompt template folder, relative to the project (default: `<project>/prompts` if present, else
     /// built-in).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub prompts: Option<String>,
@@ -133,7 +133,7 @@ pub struct EvolveParams {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub seed: Option<u64>,
     /// Folder for the grown library, relative to the project (default:
-    /// <run>/exports/<stage>/library).
+    /// `<run>/exports/<stage>/library`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub output: Option<String>,
     /// Python worker processes (0 = one per core).

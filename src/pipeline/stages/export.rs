@@ -76,7 +76,7 @@ pub struct ExportParams {
     pub sql: Option<String>,
     /// File format.
     pub format: ExportFormat,
-    /// File name under exports/ (default: <table or stage id>.<extension>).
+    /// File name under exports/ (default: `<table or stage id>.<extension>`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub file: Option<String>,
     /// Decimals for floats in Markdown and LaTeX.

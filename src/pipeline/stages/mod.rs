@@ -1,7 +1,15 @@
-//! The stage kinds, one file each: `import` (paper-format JSON into the trace tables), `simulate` (an
-//! environment's simulator into the trace tables), `sql` (a query over the run stored as a table) and
-//! `export` (a table or query written to `exports/`), `annotate` (a detector library run over the traces)
-//! and `accuracy` (its event-grounded labels scored against simulator events).
+//! The stage kinds, one file each, in the order of `STAGE_KINDS` (`super::registry`): `import`
+//! (paper-format JSON into the trace tables), `simulate` (an environment's simulator into the trace
+//! tables; `simulate.rs` with `simulate_phyre.rs` and `simulate_iphyre.rs` for the other environments),
+//! `annotate` (a detector library run over the traces), `accuracy` (its event-grounded labels scored
+//! against simulator events), `optimise` (annealing actions for reward programs), `evolve` (the
+//! evolutionary search for detectors), `sql` (a query over the run stored as a table) and `export` (a
+//! table or query written to `exports/`).
+//!
+//! Helpers shared by kinds: `detector_setup` (the library, environment and sandbox parameters of every
+//! kind that runs detectors), `trace_files` (reading a run's traces file by file for `annotate` and
+//! `accuracy`), and `SqlSource` here (the query of `sql` and `export`). Adding a kind:
+//! `docs/architecture.md`.
 
 pub mod accuracy;
 pub mod annotate;

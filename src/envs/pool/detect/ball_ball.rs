@@ -1,4 +1,4 @@
-//! Ball–ball collision time (reference/pooltool-physics.md §2.7 "Ball–ball (quartic)";
+//! Ball–ball collision time (docs/envs/pool.md §P7 "Ball–ball (quartic)";
 //! pooltool `solve.py::ball_ball_collision_coeffs` and `simulate.py::get_next_ball_ball_collision`).
 //!
 //! With A = a₂−a₁, B = b₂−b₁, C = c₂−c₁, contact ‖C + Bt + At²‖ = 2R gives the quartic

@@ -1,4 +1,4 @@
-//! Ball–cushion collision times (reference/pooltool-physics.md §2.7):
+//! Ball–cushion collision times (docs/envs/pool.md §P7):
 //! * linear segment: quadratic A t² + B t + C = 0 with A = l·a, B = l·b,
 //!   C = l₀ + l·c ± R‖l‖ (+ for SIDE1, − for SIDE2, both for BOTH); a root counts if it is
 //!   real, > EPS and the ball centre then projects onto the segment (s ∈ [0, 1]);

@@ -1,4 +1,4 @@
-//! Ball–pocket time (reference/pooltool-physics.md §2.7 "Ball–pocket (quartic)"): the
+//! Ball–pocket time (docs/envs/pool.md §P7 "Ball–pocket (quartic)"): the
 //! circle quartic with contact radius = the pocket radius, i.e. the event fires when the
 //! ball *centre* enters the pocket circle (pooltool `solve.py::ball_pocket_collision_coeffs`).
 

@@ -1,4 +1,4 @@
-//! Event detection (reference/pooltool-physics.md §2.7): collision times for ball–ball,
+//! Event detection (docs/envs/pool.md §P7): collision times for ball–ball,
 //! ball–cushion (linear and circular) and ball–pocket, plus motion transitions.
 //!
 //! Every translating ball follows r(t) = c + b t + a t² until its next transition;

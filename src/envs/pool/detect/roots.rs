@@ -1,4 +1,4 @@
-//! Polynomial root finding for collision detection (reference/pooltool-physics.md §2.7).
+//! Polynomial root finding for collision detection (docs/envs/pool.md §P7).
 //!
 //! * [`quadratic_real`]: pooltool's real quadratic (`ptmath/roots/quadratic.py::solve`),
 //!   used for linear cushions.
@@ -9,7 +9,7 @@
 //!   degree (cubic → quadratic → linear), the quartic itself is solved by Ferrari's
 //!   method on the depressed polynomial, and every root is polished by complex Newton
 //!   iterations on the original polynomial.
-//! * [`smallest_positive_real`]: the §2.7 root filter
+//! * [`smallest_positive_real`]: the §P7 root filter
 //!   (`ptmath/roots/core.py::get_real_positive_smallest_root`).
 
 use std::ops::{Add, Div, Mul, Neg, Sub};
@@ -192,7 +192,7 @@ fn horner(c: &[f64], z: C64) -> (C64, C64) {
 }
 
 /// Newton polish of `z` on the polynomial `c` (highest degree first). Roots that cannot
-/// pass the §2.7 filter (clearly negative or clearly complex) are returned unpolished.
+/// pass the §P7 filter (clearly negative or clearly complex) are returned unpolished.
 fn polish(c: &[f64], mut z: C64) -> C64 {
     if z.re < -1e-6 || z.im.abs() > 1e-3 * z.re.abs() + 1e-6 {
         return z;
@@ -370,7 +370,7 @@ pub fn quartic(a: f64, b: f64, c: f64, d: f64, e: f64) -> Roots {
     out
 }
 
-/// The §2.7 root filter: smallest root with re ≥ 0 that counts as real, else ∞.
+/// The §P7 root filter: smallest root with re ≥ 0 that counts as real, else ∞.
 /// Real means |im| < 1e-9 when |re| > 1e-3, |im|/|re| < 1e-3 when 0 < |re| ≤ 1e-3, and
 /// im == 0 when re == 0.
 pub fn smallest_positive_real(roots: &[C64]) -> f64 {
@@ -510,7 +510,7 @@ mod tests {
         assert!(eval(&c, t).abs() < 1e-18, "residual {}", eval(&c, t));
     }
 
-    /// The §2.7 filter rules.
+    /// The §P7 filter rules.
     #[test]
     fn root_filter_rules() {
         let z = |re, im| C64::new(re, im);

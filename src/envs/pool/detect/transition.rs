@@ -1,4 +1,4 @@
-//! Motion-transition detection (reference/pooltool-physics.md §2.3 "Transition events";
+//! Motion-transition detection (docs/envs/pool.md §P3 "Transition events";
 //! pooltool `evolution/event_based/cache.py::_next_transition`): sliding → rolling,
 //! rolling → spinning/stationary, spinning → stationary, at absolute times.
 
@@ -24,7 +24,7 @@ pub fn next_transition(state: &BallState, p: &BallParams) -> Option<(f64, EventK
 mod tests {
     use super::*;
 
-    /// Rolling with z-spin that outlasts the roll → rolling_spinning (§2.3).
+    /// Rolling with z-spin that outlasts the roll → rolling_spinning (§P3).
     #[test]
     fn rolling_with_english_goes_to_spinning() {
         let p = BallParams::pool_default();

@@ -1,4 +1,4 @@
-//! Ball–ball resolution (reference/pooltool-physics.md §2.8 (b); pooltool
+//! Ball–ball resolution (docs/envs/pool.md §P8 (b); pooltool
 //! `physics/resolve/ball_ball/core.py` and `frictional_inelastic/__init__.py`,
 //! `friction.py::AlciatoreBallBallFriction`):
 //! 1. `make_kiss`: place the balls 2R + MIN_DIST apart along their velocities (fallback:
@@ -225,7 +225,7 @@ mod tests {
     use super::*;
 
     /// Head-on, no spin: normal velocities exchange with restitution e_b:
-    /// v1' = (1−e)/2·v, v2' = (1+e)/2·v (§2.8 (b) step 4). No tangential slip, so spins
+    /// v1' = (1−e)/2·v, v2' = (1+e)/2·v (§P8 (b) step 4). No tangential slip, so spins
     /// stay 0. make_kiss leaves a 2R + 1e-6 gap. Tol 1e-12.
     #[test]
     fn head_on_exchange_with_restitution() {

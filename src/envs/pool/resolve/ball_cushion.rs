@@ -1,5 +1,5 @@
-//! Ball–cushion resolution, linear segments and circular jaws (reference/pooltool-physics.md
-//! §2.8 (c); pooltool `physics/resolve/ball_cushion/core.py`,
+//! Ball–cushion resolution, linear segments and circular jaws (docs/envs/pool.md
+//! §P8 (c); pooltool `physics/resolve/ball_cushion/core.py`,
 //! `ball_cushion/stronge_compliant/model.py`, `physics/resolve/stronge_compliant.py`):
 //! 1. `make_kiss`: move the ball along v to R + MIN_DIST from the cushion (fallback: along
 //!    the normal);
@@ -283,7 +283,7 @@ mod tests {
     use super::super::super::table::Table;
     use super::*;
 
-    /// Gross-slip branch vs the closed form (§2.8 (c) step 4): a ball rolling straight
+    /// Gross-slip branch vs the closed form (§P8 (c) step 4): a ball rolling straight
     /// into the +x rail. v_t0 = 0 would not be gross slip, so give it side spin; the
     /// result must satisfy v_n,f = −e v_n0 and v_t,f = v_t0 − μ v_n0 (β_t/β_n)(1+e) along
     /// the contact frame. Tolerance 1e-12 (closed form).

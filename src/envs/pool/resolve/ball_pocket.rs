@@ -1,4 +1,4 @@
-//! Ball–pocket resolution (reference/pooltool-physics.md §2.8 (d); pooltool
+//! Ball–pocket resolution (docs/envs/pool.md §P8 (d); pooltool
 //! `physics/resolve/ball_pocket/__init__.py::CanonicalBallPocket`): the ball is moved to
 //! (pocket x, pocket y, −depth) with v = ω = 0 and marked pocketed.
 

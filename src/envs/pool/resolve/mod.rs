@@ -1,5 +1,5 @@
 //! Event resolution models: pooltool 0.6.0's default `Resolver` (VERSION 9;
-//! reference/pooltool-physics.md §2.8): frictional-inelastic ball–ball with the Alciatore
+//! docs/envs/pool.md §P8): frictional-inelastic ball–ball with the Alciatore
 //! friction curve, Stronge compliant cushions, canonical pocket, instantaneous-point cue
 //! strike with squirt, canonical transitions.
 

@@ -1,4 +1,4 @@
-//! Cue-stick strike (reference/pooltool-physics.md §2.8 (a); pooltool
+//! Cue-stick strike (docs/envs/pool.md §P8 (a); pooltool
 //! `physics/resolve/stick_ball/instantaneous_point/__init__.py` and `squirt.py`):
 //! instantaneous point contact (Alciatore TP A-30) plus squirt (TP A-31).
 
@@ -83,7 +83,7 @@ mod tests {
     }
 
     /// Natural roll at b = 0.4 (θ = 0): the slip velocity is zero right after the strike,
-    /// so there is no sliding phase (slide time 0). Source: §2.8 (a) check. Tol 1e-12.
+    /// so there is no sliding phase (slide time 0). Source: §P8 (a) check. Tol 1e-12.
     #[test]
     fn natural_roll_at_b_0_4() {
         let p = BallParams::pool_default();
@@ -104,7 +104,7 @@ mod tests {
     }
 
     /// Side spin at θ = 0 only squirts: heading rotated by the squirt angle (a = 0.5 gives
-    /// ≈ −1.9°, reference §2.8 (a): "a straight line at 88.1°" for φ = 90°).
+    /// ≈ −1.9°, docs/envs/pool.md §P8 (a): "a straight line at 88.1°" for φ = 90°).
     #[test]
     fn squirt_with_side_spin() {
         let s = strike(Shot {

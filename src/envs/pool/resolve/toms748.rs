@@ -1,7 +1,7 @@
 //! Bracketing root finder used by the Stronge cushion model's stick branches: a faithful
 //! port of scipy's `optimize.toms748` (Alefeld, Potra & Shi, TOMS 748; scipy 1.17,
 //! defaults k = 1, xtol = 2e-12, rtol = 4·eps, maxiter = 100), which pooltool 0.6.0 calls
-//! in `physics/resolve/stronge_compliant.py` (reference/pooltool-physics.md §2.8 (c)).
+//! in `physics/resolve/stronge_compliant.py` (docs/envs/pool.md §P8 (c)).
 //!
 //! The slip-time functions can have several roots in [t_c, t_f] (a near-tangency of
 //! |u_t| with the friction limit); which one is found depends on the iteration path, so

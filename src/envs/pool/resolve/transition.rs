@@ -1,4 +1,4 @@
-//! Transition resolution (reference/pooltool-physics.md §2.3; pooltool
+//! Transition resolution (docs/envs/pool.md §P3; pooltool
 //! `physics/resolve/transition/__init__.py::CanonicalTransition`): set the new motion
 //! state; entering spinning zeroes v and ω_xy, entering stationary zeroes v and ω.
 
