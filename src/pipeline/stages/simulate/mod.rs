@@ -2,7 +2,7 @@
 //! frames, events), sharded and resumable.
 //!
 //! **Owns:** the stage kind, its parameters (one struct per environment, chosen by `env`), the
-//! [`Simulation`] trait each environment implements, and the stage that drives any of them.
+//! `Simulation` trait each environment implements, and the stage that drives any of them.
 //! **Does not:** simulate (`envs::*`), or know how shards are cut, written and resumed (`shards`).
 //!
 //! Layout: `shards.rs` (the machinery every environment shares), `pool.rs`, `phyre.rs`, `iphyre.rs`
@@ -165,7 +165,7 @@ pub(crate) trait Simulation: Send + Sync + std::fmt::Debug {
     fn report(&self, sums: &ShardTotals) -> (SimulateSummary, String);
 }
 
-/// The `simulate` stage: drives one environment's [`Simulation`].
+/// The `simulate` stage: drives one environment's `Simulation`.
 #[derive(Debug)]
 pub struct SimulateStage {
     sim: Box<dyn Simulation>,
