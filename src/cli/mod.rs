@@ -109,6 +109,7 @@ enum Command {
 
 /// Parses arguments, runs the command, prints errors and returns the exit code.
 pub fn main() -> ExitCode {
+    quiet_on_closed_pipe();
     let cli = Cli::parse();
     init_logging(cli.quiet);
     let result = match cli.command {
@@ -137,6 +138,25 @@ pub fn main() -> ExitCode {
             ExitCode::from(e.code)
         }
     }
+}
+
+/// A reader that closes the pipe early (`annotrace stages | head -1`) ends the command quietly with
+/// exit code 0, as a returned broken-pipe error does: `println!` panics on a closed stdout, so a panic
+/// hook recognises that one panic and exits; every other panic goes to the default hook.
+fn quiet_on_closed_pipe() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let message = info
+            .payload()
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| info.payload().downcast_ref::<&str>().copied())
+            .unwrap_or_default();
+        if message.starts_with("failed printing to stdout") && message.contains("Broken pipe") {
+            std::process::exit(0);
+        }
+        default(info);
+    }));
 }
 
 fn is_broken_pipe(e: &anyhow::Error) -> bool {

@@ -316,3 +316,44 @@ fn spilled_traces_give_the_same_tables() {
         "n\n1800\n"
     );
 }
+
+/// A reader that closes the pipe after the first bytes (`annotrace stages | head -c 1`) ends the
+/// command quietly with exit code 0: no panic message, no exit code 101.
+#[test]
+fn a_closed_pipe_ends_a_command_quietly() {
+    use std::io::Read;
+    use std::process::Stdio;
+    let t = TestRun::new();
+    t.write(
+        "p.toml",
+        "[[stage]]\nid = \"one\"\nkind = \"sql\"\nsql = \"SELECT 1 AS one\"\n",
+    );
+    t.run(&["run", "p.toml", "--run-dir", "r"]).ok();
+    for args in [
+        &["stages"][..],
+        &["run", "p.toml", "--run-dir", "r", "--explain"][..],
+        &["tables", "--run", "r"][..],
+        &[
+            "query",
+            "SELECT * FROM generate_series(1, 200000)",
+            "--run",
+            "r",
+        ][..],
+    ] {
+        let mut child = t
+            .cmd()
+            .args(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("annotrace runs");
+        let mut out = child.stdout.take().unwrap();
+        let mut first = [0u8; 1];
+        out.read_exact(&mut first).expect("some output");
+        drop(out);
+        let done = child.wait_with_output().expect("exits");
+        let stderr = String::from_utf8_lossy(&done.stderr);
+        assert_eq!(done.status.code(), Some(0), "{args:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+    }
+}
