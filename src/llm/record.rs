@@ -3,8 +3,9 @@
 //!
 //! Parquet files cannot grow, so "appending" means adding files: a client buffers rows and writes
 //! `llm_calls/llm-<session>.<nnnnn>.parquet` (atomically, through [`ParquetSink`]) every
-//! [`FLUSH_EVERY`] rows, on `CallLog::flush` and when dropped. A killed process loses at most the rows
-//! of its unflushed buffer; no reader ever sees a partial file. Every text column has the API key
+//! [`FLUSH_EVERY`] rows or when the oldest buffered row is [`FLUSH_AFTER`] old, on `CallLog::flush`
+//! and when dropped. A killed process loses at most the calls of the last [`FLUSH_AFTER`] (calls take
+//! seconds, so that is one or two); no reader ever sees a partial file. Every text column has the API key
 //! scrubbed before it is stored.
 
 use std::path::PathBuf;
@@ -29,6 +30,9 @@ pub const TABLE: &str = "llm_calls";
 
 /// Rows buffered before a file is written.
 pub const FLUSH_EVERY: usize = 16;
+
+/// The longest a recorded call waits in the buffer before it is written (a kill loses no older call).
+pub const FLUSH_AFTER: std::time::Duration = std::time::Duration::from_secs(1);
 
 /// The outcome of one attempt, as stored in `llm_calls.status`.
 pub mod status {
@@ -303,6 +307,8 @@ pub(crate) struct CallLog {
 struct LogState {
     rows: Vec<CallRecord>,
     files: u32,
+    /// When the oldest buffered row arrived.
+    oldest: Option<std::time::Instant>,
 }
 
 impl CallLog {
@@ -314,11 +320,12 @@ impl CallLog {
         }
     }
 
-    /// Adds a row; writes a file when the buffer is full.
+    /// Adds a row; writes a file when the buffer is full or its oldest row is [`FLUSH_AFTER`] old.
     pub fn push(&self, row: CallRecord) -> Result<(), LlmError> {
         let mut st = self.state.lock().unwrap_or_else(|p| p.into_inner());
         st.rows.push(row);
-        if st.rows.len() >= FLUSH_EVERY {
+        let oldest = *st.oldest.get_or_insert_with(std::time::Instant::now);
+        if st.rows.len() >= FLUSH_EVERY || oldest.elapsed() >= FLUSH_AFTER {
             self.write(&mut st)?;
         }
         Ok(())
@@ -348,6 +355,7 @@ impl CallLog {
         sink.commit()?;
         st.files += 1;
         st.rows.clear();
+        st.oldest = None;
         Ok(())
     }
 }
