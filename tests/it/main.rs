@@ -10,6 +10,7 @@ mod iphyre;
 mod libraries;
 mod llm;
 mod optimise;
+mod originals;
 mod phyre;
 mod query;
 mod render;
