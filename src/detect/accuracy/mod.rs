@@ -29,7 +29,7 @@ use crate::trace::{Env, Trace};
 
 pub use iphyre::iphyre_truth;
 pub use phyre::{PHYRE_AT_REST, PHYRE_MOVING, phyre_truth};
-pub use pooltool::{event_balls, pooltool_truth};
+pub use pooltool::{event_balls, pooltool_state_truth, pooltool_truth};
 
 /// One ground-truth occurrence of a label.
 #[derive(Clone, Debug, PartialEq)]
@@ -97,7 +97,8 @@ fn ratio(a: u64, b: u64, empty_is_perfect: bool) -> f64 {
     }
 }
 
-/// The event-grounded pooltool labels, in the paper's order.
+/// The pooltool labels with a ground truth (from events, or from the simulator's inputs and state), in the
+/// paper's order.
 pub const POOLTOOL_GROUNDED: &[&str] = &[
     "cue strike",
     "ball collision",
@@ -106,6 +107,10 @@ pub const POOLTOOL_GROUNDED: &[&str] = &[
     "rolling ball",
     "sliding ball",
     "spinning ball",
+    "ball slowing",
+    "spin shot",
+    "high angle collision",
+    "gentle touch",
 ];
 
 /// The event-grounded I-PHYRE labels.
@@ -131,7 +136,11 @@ pub fn grounded(env: Env) -> &'static [&'static str] {
 pub fn truth(env: Env, trace: &Trace, merge_s: f64) -> Vec<TruthEvent> {
     let last = trace.timesteps.last().map_or(f64::NEG_INFINITY, |s| s.t);
     match env {
-        Env::Pooltool => pooltool_truth(trace, merge_s),
+        Env::Pooltool => {
+            let mut v = pooltool_truth(trace, merge_s);
+            v.extend(pooltool::pooltool_state_truth(trace, merge_s));
+            v
+        }
         Env::Iphyre => iphyre_truth(trace, merge_s),
         Env::Phyre => phyre_truth(trace, merge_s),
     }
@@ -366,6 +375,38 @@ mod tests {
         assert_eq!(
             event_balls("physics_ball_pocket", Some(&json!({"ball": "3"}))),
             v("3")
+        );
+    }
+
+    #[test]
+    fn pooltool_state_truth_spin_from_the_shot_and_slowing_from_the_roll_time() {
+        let mut trace = crate::testutil::synthetic_trace(Env::Pooltool, 0, 3, 1);
+        let a = |kind: &str, t: f64, ids: &[&str]| ev(kind, t, json!({ "agents": ids }));
+        trace.events = vec![
+            a("physics_stick_ball", 0.0, &["cue_stick", "cue"]),
+            a("physics_sliding_rolling", 0.2, &["cue"]),
+            a("physics_rolling_stationary", 1.0, &["cue"]), // 0.8 s of roll: 0.078 m/s at its start
+            a("physics_sliding_rolling", 0.3, &["1"]),
+            a("physics_rolling_stationary", 0.6, &["1"]), // 0.3 s: 0.029 m/s, too slow
+        ];
+        trace
+            .extra
+            .insert("shot".into(), json!({"V0": 1.0, "a": 0.15, "b": -0.15}));
+        let got: Vec<(&str, f64)> = pooltool_state_truth(&trace, 0.05)
+            .iter()
+            .map(|e| (e.label, e.t))
+            .collect();
+        assert_eq!(got, [("spin shot", 0.0), ("ball slowing", 1.0)]);
+        // The strike's own offsets win over the top-level shot: a centre-ball hit.
+        trace.events[0] = ev(
+            "physics_stick_ball",
+            0.0,
+            json!({"agents": ["cue_stick", "cue"], "a": 0.0, "b": 0.1}),
+        );
+        assert!(
+            pooltool_state_truth(&trace, 0.05)
+                .iter()
+                .all(|e| e.label != "spin shot")
         );
     }
 

@@ -104,3 +104,158 @@ pub fn pooltool_truth(trace: &crate::trace::Trace, merge_s: f64) -> Vec<TruthEve
     }
     out
 }
+
+/// pooltool's default rolling-friction coefficient `u_r` (annotrace's default table uses it too).
+pub const ROLLING_FRICTION: f64 = 0.01;
+
+/// Standard gravity (m/s²), as pooltool's `g`.
+const G: f64 = 9.8;
+
+/// "ball slowing": a rolling ball coming to rest, if it rolled at least this fast (m/s) when its roll
+/// began.
+pub const SLOWING_MIN_SPEED: f64 = 0.05;
+
+/// "spin shot": a tip offset at least this far from the cue ball's centre (units of R).
+pub const SPIN_MIN_OFFSET: f64 = 0.2;
+
+/// "gentle touch": a collision approached slower than this (m/s, along the line of centres).
+pub const GENTLE_MAX_SPEED: f64 = 0.3;
+
+/// "high angle collision": a cut angle (between the relative velocity and the line of centres) in
+/// this range (degrees).
+pub const HIGH_ANGLE_DEG: (f64, f64) = (45.0, 90.0);
+
+fn num(v: Option<&serde_json::Value>, key: &str) -> Option<f64> {
+    v?.get(key)?.as_f64()
+}
+
+/// The (position, velocity) of ball `id` at time `t`, moved straight on from the last frame at or
+/// before `t` (frames are 10 ms apart or less; a contact's own frame already shows its outcome).
+fn state_at(trace: &crate::trace::Trace, id: &str, t: f64) -> Option<([f64; 2], [f64; 2])> {
+    let k = trace
+        .timesteps
+        .partition_point(|s| s.t < t)
+        .checked_sub(1)?;
+    let step = &trace.timesteps[k];
+    step.objects.iter().find_map(|o| match &o.body {
+        crate::trace::Body::Pool(b) if b.ball_id == id => {
+            let dt = t - step.t;
+            Some((
+                [
+                    b.position[0] + b.velocity[0] * dt,
+                    b.position[1] + b.velocity[1] * dt,
+                ],
+                [b.velocity[0], b.velocity[1]],
+            ))
+        }
+        _ => None,
+    })
+}
+
+/// The labels pooltool's events ground through the simulator's inputs and state rather than one event
+/// kind each (rules in `docs/accuracy.md`):
+///
+/// * `spin shot` ↔ a `physics_stick_ball` whose tip offset `hypot(a, b)` is at least
+///   [`SPIN_MIN_OFFSET`]; the offsets come from the strike's payload (annotrace) or the trace's top-level
+///   `shot` (pooltool exporters); without either the strike grounds nothing.
+/// * `ball slowing` ↔ a `physics_rolling_stationary` that ends a roll begun by the same ball's
+///   `physics_sliding_rolling` with nothing in between, when the roll lasted long enough to have started
+///   at [`SLOWING_MIN_SPEED`] or more: rolling friction decelerates at `u_r g`, so the start speed is
+///   `u_r g (t_stop − t_roll)` — event times only, no frame.
+/// * `gentle touch` and `high angle collision` ↔ a merged `ball collision` (as in [`pooltool_truth`])
+///   whose approach speed along the line of centres is below [`GENTLE_MAX_SPEED`], or whose cut angle is
+///   in [`HIGH_ANGLE_DEG`]; both from the two balls' states moved on to the first contact's time (the
+///   approach speed from the first contact's event when it records one, as annotrace's simulator does).
+pub fn pooltool_state_truth(trace: &crate::trace::Trace, merge_s: f64) -> Vec<TruthEvent> {
+    let mut out = Vec::new();
+    let shot = trace.extra.get("shot");
+    let mut events: Vec<_> = trace.events.iter().filter(|e| e.t.is_some()).collect();
+    events.sort_by(|a, b| a.t.partial_cmp(&b.t).unwrap_or(std::cmp::Ordering::Equal));
+    // The open roll of each ball: the time of its sliding->rolling transition.
+    let mut rolling: BTreeMap<String, f64> = BTreeMap::new();
+    for e in &events {
+        let t = e.t.unwrap_or(0.0);
+        let p = e.payload.as_ref();
+        let balls = event_balls(&e.kind, p);
+        if e.kind == "physics_stick_ball" {
+            let (a, b) = match (num(p, "a"), num(p, "b")) {
+                (Some(a), Some(b)) => (Some(a), Some(b)),
+                _ => (num(shot, "a"), num(shot, "b")),
+            };
+            if let (Some(a), Some(b)) = (a, b)
+                && a.hypot(b) >= SPIN_MIN_OFFSET
+            {
+                out.push(TruthEvent {
+                    label: "spin shot",
+                    t,
+                    balls: balls.clone(),
+                });
+            }
+        }
+        if !e.kind.starts_with("physics_") {
+            continue;
+        }
+        for b in &balls {
+            let start = rolling.remove(b);
+            if e.kind == "physics_rolling_stationary"
+                && let Some(t0) = start
+                && ROLLING_FRICTION * G * (t - t0) >= SLOWING_MIN_SPEED
+            {
+                out.push(TruthEvent {
+                    label: "ball slowing",
+                    t,
+                    balls: vec![b.clone()],
+                });
+            }
+        }
+        if e.kind == "physics_sliding_rolling"
+            && let Some(b) = balls.first()
+        {
+            rolling.insert(b.clone(), t);
+        }
+    }
+    for c in pooltool_truth(trace, merge_s)
+        .into_iter()
+        .filter(|c| c.label == "ball collision")
+    {
+        let (Some((pa, va)), Some((pb, vb))) = (
+            state_at(trace, &c.balls[0], c.t),
+            state_at(trace, &c.balls[1], c.t),
+        ) else {
+            continue;
+        };
+        let n = [pb[0] - pa[0], pb[1] - pa[1]];
+        let nn = n[0].hypot(n[1]);
+        let v = [va[0] - vb[0], va[1] - vb[1]];
+        let vn = v[0].hypot(v[1]);
+        if nn <= 0.0 {
+            continue;
+        }
+        let approach = (v[0] * n[0] + v[1] * n[1]) / nn;
+        // The simulator's own approach speed at the first contact when its event records one.
+        let logged = trace
+            .events
+            .iter()
+            .find(|e| e.kind == "physics_ball_ball" && e.t == Some(c.t))
+            .and_then(|e| num(e.payload.as_ref(), "approach_speed"));
+        if logged.unwrap_or(approach).abs() < GENTLE_MAX_SPEED {
+            out.push(TruthEvent {
+                label: "gentle touch",
+                t: c.t,
+                balls: c.balls.clone(),
+            });
+        }
+        if vn > 1e-6 {
+            let cut = (approach / vn).clamp(-1.0, 1.0).acos().to_degrees();
+            if (HIGH_ANGLE_DEG.0..HIGH_ANGLE_DEG.1).contains(&cut) {
+                out.push(TruthEvent {
+                    label: "high angle collision",
+                    t: c.t,
+                    balls: c.balls,
+                });
+            }
+        }
+    }
+    out.sort_by(|a, b| a.t.partial_cmp(&b.t).unwrap_or(std::cmp::Ordering::Equal));
+    out
+}
