@@ -136,6 +136,7 @@ fn iphyre_library_on_iphyres_own_traces() {
         let s = scores(Env::Iphyre, hide);
         at_least(&s, "collision", 0.9);
         at_least(&s, "object removal", 0.95);
+        at_least(&s, "airborne motion", 0.85);
     }
 }
 

@@ -109,9 +109,14 @@ fn segment_segment(a: P, b: P, c: P, d: P) -> f64 {
 
 // ------------------------------------------------------------------------------------------ I-PHYRE
 
-/// Per-frame touching pairs of an I-PHYRE trace (capsules, at least one body dynamic).
+/// Collision begins of an I-PHYRE trace from its frames ([`iphyre_touching`]).
 pub fn iphyre_contacts(trace: &Trace, merge_s: f64) -> Vec<(f64, Vec<String>)> {
-    let frames = trace
+    begins(iphyre_touching(trace), merge_s)
+}
+
+/// The pairs touching in each frame of an I-PHYRE trace (capsules, at least one body dynamic).
+pub fn iphyre_touching(trace: &Trace) -> Vec<(f64, Vec<Vec<String>>)> {
+    trace
         .timesteps
         .iter()
         .map(|s| {
@@ -137,8 +142,7 @@ pub fn iphyre_contacts(trace: &Trace, merge_s: f64) -> Vec<(f64, Vec<String>)> {
             }
             (s.t, pairs)
         })
-        .collect();
-    begins(frames, merge_s)
+        .collect()
 }
 
 // ------------------------------------------------------------------------------------------- PHYRE
@@ -279,6 +283,12 @@ pub fn phyre_outlines_known(trace: &Trace) -> bool {
 /// bodies from PHYRE's body 4 (the exporters' `body index − 4`), and its walls are the implicit ids
 /// `-4` (floor), `-3` (left), `-2` (ceiling), `-1` (right).
 pub fn phyre_contacts(trace: &Trace, merge_s: f64) -> Vec<(f64, Vec<String>)> {
+    begins(phyre_touching(trace), merge_s)
+}
+
+/// The pairs touching in each frame of a PHYRE trace, as [`phyre_contacts`] finds them (empty for a
+/// task outside the embedded set).
+pub fn phyre_touching(trace: &Trace) -> Vec<(f64, Vec<Vec<String>>)> {
     let Some(task) = phyre_task(trace) else {
         return Vec::new();
     };
@@ -298,7 +308,7 @@ pub fn phyre_contacts(trace: &Trace, merge_s: f64) -> Vec<(f64, Vec<String>)> {
             ("-1".into(), false, Outline::Wall(0, SCENE)),
         ]
     };
-    let frames = trace
+    trace
         .timesteps
         .iter()
         .map(|s| {
@@ -347,8 +357,37 @@ pub fn phyre_contacts(trace: &Trace, merge_s: f64) -> Vec<(f64, Vec<String>)> {
             }
             (s.t, pairs)
         })
-        .collect();
-    begins(frames, merge_s)
+        .collect()
+}
+
+/// Whether PHYRE object `index` of `trace` is a dynamic body (the user's ball, or a dynamic body of the
+/// task); `None` when the task is not in the embedded set.
+pub fn phyre_dynamic(trace: &Trace) -> Option<BTreeMap<String, bool>> {
+    let task = phyre_task(trace)?;
+    let first = trace.timesteps.first()?;
+    let lists_walls = first
+        .objects
+        .iter()
+        .any(|o| matches!(&o.body, Body::Phyre(p) if p.shape == "wall"));
+    let offset: i64 = if lists_walls { 0 } else { 4 };
+    Some(
+        first
+            .objects
+            .iter()
+            .filter_map(|o| match &o.body {
+                Body::Phyre(p) => Some(p),
+                _ => None,
+            })
+            .map(|p| {
+                let dynamic = p.is_user_input
+                    || usize::try_from(p.object_index + offset)
+                        .ok()
+                        .and_then(|i| task.bodies.get(i))
+                        .is_some_and(|b| b.dynamic);
+                (p.object_index.to_string(), dynamic)
+            })
+            .collect(),
+    )
 }
 
 fn copy_wall(o: &Outline) -> Outline {

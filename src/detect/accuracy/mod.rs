@@ -13,6 +13,7 @@
 //! whose span holds its time (else is nearest to it), then whose span centre is closest. Unmatched
 //! detections are false positives, unmatched events false negatives.
 
+mod airborne;
 mod contacts;
 pub mod geometry;
 mod iphyre;
@@ -114,10 +115,10 @@ pub const POOLTOOL_GROUNDED: &[&str] = &[
 ];
 
 /// The event-grounded I-PHYRE labels.
-pub const IPHYRE_GROUNDED: &[&str] = &["collision", "object removal"];
+pub const IPHYRE_GROUNDED: &[&str] = &["collision", "object removal", "airborne motion"];
 
 /// The event-grounded PHYRE labels.
-pub const PHYRE_GROUNDED: &[&str] = &["moving object hits stationary object"];
+pub const PHYRE_GROUNDED: &[&str] = &["moving object hits stationary object", "airborne motion"];
 
 /// The event-grounded labels of `env`, in the paper's order.
 pub fn grounded(env: Env) -> &'static [&'static str] {
@@ -141,8 +142,15 @@ pub fn truth(env: Env, trace: &Trace, merge_s: f64) -> Vec<TruthEvent> {
             v.extend(pooltool::pooltool_state_truth(trace, merge_s));
             v
         }
-        Env::Iphyre => iphyre_truth(trace, merge_s),
-        Env::Phyre => phyre_truth(trace, merge_s),
+        Env::Iphyre | Env::Phyre => {
+            let mut v = if env == Env::Iphyre {
+                iphyre_truth(trace, merge_s)
+            } else {
+                phyre_truth(trace, merge_s)
+            };
+            v.extend(airborne::airborne_truth(env, trace, merge_s));
+            v
+        }
     }
     .into_iter()
     .filter(|e| env == Env::Pooltool || e.t <= last + 1e-9)
