@@ -13,7 +13,7 @@ fn pipeline(extra: &str) -> String {
     format!(
         r#"[pipeline]
 name = "evt"
-seed = 5
+seed = 6
 
 [[stage]]
 id = "sim"

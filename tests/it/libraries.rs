@@ -17,7 +17,7 @@ use annotrace::trace::{Env, Trace};
 
 use crate::common::TestRun;
 
-fn library(env: &str) -> Library {
+pub(crate) fn library(env: &str) -> Library {
     Library::load(
         &Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("data/libraries")
@@ -45,7 +45,7 @@ fn iphyre_traces() -> &'static [Trace] {
 }
 
 /// Runs `lib` over `traces`, asserting every call is `ok`; returns the annotations.
-fn annotate(lib: &Library, traces: &[Trace]) -> Vec<Annotation> {
+pub(crate) fn annotate(lib: &Library, traces: &[Trace]) -> Vec<Annotation> {
     let pool = WorkerPool::new(SandboxLimits {
         workers: 2,
         call_timeout: Duration::from_secs(30),
@@ -76,7 +76,11 @@ fn annotate(lib: &Library, traces: &[Trace]) -> Vec<Annotation> {
 }
 
 /// Scores annotations of `traces` against their simulator events (tolerance and merge 50 ms).
-fn score(env: Env, traces: &[Trace], anns: &[Annotation]) -> BTreeMap<String, LabelScore> {
+pub(crate) fn score(
+    env: Env,
+    traces: &[Trace],
+    anns: &[Annotation],
+) -> BTreeMap<String, LabelScore> {
     let mut scores = BTreeMap::new();
     for t in traces {
         let mine: Vec<&Annotation> = anns.iter().filter(|a| a.trace_id == t.trace_id).collect();

@@ -11,6 +11,7 @@ mod iphyre;
 mod libraries;
 mod llm;
 mod optimise;
+mod originals;
 mod phyre;
 mod query;
 mod render;

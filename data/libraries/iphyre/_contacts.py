@@ -1,13 +1,13 @@
 """Prelude: contact episodes of object pairs, from the `contact_begin` / `contact_end` events when the
 trace has them, else from the capsule geometry of the frames: a contact begins when the gap between the two capsules
-is at most CONTACT_GAP px and lasts while it stays at most KEEP_GAP px (hysteresis, so a resting pair
-does not flicker). A pair's contact that begins again within MERGE_S (50 ms) of its end is the same
+is at most CONTACT_GAP px and lasts while it stays at most KEEP_GAP px (a little hysteresis, so a resting
+pair does not flicker; README.md says how both were chosen on annotrace's and iphyre's own traces). A pair's contact that begins again within MERGE_S (50 ms) of its end is the same
 contact (rapier reports a ball crossing a block joint or resting on two blocks as end/begin chatter).
 
 library.toml prepends it to the detectors that list it; it defines no find_pattern."""
 
-CONTACT_GAP = 0.25
-KEEP_GAP = 1.0
+CONTACT_GAP = 0.05
+KEEP_GAP = 0.1
 
 
 def _seg_point(px, py, ax, ay, bx, by):

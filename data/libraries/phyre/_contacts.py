@@ -1,14 +1,185 @@
 """Prelude: contact episodes of object pairs from the `contact_begin` / `contact_end` events, a pair's
 contact that begins again within MERGE_S (50 ms) of its end being the same contact (a bouncing or
-rocking body chatters). Without an event log, contacts of balls are found from geometry: two balls whose
-surfaces are at most CONTACT_GAP px apart, or a ball at most that far from a wall (the four walls
-bound the 256 px scene); other shapes have no geometric fallback (PHYRE traces do not carry the
-outlines of bars, jars and sticks).
+rocking body chatters). Without an event log, contacts come from geometry: two bodies whose outlines are
+at most CONTACT_GAP px apart touch (DENSE_GAP when the frames hold every 60 Hz physics step; bodies
+that never move do not touch each other). Outlines are rebuilt from what every PHYRE trace carries (shape,
+diameter, position of the body origin, angle): a ball is a circle; a bar a 5.12 px thick rectangle
+whose diagonal is the diameter; a jar PHYRE's cup of three convex pieces (a base 0.533 D wide and two
+slanted walls up to 0.8 D, wall thickness 3.824 + 1.179 ln(D / 32) px, as PHYRE builds them); the four
+walls bound the 256 px scene, as objects of shape `wall` when the trace lists them, else as implicit
+walls "-4" (floor), "-3" (left), "-2" (ceiling), "-1" (right): PHYRE's body indices 0-3 less 4, the
+numbering of exported traces that omit the walls.
 
 library.toml prepends it to the detectors that list it; it defines no find_pattern."""
 
 CONTACT_GAP = 1.5
+DENSE_GAP = 0.15
 SCENE = 256.0
+BAR_THICKNESS = 5.12
+
+
+def _poly_world(o, pts):
+    x, y, a = float(o.get("x", 0.0)), float(o.get("y", 0.0)), float(o.get("angle", 0.0) or 0.0)
+    c, s = _cos(a), _sin(a)
+    return [(x + c * px - s * py, y + s * px + c * py) for px, py in pts]
+
+
+def _sin(a):
+    """sin by its Taylor series after range reduction (detectors cannot import math)."""
+    pi = 3.141592653589793
+    a = (a + pi) % (2 * pi) - pi
+    term, total, n = a, a, 1
+    while abs(term) > 1e-15:
+        term *= -a * a / ((n + 1) * (n + 2))
+        total += term
+        n += 2
+    return total
+
+
+def _cos(a):
+    return _sin(a + 1.5707963267948966)
+
+
+def _ln(x):
+    """Natural logarithm (no math module): ln x = 2 atanh((x-1)/(x+1)) after halving into [0.5, 1]."""
+    k = 0
+    while x > 1.0:
+        x /= 2.0
+        k += 1
+    z = (x - 1.0) / (x + 1.0)
+    term, total, n = z, 0.0, 1
+    while abs(term) > 1e-17:
+        total += term / n
+        term *= z * z
+        n += 2
+    return 2.0 * total + k * 0.6931471805599453
+
+
+def _outline(o):
+    """("circle", cx, cy, r) or ("polys", [convex polygons in scene px]) of a trace object."""
+    shape = o.get("shape")
+    d = float(o.get("diameter", 0.0))
+    if shape == "ball" or d <= 0.0:
+        return ("circle", float(o.get("x", 0.0)), float(o.get("y", 0.0)), d / 2.0)
+    if shape == "jar":
+        t = 3.8243 + 1.1794 * _ln(d / 32.0)
+        hb, top = 0.26667 * d, 0.8 * d - t / 2.0
+        polys = [[(hb, t / 2.0), (-hb, t / 2.0), (-hb, -t / 2.0), (hb, -t / 2.0)]]
+        for sgn in (-1.0, 1.0):
+            bx, by, tx, ty = sgn * hb, -t / 2.0, sgn * d / 3.0, top
+            ux, uy = tx - bx, ty - by
+            n = (ux * ux + uy * uy) ** 0.5
+            nx, ny = -sgn * uy / n * t, sgn * ux / n * t  # towards the inside of the jar
+            if nx * sgn > 0:
+                nx, ny = -nx, -ny
+            ix, iy = bx + nx, by + ny  # inner bottom corner; the inner edge is cut level with the top
+            jx = ix + ux * (ty - iy) / uy
+            polys.append([(bx, by), (tx, ty), (jx, ty), (ix, iy)])
+        return ("polys", [_poly_world(o, p) for p in polys])
+    # bars (and any other shape: the diameter's rectangle)
+    half_l = max(d * d - BAR_THICKNESS * BAR_THICKNESS, 0.0) ** 0.5 / 2.0
+    h = BAR_THICKNESS / 2.0
+    return ("polys", [_poly_world(o, [(half_l, h), (-half_l, h), (-half_l, -h), (half_l, -h)])])
+
+
+def _implicit_walls(trace):
+    """The scene's walls as half-planes when the trace does not list them (exported PHYRE traces)."""
+    steps = trace.get("timesteps") or ()
+    if steps and any(o.get("shape") == "wall" for o in steps[0].get("objects", [])):
+        return []
+    return [("-4", ("wall", 1, 0.0)), ("-3", ("wall", 0, 0.0)), ("-2", ("wall", 1, SCENE)),
+            ("-1", ("wall", 0, SCENE))]
+
+
+def _wall_of(o):
+    """A listed wall object as a half-plane boundary (axis, coordinate)."""
+    wx, wy = float(o["x"]), float(o["y"])
+    if wy < 0.0:
+        return ("wall", 1, 0.0)
+    if wy > SCENE:
+        return ("wall", 1, SCENE)
+    return ("wall", 0, 0.0) if wx < 0.0 else ("wall", 0, SCENE)
+
+
+def _seg_dist(px, py, ax, ay, bx, by):
+    dx, dy = bx - ax, by - ay
+    l2 = dx * dx + dy * dy
+    u = 0.0 if l2 <= 0.0 else max(0.0, min(1.0, ((px - ax) * dx + (py - ay) * dy) / l2))
+    qx, qy = ax + u * dx - px, ay + u * dy - py
+    return (qx * qx + qy * qy) ** 0.5
+
+
+def _inside(px, py, poly):
+    """Point inside a convex polygon (either winding)."""
+    sign = 0
+    n = len(poly)
+    for i in range(n):
+        ax, ay = poly[i]
+        bx, by = poly[(i + 1) % n]
+        c = (bx - ax) * (py - ay) - (by - ay) * (px - ax)
+        if c != 0.0:
+            s = 1 if c > 0 else -1
+            if sign == 0:
+                sign = s
+            elif s != sign:
+                return False
+    return True
+
+
+def _poly_dist(p, q):
+    """Distance between two convex polygons, 0 when they overlap."""
+    if any(_inside(x, y, q) for x, y in p) or any(_inside(x, y, p) for x, y in q):
+        return 0.0
+    best = None
+    for a, b in ((p, q), (q, p)):
+        n = len(b)
+        for x, y in a:
+            for i in range(n):
+                d = _seg_dist(x, y, b[i][0], b[i][1], b[(i + 1) % n][0], b[(i + 1) % n][1])
+                if best is None or d < best:
+                    best = d
+    # Crossing edges without a vertex inside: overlapping.
+    return best
+
+
+def _circle_poly(cx, cy, r, poly):
+    if _inside(cx, cy, poly):
+        return -r
+    n = len(poly)
+    return min(_seg_dist(cx, cy, poly[i][0], poly[i][1], poly[(i + 1) % n][0], poly[(i + 1) % n][1])
+               for i in range(n)) - r
+
+
+def _extent(sh, axis):
+    """(min, max) of an outline along x (axis 0) or y (axis 1)."""
+    if sh[0] == "circle":
+        c = sh[1 + axis]
+        return c - sh[3], c + sh[3]
+    vals = [p[axis] for poly in sh[1] for p in poly]
+    return min(vals), max(vals)
+
+
+def _gap(sa, sb):
+    """Gap (px) between two outlines; negative or 0 when they overlap."""
+    if sa[0] == "wall":
+        sa, sb = sb, sa
+    if sb[0] == "wall":
+        lo, hi = _extent(sa, sb[1])
+        return lo - sb[2] if sb[2] <= 0.0 else sb[2] - hi
+    if sa[0] == "circle" and sb[0] == "circle":
+        d = ((sa[1] - sb[1]) ** 2 + (sa[2] - sb[2]) ** 2) ** 0.5
+        return d - sa[3] - sb[3]
+    if sa[0] == "polys":
+        sa, sb = sb, sa
+    # Cheap reject on bounding boxes.
+    for axis in (0, 1):
+        a0, a1 = _extent(sa, axis)
+        b0, b1 = _extent(sb, axis)
+        if a0 - b1 > CONTACT_GAP or b0 - a1 > CONTACT_GAP:
+            return CONTACT_GAP + 1.0
+    if sa[0] == "circle":
+        return min(_circle_poly(sa[1], sa[2], sa[3], q) for q in sb[1])
+    return min(_poly_dist(p, q) for p in sa[1] for q in sb[1])
 
 
 def _contacts(trace):
@@ -44,24 +215,37 @@ def _contacts(trace):
             groups[key] = g
             out.append(g)
         return out
-    for k, s in enumerate(trace["timesteps"]):
-        balls = [o for o in s.get("objects", []) if o.get("shape") == "ball"]
-        walls = [o for o in s.get("objects", []) if o.get("shape") == "wall"]
+    walls = _implicit_walls(trace)
+    steps = trace["timesteps"]
+    # Frames at every 60 Hz physics step show a contact as it happens: Box2D keeps touching outlines
+    # within DENSE_GAP. Sparser frames need the slack of CONTACT_GAP (the contact fell between them).
+    gaps = sorted(ts[i + 1] - ts[i] for i in range(len(ts) - 1))
+    dense = bool(gaps) and gaps[len(gaps) // 2] <= 1.0 / 60.0 + 1e-6
+    tol = DENSE_GAP if dense else CONTACT_GAP
+    # Bodies that never move (static bars, walls; float32 noise aside) do not collide with each other.
+    first = {}
+    moved = set()
+    for s in steps:
+        for o in s.get("objects", []):
+            oid = str(o.get("object_index"))
+            if oid in moved or o.get("shape") == "wall":
+                continue
+            p = (float(o.get("x", 0.0)), float(o.get("y", 0.0)), float(o.get("angle", 0.0) or 0.0))
+            q = first.setdefault(oid, p)
+            if abs(p[0] - q[0]) + abs(p[1] - q[1]) > 0.01 or abs(p[2] - q[2]) > 1e-4:
+                moved.add(oid)
+    for k, s in enumerate(steps):
+        shapes = [(str(o["object_index"]), _wall_of(o) if o.get("shape") == "wall" else _outline(o))
+                  for o in s.get("objects", [])]
+        shapes += walls
         touching = []
-        for i, o in enumerate(balls):
-            r = float(o.get("diameter", 0.0)) / 2.0
-            x, y = float(o["x"]), float(o["y"])
-            for w in walls:
-                wx, wy = float(w["x"]), float(w["y"])
-                gap = y - r if wy < 0.0 else (SCENE - y - r if wy > SCENE else
-                                               (x - r if wx < 0.0 else SCENE - x - r))
-                if gap <= CONTACT_GAP:
-                    touching.append((str(w["object_index"]), str(o["object_index"]), gap))
-            for q in balls[i + 1:]:
-                d = ((float(o["x"]) - float(q["x"])) ** 2 + (float(o["y"]) - float(q["y"])) ** 2) ** 0.5
-                gap = d - r - float(q.get("diameter", 0.0)) / 2.0
-                if gap <= CONTACT_GAP:
-                    touching.append((str(o["object_index"]), str(q["object_index"]), gap))
+        for i, (a, sa) in enumerate(shapes):
+            for b, sb in shapes[i + 1:]:
+                if a not in moved and b not in moved:
+                    continue
+                gap = _gap(sa, sb)
+                if gap <= tol:
+                    touching.append((a, b, gap))
         for a, b, gap in touching:
             key = tuple(sorted((a, b)))
             g = groups.get(key)
@@ -71,7 +255,7 @@ def _contacts(trace):
             # The contact began after the previous frame: by this frame when the bodies already press
             # together, else (a gap of up to CONTACT_GAP) possibly only before the next one.
             t0 = ts[k - 1] if k > 0 else ts[0]
-            t_seen = ts[k] if gap <= 0.0 or k + 1 >= len(ts) else ts[k + 1]
+            t_seen = ts[k] if gap <= 0.0 or dense or k + 1 >= len(ts) else ts[k + 1]
             g = {"pair": key, "t0": t0, "t_seen": t_seen, "t1": ts[k], "begins": [t0], "ended": True,
                  "last_k": k}
             groups[key] = g

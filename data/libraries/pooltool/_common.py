@@ -40,14 +40,59 @@ def _span(idx, ts, t0, t1=None):
     return idx[a], idx[b], a, b
 
 
+CUSHION_KINDS = ("physics_ball_linear_cushion", "physics_ball_circular_cushion")
+
+
+def _roles(kind, p):
+    """(balls, other id) of a pooltool event, from `payload.agents` by pooltool's id conventions: the
+    order of the ids depends on the event kind, not on what the ids look like (cushion segments "1".."18"
+    look like ball ids; jaws are "1t".., pockets "lb".."rt"). stick_ball: (cue stick, ball); ball_ball:
+    (ball, ball); ball_*_cushion: (ball, cushion); ball_pocket: (ball, pocket); motion transitions:
+    (ball,). Falls back to annotrace's extra `ball` / `cushion` / `pocket` fields when agents are missing."""
+    ag = [str(a) for a in (p.get("agents") or [])]
+    other = None
+    if kind == "physics_stick_ball":
+        balls = ag[1:2] or ag[:1]
+    elif kind == "physics_ball_ball":
+        balls = ag[:2]
+    else:
+        balls = ag[:1]
+        if kind in CUSHION_KINDS or kind == "physics_ball_pocket":
+            other = ag[1] if len(ag) > 1 else None
+    if not balls and p.get("ball") is not None:
+        balls = [str(p["ball"])]
+    if other is None:
+        o = p.get("cushion") if kind in CUSHION_KINDS else p.get("pocket")
+        other = str(o) if o is not None else None
+    return balls, other
+
+
 def _events(trace, kinds):
-    """(t, payload) of events of the given kinds, in time order."""
+    """(t, payload) of events of the given kinds, in time order. Every payload is a copy with `ball`
+    (the first ball, `_roles`), and `cushion` / `pocket` where the kind has one, filled in from
+    `payload.agents`, so detectors read one shape whatever wrote the trace."""
     out = []
     for e in trace.get("events", []):
-        if e.get("kind") in kinds and e.get("t") is not None:
-            out.append((float(e["t"]), e.get("payload") or {}))
+        k = e.get("kind")
+        if k in kinds and e.get("t") is not None:
+            p = dict(e.get("payload") or {})
+            balls, other = _roles(k, p)
+            if balls and k != "physics_ball_ball":
+                p["ball"] = balls[0]
+            if other is not None:
+                p["cushion" if k in CUSHION_KINDS else "pocket"] = other
+            out.append((float(e["t"]), p))
     out.sort(key=lambda x: x[0])
     return out
+
+
+def _shot(trace, p):
+    """The cue parameters (V0, phi, theta, a, b) of a strike: its event payload when it carries them
+    (annotrace's simulator), else the trace's top-level `shot` object (pooltool exporters), else {}."""
+    if any(isinstance(p.get(k), (int, float)) for k in ("V0", "a", "b")):
+        return p
+    shot = trace.get("shot")
+    return shot if isinstance(shot, dict) else {}
 
 
 def _state(trace, k, bid):

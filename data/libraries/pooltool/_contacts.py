@@ -6,6 +6,8 @@ library.toml prepends it to the detectors that list it; it defines no find_patte
 KICK_ACCEL = 3.0  # m/s²: more than cloth friction (sliding ≈ 2 m/s²) can change a velocity
 KICK_FLOOR = 0.05  # m/s
 CONTACT_SLACK = 1.15  # × the sum of radii
+IMPULSE_MIN = 0.02  # m/s: the smallest ball-ball impulse (as a velocity change) taken as a collision
+FRICTION_ACCEL = 1.0  # m/s²: cloth friction (sliding) that an impulse fit may mistake for a push
 
 
 def _closest(pa, va, pb, vb, dt):
@@ -70,34 +72,55 @@ def _kinematic(trace):
                         s_, d = dt - s2, d2
                     reach = CONTACT_SLACK * (float(pa.get("radius") or 0.028575) + float(pb.get("radius") or 0.028575))
                     if d <= reach:
-                        near[a].append((b, t0 + s_))
-                        near[b].append((a, t0 + s_))
-            # A kick travels along touching balls (a struck ball pressed against another passes the
-            # impulse on and barely moves): the shortest chain between two kicked balls collided.
+                        # Line of centres (a -> b) at the closest approach.
+                        ss = s_
+                        px = [float(pa["position"][i]) + float(pa["velocity"][i]) * ss for i in (0, 1)]
+                        qx = [float(pb["position"][i]) + float(pb["velocity"][i]) * ss for i in (0, 1)]
+                        nx, ny = qx[0] - px[0], qx[1] - px[1]
+                        nn = (nx * nx + ny * ny) ** 0.5 or 1.0
+                        n = (nx / nn, ny / nn)
+                        if a < b:
+                            near[a].append((b, t0 + s_, n))
+                        else:
+                            near[b].append((a, t0 + s_, (-n[0], -n[1])))
+            # Impulses on the contact graph: each pair that touches in the interval may push its two balls
+            # apart along the line of centres (equal masses, so as velocity changes J >= 0). The
+            # non-negative J that best explain every ball's velocity change (a least-squares fit, by
+            # projected coordinate descent) tell which pairs collided: a ball pressed between two others
+            # passes the impulse on, and a pair that merely sits close takes none.
             hits = {}
-            kset = set(kicked)
-            for src in kicked:
-                back = {src: None}
-                queue = [src]
-                while queue:
-                    x = queue.pop(0)
-                    for y, ty in near.get(x, ()):
-                        if y not in back:
-                            back[y] = (x, ty)
-                            queue.append(y)
-                for dst in kicked:
-                    if dst == src or dst not in back:
-                        continue
-                    y = dst
-                    while back[y] is not None:
-                        x, ty = back[y]
-                        hits[tuple(sorted((x, y)))] = ty
-                        y = x
-            # A kicked ball touching no other kicked ball but touching one at rest hit that one.
-            for b in kicked:
-                if not any(b in pair for pair in hits) and near.get(b):
-                    y, ty = min(near[b], key=lambda e: e[1])
-                    hits[tuple(sorted((b, y)))] = ty
+            pairs = []
+            for a in near:
+                for b, ty, n in near[a]:
+                    if a < b:
+                        pairs.append((a, b, ty, n))
+            if pairs:
+                dv = {}
+                for b in live:
+                    v0, v1 = prev[b]["velocity"], cur[b]["velocity"]
+                    dv[b] = [float(v1[0]) - float(v0[0]), float(v1[1]) - float(v0[1])]
+                res = {b: list(v) for b, v in dv.items()}
+                J = [0.0] * len(pairs)
+                for _ in range(60):
+                    moved = 0.0
+                    for i, (a, b, ty, n) in enumerate(pairs):
+                        ra, rb = res[a], res[b]
+                        step = ((rb[0] - ra[0]) * n[0] + (rb[1] - ra[1]) * n[1]) / 2.0
+                        new = max(0.0, J[i] + step)
+                        d = new - J[i]
+                        if d != 0.0:
+                            J[i] = new
+                            ra[0] += d * n[0]
+                            ra[1] += d * n[1]
+                            rb[0] -= d * n[0]
+                            rb[1] -= d * n[1]
+                            moved = max(moved, abs(d))
+                    if moved < 1e-6:
+                        break
+                for i, (a, b, ty, n) in enumerate(pairs):
+                    if J[i] >= IMPULSE_MIN + FRICTION_ACCEL * dt:
+                        hits[(a, b)] = ty
+                kicked = [b for b in kicked if (res[b][0] ** 2 + res[b][1] ** 2) ** 0.5 > KICK_ACCEL * dt + KICK_FLOOR]
             paired = set()
             for (a, b), ty in sorted(hits.items(), key=lambda h: h[1]):
                 out.append(("physics_ball_ball", ty, {"agents": [a, b]}))

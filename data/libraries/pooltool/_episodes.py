@@ -4,11 +4,8 @@ library.toml prepends it to the detectors that list it; it defines no find_patte
 
 
 def _balls_of(kind, p):
-    """Ball ids an event involves (cushion and pocket ids are not balls)."""
-    if kind == "physics_ball_ball":
-        return [str(a) for a in (p.get("agents") or [])[:2]]
-    b = p.get("ball")
-    return [str(b)] if b is not None else []
+    """Ball ids an event involves (cushion and pocket ids are not balls; `_roles`)."""
+    return _roles(kind, p)[0]
 
 
 def _episodes(trace, starts, ends, state_name):

@@ -17,7 +17,7 @@ def _ball_events(trace, bid):
         k = e.get("kind", "")
         if not k.startswith("physics_") or e.get("t") is None:
             continue
-        balls = [str(x) for x in (p.get("agents") or [])[:2]] if k == "physics_ball_ball" else [str(p.get("ball"))]
+        balls = _roles(k, p)[0]
         if bid in balls:
             out.append(float(e["t"]))
     return sorted(out)

@@ -1,8 +1,10 @@
 """gentle touch: two balls meet softly (approach speed under 0.3 m/s), nudging rather than driving the
 struck ball.
 
-Uses the merged `physics_ball_ball` collisions; the approach speed comes from the event, or from the
-recorded velocities at the last timestep before contact when the event does not carry it."""
+Uses the merged `physics_ball_ball` collisions; the approach speed (along the line of centres, at the
+burst's first contact) comes from the event when it carries one (annotrace's `approach_speed`), else from
+the recorded states of the last timestep before the contact, moved on to its time. Without an event log
+the collisions are inferred from the recorded velocities (`_kinematic`)."""
 
 
 MERGE_S = 0.05
@@ -22,12 +24,20 @@ def find_pattern(trace):
             continue
         s, e, a, b = _span(idx, ts, g["t0"], g["t1"])
         x, y = g["key"]
-        speeds = [abs(float(p["approach_speed"])) for p in g["payloads"] if isinstance(p.get("approach_speed"), (int, float))]
+        first = g["payloads"][0]
         ox, oy = _state(trace, a, x), _state(trace, a, y)
-        if speeds:
-            v = max(speeds)
+        if isinstance(first.get("approach_speed"), (int, float)):
+            v = abs(float(first["approach_speed"]))
         elif ox is not None and oy is not None:
-            v = ((ox["velocity"][0] - oy["velocity"][0]) ** 2 + (ox["velocity"][1] - oy["velocity"][1]) ** 2) ** 0.5
+            # Along the line of centres at the first contact, both balls moved on from the frame before.
+            dt = g["t0"] - ts[a]
+            px = [ox["position"][i] + ox["velocity"][i] * dt for i in (0, 1)]
+            py = [oy["position"][i] + oy["velocity"][i] * dt for i in (0, 1)]
+            n = [py[0] - px[0], py[1] - px[1]]
+            nn = (n[0] ** 2 + n[1] ** 2) ** 0.5
+            if nn < 1e-9:
+                continue
+            v = abs(((ox["velocity"][0] - oy["velocity"][0]) * n[0] + (ox["velocity"][1] - oy["velocity"][1]) * n[1]) / nn)
         else:
             continue
         if v >= SOFT:

@@ -1,7 +1,7 @@
 """spin shot: the cue ball is struck off centre, so it carries follow, draw or side spin.
 
 From the strike's tip offsets (`a` side, `b` vertical, as fractions of the radius) in the stick-ball event
-when present, else from the cue ball's angular velocity just after the strike compared with natural roll.
+or the trace's top-level `shot` when present, else from the cue ball's angular velocity just after the strike compared with natural roll.
 Offsets below 0.2 R are a centre-ball hit. The span runs from the strike until the cue ball first rolls
 (while it slides, the spin is acting)."""
 
@@ -31,8 +31,9 @@ def find_pattern(trace):
     out = []
     for t, p in _events(trace, ("physics_stick_ball",)):
         bid = str(p.get("ball") or (p.get("agents") or ["", "cue"])[-1])
-        if isinstance(p.get("a"), (int, float)) and isinstance(p.get("b"), (int, float)):
-            side, vert = float(p["a"]), float(p["b"])
+        shot = _shot(trace, p)
+        if isinstance(shot.get("a"), (int, float)) and isinstance(shot.get("b"), (int, float)):
+            side, vert = float(shot["a"]), float(shot["b"])
         else:
             o = _state(trace, min(_at(ts, t) + 1, len(ts) - 1), bid)
             side, vert = _spin_from_state(o or {})
