@@ -156,15 +156,15 @@ fn state_at(trace: &crate::trace::Trace, id: &str, t: f64) -> Option<([f64; 2], 
 /// kind each (rules in `docs/accuracy.md`):
 ///
 /// * `spin shot` ↔ a `physics_stick_ball` whose tip offset `hypot(a, b)` is at least
-///   [`SPIN_MIN_OFFSET`]; the offsets come from the strike's payload (annotrace) or the trace's top-level
+///   `SPIN_MIN_OFFSET`; the offsets come from the strike's payload (annotrace) or the trace's top-level
 ///   `shot` (pooltool exporters); without either the strike grounds nothing.
 /// * `ball slowing` ↔ a `physics_rolling_stationary` that ends a roll begun by the same ball's
 ///   `physics_sliding_rolling` with nothing in between, when the roll lasted long enough to have started
-///   at [`SLOWING_MIN_SPEED`] or more: rolling friction decelerates at `u_r g`, so the start speed is
+///   at `SLOWING_MIN_SPEED` or more: rolling friction decelerates at `u_r g`, so the start speed is
 ///   `u_r g (t_stop − t_roll)` — event times only, no frame.
 /// * `gentle touch` and `high angle collision` ↔ a merged `ball collision` (as in [`pooltool_truth`])
-///   whose approach speed along the line of centres is below [`GENTLE_MAX_SPEED`], or whose cut angle is
-///   in [`HIGH_ANGLE_DEG`]; both from the two balls' states moved on to the first contact's time (the
+///   whose approach speed along the line of centres is below `GENTLE_MAX_SPEED`, or whose cut angle is
+///   in `HIGH_ANGLE_DEG`; both from the two balls' states moved on to the first contact's time (the
 ///   approach speed from the first contact's event when it records one, as annotrace's simulator does).
 pub fn pooltool_state_truth(trace: &crate::trace::Trace, merge_s: f64) -> Vec<TruthEvent> {
     let mut out = Vec::new();
