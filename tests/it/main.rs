@@ -18,3 +18,4 @@ mod reward;
 mod run;
 mod sandbox;
 mod simulate;
+mod sql_guard;
