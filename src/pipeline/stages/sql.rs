@@ -6,7 +6,7 @@
 //! `annotrace query`.
 //!
 //! The query only reads (`COPY`, `INSERT`, `CREATE`… are refused) and runs on one partition, so the same
-//! run gives the same table bytes; `memory_limit` and `timeout_s` bound it ([`StageLimits`], shared with
+//! run gives the same table bytes; `memory_limit` and `timeout_s` bound it (`StageLimits`, shared with
 //! `export`).
 
 use schemars::JsonSchema;
