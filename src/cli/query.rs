@@ -1,13 +1,20 @@
 //! `annotrace query "SQL"`: runs SQL over a run's tables and prints the result.
+//!
+//! The SQL only reads (the library refuses `COPY`, `INSERT`, `CREATE`, `SET`…); the one way to write a
+//! result is `--out FILE`, a path the user names: outside the run, or under the run's `exports/`, never
+//! elsewhere in the run folder. Limits come from `--memory-limit`/`--timeout`, else from
+//! `ANNOTRACE_SQL_MEMORY_LIMIT`/`ANNOTRACE_SQL_TIMEOUT` (read here), else the library's defaults.
 
 use std::io::Write;
 use std::path::PathBuf;
 
-use annotrace::query::{Format, RenderOptions, render};
-use annotrace::store::{AtomicFile, ParquetSink};
+use annotrace::query::read_only::check_output_path;
+use annotrace::query::settings::parse_timeout;
+use annotrace::query::{Format, MemoryLimit, QuerySettings, RenderOptions, RunQuery, render};
+use annotrace::store::{AtomicFile, ParquetSink, RunDir};
 use anyhow::Context;
 
-use super::{CliError, CliResult, open_query};
+use super::{CliError, CliResult};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -23,15 +30,48 @@ pub struct Args {
     /// Decimals for floats in table, markdown and latex output (csv and json keep full precision).
     #[arg(long, default_value_t = 4)]
     precision: usize,
-    /// Write to this file (atomically) instead of standard output.
+    /// Write to this file (atomically) instead of standard output: a path outside the run folder, or
+    /// under its exports/ folder.
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Memory the query may use (e.g. 512MiB, 8G, 25%); operators that can spill go to the temporary
+    /// folder, others fail. Default: ANNOTRACE_SQL_MEMORY_LIMIT, else 4 GiB or half the machine's
+    /// memory, whichever is smaller.
+    #[arg(long, value_name = "SIZE")]
+    memory_limit: Option<MemoryLimit>,
+    /// Stop the query with an error after this many seconds. Default: ANNOTRACE_SQL_TIMEOUT, else none.
+    #[arg(long, value_name = "SECS", value_parser = parse_timeout)]
+    timeout: Option<std::time::Duration>,
+    /// Threads (DataFusion partitions) for the query. 1, the default, gives the same result bytes on
+    /// every run; more is faster on large runs, but float aggregates may then differ in the last digits
+    /// and rows without ORDER BY come in varying order.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=1024))]
+    threads: u16,
 }
 
 pub fn run(args: Args) -> CliResult {
-    let q = open_query(&args.run)?;
-    // SQL mistakes are the user's: DataFusion's message is shown as is, exit code 2.
-    let result = q.sql(&args.sql).map_err(CliError::input)?;
+    if !args.run.is_dir() {
+        return Err(CliError::input(anyhow::anyhow!(
+            "{}: no such run folder",
+            args.run.display()
+        )));
+    }
+    if let Some(out) = &args.out {
+        check_output_path(&args.run, out).map_err(CliError::input)?;
+    }
+    let mut settings =
+        QuerySettings::resolve(args.memory_limit, args.timeout, &|k| std::env::var(k).ok())
+            .map_err(CliError::input)?;
+    settings.partitions = usize::from(args.threads);
+    let q = RunQuery::open_with(&RunDir::new(&args.run), settings).map_err(CliError::failed)?;
+    // The query's own faults (bad or refused SQL, over its limits) are the user's: exit code 2.
+    let result = q.sql(&args.sql).map_err(|e| {
+        if e.is_users() {
+            CliError::input(e)
+        } else {
+            CliError::failed(e)
+        }
+    })?;
     let opts = RenderOptions {
         precision: Some(args.precision),
         title: None,

@@ -1,8 +1,12 @@
 //! SQL over a run's tables with DataFusion, and the formats results are printed or exported in.
 //!
 //! **Owns:** registering every table of a run folder in a DataFusion `SessionContext` ([`RunQuery`]),
-//! running SQL and collecting results, listing tables with row counts and schemas, and rendering results
-//! ([`format`](mod@format)). **Does not:** write tables (stages do that through `store/`).
+//! running SQL under the session's limits and collecting results, listing tables with row counts and
+//! schemas, and rendering results ([`format`](mod@format)). **Does not:** write tables (stages do that
+//! through `store/`), nor let SQL write anything: every statement is checked before it runs
+//! ([`read_only`]) and `COPY`, `INSERT`, `CREATE`, `SET` and the like are refused with
+//! [`QueryError::NotReadOnly`]. Limits ([`settings`]): a memory pool, an optional time limit, and one
+//! partition by default so that results are reproducible to the last bit.
 //!
 //! The trace tables (`scenes`, `traces`, `timesteps`, `frames`, `events`) are always registered with
 //! their documented schemas, empty if the run has none yet, and expose the `env` partition as a column.
@@ -18,8 +22,13 @@
 //! ```
 
 pub mod format;
+pub mod read_only;
+pub mod settings;
 
+use std::num::NonZeroUsize;
+use std::path::PathBuf;
 use std::sync::Arc;
+use std::time::Duration;
 
 use arrow::array::{AsArray, RecordBatch};
 use arrow::datatypes::{DataType, Field, Schema, SchemaRef};
@@ -27,20 +36,70 @@ use datafusion::datasource::MemTable;
 use datafusion::datasource::file_format::parquet::ParquetFormat;
 use datafusion::datasource::listing::ListingOptions;
 use datafusion::error::DataFusionError;
+use datafusion::execution::memory_pool::{FairSpillPool, TrackConsumersPool};
+use datafusion::execution::runtime_env::RuntimeEnvBuilder;
 use datafusion::prelude::{SessionConfig, SessionContext};
 
 use crate::store::{RunDir, StoreError};
 use crate::trace::schema::{ENV_COLUMN, TRACE_TABLES, table_schema};
 
 pub use format::{Format, RenderOptions, UnknownFormat, render, render_string};
+pub use settings::{BadSetting, MemoryLimit, QuerySettings};
 
 /// A failure to register or query a run's tables.
+///
+/// [`is_users`](QueryError::is_users) tells the query's own faults (refused, too big, too slow, bad
+/// SQL) from the machine's (files, runtime).
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum QueryError {
     /// DataFusion rejected or failed the query; the message is DataFusion's own.
     #[error("{0}")]
     DataFusion(DataFusionError),
+    /// The statement would write files or change the session; queries only read the run.
+    #[error(
+        "refused: {statement} — SQL over a run is read-only (no COPY, INSERT, CREATE, DROP, SET…); \
+         write a result with `annotrace query … --out FILE` or an `export` stage"
+    )]
+    NotReadOnly {
+        /// What was refused, in SQL words (`COPY … TO '/tmp/f.csv'`, `INSERT INTO traces`).
+        statement: String,
+    },
+    /// The query needed more memory than the session's pool holds.
+    #[error(
+        "the query needs more memory than the SQL memory limit of {limit} (raise it with --memory-limit, \
+         the `memory_limit` stage parameter or ANNOTRACE_SQL_MEMORY_LIMIT): {detail}"
+    )]
+    MemoryLimit {
+        /// The limit.
+        limit: MemoryLimit,
+        /// DataFusion's account of who asked for what.
+        detail: String,
+    },
+    /// The query did not finish within its time limit.
+    #[error(
+        "the query did not finish within its time limit of {} s (--timeout, the `timeout_s` stage \
+         parameter or ANNOTRACE_SQL_TIMEOUT)", limit.as_secs_f64()
+    )]
+    Timeout {
+        /// The limit.
+        limit: Duration,
+    },
+    /// A result file would land inside the run's folders (only `exports/` takes files).
+    #[error(
+        "{}: refused to write a query result inside run folder {} (a file there could be read as part of a \
+         table); write it under {}/exports/ or outside the run",
+        path.display(), run.display(), run.display()
+    )]
+    OutputInRun {
+        /// The file asked for.
+        path: PathBuf,
+        /// The run folder.
+        run: PathBuf,
+    },
+    /// A limit given in a variable or parameter does not parse.
+    #[error(transparent)]
+    BadSetting(#[from] BadSetting),
     /// The run's files could not be listed.
     #[error(transparent)]
     Store(#[from] StoreError),
@@ -54,6 +113,53 @@ impl From<DataFusionError> for QueryError {
     // repeat them.
     fn from(e: DataFusionError) -> Self {
         QueryError::DataFusion(e)
+    }
+}
+
+impl QueryError {
+    /// Whether the query itself is at fault (bad or refused SQL, over its memory or time limit, a
+    /// result path inside the run, a bad limit) rather than the run's files or the machine.
+    pub fn is_users(&self) -> bool {
+        match self {
+            QueryError::DataFusion(e) => !matches!(
+                e.find_root(),
+                DataFusionError::IoError(_)
+                    | DataFusionError::ObjectStore(_)
+                    | DataFusionError::ParquetError(_)
+                    | DataFusionError::Internal(_)
+            ),
+            QueryError::Store(_) | QueryError::Runtime(_) => false,
+            QueryError::NotReadOnly { .. }
+            | QueryError::MemoryLimit { .. }
+            | QueryError::Timeout { .. }
+            | QueryError::OutputInRun { .. }
+            | QueryError::BadSetting(_) => true,
+        }
+    }
+
+    /// DataFusion's error, as [`QueryError::MemoryLimit`] when the memory pool ran out.
+    fn from_execution(e: DataFusionError, limit: MemoryLimit) -> Self {
+        match e.find_root() {
+            DataFusionError::ResourcesExhausted(detail) => QueryError::MemoryLimit {
+                limit,
+                detail: detail.clone(),
+            },
+            // The spill cap is an I/O error in DataFusion 55 (disk_manager.rs); only its text tells.
+            _ if e
+                .to_string()
+                .contains("during the spilling process has exceeded") =>
+            {
+                QueryError::MemoryLimit {
+                    limit,
+                    detail: format!(
+                        "its spill files outgrew {} in the temporary folder ({} × the memory limit)",
+                        settings::human_bytes(limit.bytes().saturating_mul(settings::SPILL_FACTOR)),
+                        settings::SPILL_FACTOR
+                    ),
+                }
+            }
+            _ => QueryError::DataFusion(e),
+        }
     }
 }
 
@@ -86,11 +192,13 @@ pub struct TableSummary {
     pub schema: SchemaRef,
 }
 
-/// A DataFusion session with every table of one run registered.
+/// A DataFusion session with every table of one run registered, under the limits of its
+/// [`QuerySettings`].
 pub struct RunQuery {
     ctx: SessionContext,
     runtime: tokio::runtime::Runtime,
     tables: Vec<(String, usize)>,
+    settings: QuerySettings,
 }
 
 fn with_env(schema: &Schema) -> SchemaRef {
@@ -100,18 +208,38 @@ fn with_env(schema: &Schema) -> SchemaRef {
 }
 
 impl RunQuery {
-    /// Registers the tables of `run`.
+    /// Registers the tables of `run` with the default [`QuerySettings`].
     pub fn open(run: &RunDir) -> Result<Self, QueryError> {
+        Self::open_with(run, QuerySettings::default())
+    }
+
+    /// Registers the tables of `run`; every statement runs under `settings`.
+    pub fn open_with(run: &RunDir, settings: QuerySettings) -> Result<Self, QueryError> {
+        let partitions = settings.partitions.max(1);
         let runtime = tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(std::thread::available_parallelism().map_or(2, |n| n.get()))
+            .worker_threads(
+                std::thread::available_parallelism()
+                    .map_or(2, |n| n.get())
+                    .min(partitions.max(2)),
+            )
             .thread_name("annotrace-query")
             .enable_all()
             .build()
             .map_err(QueryError::Runtime)?;
         let config = SessionConfig::new()
             .with_information_schema(true)
-            .with_default_catalog_and_schema("annotrace", "run");
-        let ctx = SessionContext::new_with_config(config);
+            .with_default_catalog_and_schema("annotrace", "run")
+            .with_target_partitions(partitions);
+        let limit = settings.memory_limit.bytes();
+        let pool = TrackConsumersPool::new(
+            FairSpillPool::new(usize::try_from(limit).unwrap_or(usize::MAX)),
+            NonZeroUsize::new(3).expect("non-zero"),
+        );
+        let env = RuntimeEnvBuilder::new()
+            .with_memory_pool(Arc::new(pool))
+            .with_max_temp_directory_size(limit.saturating_mul(settings::SPILL_FACTOR))
+            .build_arc()?;
+        let ctx = SessionContext::new_with_config_rt(config, env);
         let mut tables = Vec::new();
         let found = run.tables()?;
         for name in TRACE_TABLES {
@@ -141,16 +269,40 @@ impl RunQuery {
             ctx,
             runtime,
             tables,
+            settings,
         })
     }
 
-    /// Runs one SQL statement and collects its result.
+    /// The settings this session runs under.
+    pub fn settings(&self) -> &QuerySettings {
+        &self.settings
+    }
+
+    /// Runs one SQL statement and collects its result. The statement must only read
+    /// ([`QueryError::NotReadOnly`] otherwise, checked before anything runs) and finish within the
+    /// session's memory pool and time limit.
     pub fn sql(&self, sql: &str) -> Result<QueryResult, QueryError> {
-        self.runtime.block_on(async {
-            let df = self.ctx.sql(sql).await?;
+        let limit = self.settings.memory_limit;
+        let run = async {
+            let plan = self.ctx.state().create_logical_plan(sql).await?;
+            read_only::check_plan(&plan)?;
+            let df = self.ctx.execute_logical_plan(plan).await?;
             let schema: SchemaRef = Arc::new(df.schema().as_arrow().clone());
-            let batches = df.collect().await?;
+            let batches = df
+                .collect()
+                .await
+                .map_err(|e| QueryError::from_execution(e, limit))?;
             Ok(QueryResult { schema, batches })
+        };
+        self.runtime.block_on(async {
+            match self.settings.timeout {
+                // DataFusion's operators yield to the runtime between batches, so the timer fires
+                // even in a query that never waits for input; dropping the future cancels the query.
+                Some(t) => tokio::time::timeout(t, run)
+                    .await
+                    .unwrap_or(Err(QueryError::Timeout { limit: t })),
+                None => run.await,
+            }
         })
     }
 

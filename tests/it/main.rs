@@ -20,3 +20,4 @@ mod run;
 mod sandbox;
 mod simulate;
 mod snapshots_cli;
+mod sql_guard;

@@ -1,7 +1,10 @@
 //! `export`: writes a table, or the result of a query, as a file under the run's `exports/` folder.
 //!
 //! Formats: CSV, Markdown, LaTeX (booktabs), JSON, JSON Lines and Parquet. The file is written
-//! atomically; its name defaults to the table (or stage) name with the format's extension.
+//! atomically; its name defaults to the table (or stage) name with the format's extension. The file
+//! is always a plain name under the run's `exports/`; the query only reads (`COPY`, `INSERT`… are
+//! refused), runs on one partition so that the same run gives the same bytes, and takes the same
+//! `memory_limit` and `timeout_s` as `sql`.
 
 use std::io::Write;
 
@@ -10,6 +13,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use super::SqlSource;
+use super::sql::StageLimits;
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
@@ -84,6 +88,14 @@ pub struct ExportParams {
     /// Caption line written above the table (Markdown, LaTeX).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub title: Option<String>,
+    /// Memory the query may use (e.g. "512MiB", "8G", "25%"; default: ANNOTRACE_SQL_MEMORY_LIMIT, else
+    /// 4 GiB or half the machine's memory, whichever is smaller).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub memory_limit: Option<String>,
+    /// Fail the stage if the query runs longer than this many seconds (default:
+    /// ANNOTRACE_SQL_TIMEOUT, else no limit).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub timeout_s: Option<f64>,
 }
 
 impl Default for ExportParams {
@@ -96,6 +108,8 @@ impl Default for ExportParams {
             file: None,
             precision: 4,
             title: None,
+            memory_limit: None,
+            timeout_s: None,
         }
     }
 }
@@ -140,10 +154,12 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     }
     let precision = p.precision as usize;
     let title = p.title;
+    let limits = StageLimits::from_params(p.memory_limit.as_deref(), p.timeout_s)?;
     Ok(Box::new(ExportStage {
         source,
         format,
         file,
+        limits,
         opts: RenderOptions {
             precision: Some(precision),
             title,
@@ -163,6 +179,7 @@ pub struct ExportStage {
     source: Source,
     format: Format,
     file: String,
+    limits: StageLimits,
     opts: RenderOptions,
 }
 
@@ -175,7 +192,7 @@ impl Stage for ExportStage {
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
-        let query = RunQuery::open(ctx.run())?;
+        let query = RunQuery::open_with(ctx.run(), self.limits.settings()?)?;
         let sql = match &self.source {
             Source::Table(t) => {
                 if !query.has_table(t) {

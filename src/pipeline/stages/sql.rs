@@ -4,6 +4,10 @@
 //! (`sql = "SELECT …"`). It sees every table finished so far; its result is written to
 //! `<output>/<stage>.result.parquet` and is queryable as `<output>` by later stages and by
 //! `annotrace query`.
+//!
+//! The query only reads (`COPY`, `INSERT`, `CREATE`… are refused) and runs on one partition, so the same
+//! run gives the same table bytes; `memory_limit` and `timeout_s` bound it (`StageLimits`, shared with
+//! `export`).
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
@@ -14,7 +18,8 @@ use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
-use crate::query::RunQuery;
+use crate::query::settings::timeout_from_secs;
+use crate::query::{MemoryLimit, QueryError, QuerySettings, RunQuery};
 use crate::trace::schema::TRACE_TABLES;
 
 /// The `sql` stage kind.
@@ -42,6 +47,51 @@ pub struct SqlParams {
     /// Name of the result table (default: the stage id).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub output: Option<String>,
+    /// Memory the query may use (e.g. "512MiB", "8G", "25%"; default: ANNOTRACE_SQL_MEMORY_LIMIT, else
+    /// 4 GiB or half the machine's memory, whichever is smaller).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub memory_limit: Option<String>,
+    /// Fail the stage if the query runs longer than this many seconds (default:
+    /// ANNOTRACE_SQL_TIMEOUT, else no limit).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub timeout_s: Option<f64>,
+}
+
+/// The limits an `sql` or `export` stage's parameters set for its query; what they leave out comes from
+/// the `ANNOTRACE_SQL_*` variables when the stage runs, then the defaults.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct StageLimits {
+    memory_limit: Option<MemoryLimit>,
+    timeout: Option<std::time::Duration>,
+}
+
+impl StageLimits {
+    /// From the `memory_limit` and `timeout_s` parameters.
+    pub(crate) fn from_params(
+        memory_limit: Option<&str>,
+        timeout_s: Option<f64>,
+    ) -> Result<Self, BuildError> {
+        Ok(StageLimits {
+            memory_limit: memory_limit.map(str::parse).transpose().map_err(
+                |e: crate::query::settings::BadMemoryLimit| {
+                    BuildError::param("memory_limit", e.to_string())
+                },
+            )?,
+            timeout: timeout_s
+                .map(timeout_from_secs)
+                .transpose()
+                .map_err(|e| BuildError::param("timeout_s", e))?,
+        })
+    }
+
+    /// The settings to open the run with: these limits over the variables, on one partition.
+    pub(crate) fn settings(&self) -> Result<QuerySettings, QueryError> {
+        Ok(QuerySettings::resolve(
+            self.memory_limit,
+            self.timeout,
+            &|k| std::env::var(k).ok(),
+        )?)
+    }
 }
 
 /// The result table's name for a stage.
@@ -75,7 +125,12 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
             format!("{output:?} is a reserved table name"),
         ));
     }
-    Ok(Box::new(SqlStage { source, output }))
+    let limits = StageLimits::from_params(p.memory_limit.as_deref(), p.timeout_s)?;
+    Ok(Box::new(SqlStage {
+        source,
+        output,
+        limits,
+    }))
 }
 
 /// The `sql` stage.
@@ -83,6 +138,7 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
 pub struct SqlStage {
     source: SqlSource,
     output: String,
+    limits: StageLimits,
 }
 
 impl Stage for SqlStage {
@@ -92,7 +148,7 @@ impl Stage for SqlStage {
 
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
         let sql = self.source.text()?;
-        let query = RunQuery::open(ctx.run())?;
+        let query = RunQuery::open_with(ctx.run(), self.limits.settings()?)?;
         let result = query.sql(&sql)?;
         let mut sink = ctx
             .staging()
