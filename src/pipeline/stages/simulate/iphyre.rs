@@ -225,57 +225,6 @@ impl IphyreSimulation {
             }
         }
     }
-
-    /// Simulates items `lo..hi` into one shard's files; the shard's counts.
-    fn fill(
-        &self,
-        ctx: &StageContext<'_>,
-        sinks: &mut ShardSinks<'_, '_>,
-        lo: u64,
-        hi: u64,
-    ) -> Result<Value, StageError> {
-        let (mut traces, mut successes, mut eliminations, mut reward) = (0u64, 0u64, 0u64, 0.0);
-        for i in lo..hi {
-            let (game, sample, trace_id, clicks) = self.item(i);
-            let scene_id = format!("iphyre-{}", game.name);
-            if sample == 0 {
-                let spec = json!({
-                    "game": game.name,
-                    "index": game.index,
-                    "fold": game.fold,
-                    "fps": self.params.fps,
-                    "objects": game.objects.len(),
-                    "eliminable": game.eliminable().count(),
-                    "joints": game.joints,
-                    "springs": game.springs,
-                });
-                let batch = scene_batch(
-                    &scene_id,
-                    &game.name,
-                    sinks.source(),
-                    game.objects.len(),
-                    &spec,
-                )?;
-                sinks.write("scenes", &batch)?;
-            }
-            let result = Episode::new(game, &clicks, &self.params, true)
-                .map_err(|e| StageError::Input(format!("trace {trace_id}: {e}")))?
-                .run();
-            let trace = trace_of(&result, game, &trace_id);
-            traces += 1;
-            successes += u64::from(result.success);
-            eliminations += result.eliminations as u64;
-            reward += result.reward;
-            sinks.write_trace(&trace, &scene_id, i == lo)?;
-            ctx.progress().advance(ctx.stage_id(), 1);
-        }
-        Ok(json!({
-            "traces": traces,
-            "successes": successes,
-            "eliminations": eliminations,
-            "reward": reward,
-        }))
-    }
 }
 
 impl Simulation for IphyreSimulation {
@@ -323,7 +272,47 @@ impl Simulation for IphyreSimulation {
         lo: u64,
         hi: u64,
     ) -> Result<Value, StageError> {
-        self.fill(ctx, sinks, lo, hi)
+        let (mut traces, mut successes, mut eliminations, mut reward) = (0u64, 0u64, 0u64, 0.0);
+        for i in lo..hi {
+            let (game, sample, trace_id, clicks) = self.item(i);
+            let scene_id = format!("iphyre-{}", game.name);
+            if sample == 0 {
+                let spec = json!({
+                    "game": game.name,
+                    "index": game.index,
+                    "fold": game.fold,
+                    "fps": self.params.fps,
+                    "objects": game.objects.len(),
+                    "eliminable": game.eliminable().count(),
+                    "joints": game.joints,
+                    "springs": game.springs,
+                });
+                let batch = scene_batch(
+                    &scene_id,
+                    &game.name,
+                    sinks.source(),
+                    game.objects.len(),
+                    &spec,
+                )?;
+                sinks.write("scenes", &batch)?;
+            }
+            let result = Episode::new(game, &clicks, &self.params, true)
+                .map_err(|e| StageError::Input(format!("trace {trace_id}: {e}")))?
+                .run();
+            let trace = trace_of(&result, game, &trace_id);
+            traces += 1;
+            successes += u64::from(result.success);
+            eliminations += result.eliminations as u64;
+            reward += result.reward;
+            sinks.write_trace(&trace, &scene_id, i == lo)?;
+            ctx.progress().advance(ctx.stage_id(), 1);
+        }
+        Ok(json!({
+            "traces": traces,
+            "successes": successes,
+            "eliminations": eliminations,
+            "reward": reward,
+        }))
     }
 
     fn report(&self, sums: &ShardTotals) -> (SimulateSummary, String) {

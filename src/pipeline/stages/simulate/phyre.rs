@@ -236,9 +236,45 @@ impl PhyreSimulation {
             }
         }
     }
+}
 
-    /// Simulates items `lo..hi` into one shard's files; the shard's counts.
-    fn fill(
+impl Simulation for PhyreSimulation {
+    /// The resolved seed, the tasks, the stride and the task data: a changed pipeline seed reruns.
+    fn fingerprint_extra(&self) -> Result<Value, StageError> {
+        let work = match &self.work {
+            Work::Dataset {
+                tasks,
+                samples,
+                seed,
+            } => json!({
+                "seed": seed,
+                "samples": samples,
+                "tasks": hex(&Sha256::digest(tasks.join(",").as_bytes())),
+                "n_tasks": tasks.len(),
+            }),
+            Work::Replay { task, action } => {
+                json!({"task": task, "action": [action.x, action.y, action.r]})
+            }
+        };
+        let data = hex(&Sha256::digest(DEFAULT_TASKS_GZ));
+        Ok(
+            json!({"env": "phyre", "stride": self.record.stride, "tasks_data": &data[..16], "work": work}),
+        )
+    }
+
+    fn env(&self) -> Env {
+        Env::Phyre
+    }
+
+    fn items(&self) -> u64 {
+        self.total()
+    }
+
+    fn trace_ids(&self, i: u64) -> Vec<String> {
+        vec![self.item(i).2]
+    }
+
+    fn fill_shard(
         &self,
         ctx: &StageContext<'_>,
         sinks: &mut ShardSinks<'_, '_>,
@@ -287,53 +323,6 @@ impl PhyreSimulation {
             "invalid": invalid,
             "steps": steps,
         }))
-    }
-}
-
-impl Simulation for PhyreSimulation {
-    /// The resolved seed, the tasks, the stride and the task data: a changed pipeline seed reruns.
-    fn fingerprint_extra(&self) -> Result<Value, StageError> {
-        let work = match &self.work {
-            Work::Dataset {
-                tasks,
-                samples,
-                seed,
-            } => json!({
-                "seed": seed,
-                "samples": samples,
-                "tasks": hex(&Sha256::digest(tasks.join(",").as_bytes())),
-                "n_tasks": tasks.len(),
-            }),
-            Work::Replay { task, action } => {
-                json!({"task": task, "action": [action.x, action.y, action.r]})
-            }
-        };
-        let data = hex(&Sha256::digest(DEFAULT_TASKS_GZ));
-        Ok(
-            json!({"env": "phyre", "stride": self.record.stride, "tasks_data": &data[..16], "work": work}),
-        )
-    }
-
-    fn env(&self) -> Env {
-        Env::Phyre
-    }
-
-    fn items(&self) -> u64 {
-        self.total()
-    }
-
-    fn trace_ids(&self, i: u64) -> Vec<String> {
-        vec![self.item(i).2]
-    }
-
-    fn fill_shard(
-        &self,
-        ctx: &StageContext<'_>,
-        sinks: &mut ShardSinks<'_, '_>,
-        lo: u64,
-        hi: u64,
-    ) -> Result<Value, StageError> {
-        self.fill(ctx, sinks, lo, hi)
     }
 
     fn report(&self, sums: &ShardTotals) -> (SimulateSummary, String) {

@@ -267,7 +267,44 @@ impl Simulation for PoolSimulation {
         lo: u64,
         hi: u64,
     ) -> Result<Value, StageError> {
-        self.fill(ctx, sinks, lo, hi)
+        let (mut traces, mut successes, mut capped, mut events) = (0u64, 0u64, 0u64, 0u64);
+        for index in lo..hi {
+            let (scene, shots) = self.scene_work(index);
+            let system = scene
+                .system(&self.config)
+                .map_err(|e| StageError::Input(format!("scene {}: {e}", scene.scene_id)))?;
+            let mut spec = scene.to_json();
+            spec["table"] = json!(self.config.name);
+            spec["index"] = json!(index);
+            let batch = scene_batch(
+                &scene.scene_id,
+                &scene.scene_id,
+                sinks.source(),
+                scene.balls.len(),
+                &spec,
+            )?;
+            sinks.write("scenes", &batch)?;
+            for (trace_id, shot) in &shots {
+                let sim = simulate(&system, shot, &self.sim)
+                    .map_err(|e| StageError::Input(format!("trace {trace_id}: {e}")))?;
+                let trace = trace_of(&sim, &scene, shot, trace_id, &self.trace);
+                traces += 1;
+                successes += u64::from(trace.outcome.success);
+                capped += u64::from(matches!(
+                    trace.outcome.terminal_status.as_str(),
+                    "max_events" | "max_time"
+                ));
+                events += sim.events.len() as u64;
+                sinks.write_trace(&trace, &scene.scene_id, index == lo)?;
+            }
+            ctx.progress().advance(ctx.stage_id(), 1);
+        }
+        Ok(json!({
+            "traces": traces,
+            "successes": successes,
+            "capped": capped,
+            "physics_events": events,
+        }))
     }
 
     fn report(&self, sums: &ShardTotals) -> (SimulateSummary, String) {
@@ -321,54 +358,6 @@ impl PoolSimulation {
                 )
             }
         }
-    }
-
-    /// Simulates items `lo..hi` into one shard's files; the shard's counts.
-    fn fill(
-        &self,
-        ctx: &StageContext<'_>,
-        sinks: &mut ShardSinks<'_, '_>,
-        lo: u64,
-        hi: u64,
-    ) -> Result<Value, StageError> {
-        let (mut traces, mut successes, mut capped, mut events) = (0u64, 0u64, 0u64, 0u64);
-        for index in lo..hi {
-            let (scene, shots) = self.scene_work(index);
-            let system = scene
-                .system(&self.config)
-                .map_err(|e| StageError::Input(format!("scene {}: {e}", scene.scene_id)))?;
-            let mut spec = scene.to_json();
-            spec["table"] = json!(self.config.name);
-            spec["index"] = json!(index);
-            let batch = scene_batch(
-                &scene.scene_id,
-                &scene.scene_id,
-                sinks.source(),
-                scene.balls.len(),
-                &spec,
-            )?;
-            sinks.write("scenes", &batch)?;
-            for (trace_id, shot) in &shots {
-                let sim = simulate(&system, shot, &self.sim)
-                    .map_err(|e| StageError::Input(format!("trace {trace_id}: {e}")))?;
-                let trace = trace_of(&sim, &scene, shot, trace_id, &self.trace);
-                traces += 1;
-                successes += u64::from(trace.outcome.success);
-                capped += u64::from(matches!(
-                    trace.outcome.terminal_status.as_str(),
-                    "max_events" | "max_time"
-                ));
-                events += sim.events.len() as u64;
-                sinks.write_trace(&trace, &scene.scene_id, index == lo)?;
-            }
-            ctx.progress().advance(ctx.stage_id(), 1);
-        }
-        Ok(json!({
-            "traces": traces,
-            "successes": successes,
-            "capped": capped,
-            "physics_events": events,
-        }))
     }
 }
 
