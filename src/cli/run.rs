@@ -26,7 +26,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args, quiet: bool) -> CliResult {
-    let spec = PipelineSpec::from_file(&args.pipeline).map_err(CliError::input)?;
+    let spec = PipelineSpec::from_file(&args.pipeline)?;
     let opts = RunOptions {
         run_dir: args.run_dir,
         force: args.force,

@@ -93,9 +93,40 @@ pub enum Action {
     /// Finished with the same fingerprint: skipped.
     Cached,
     /// Will run, for this reason.
-    Run(&'static str),
+    Run(RunReason),
     /// Not selected (`--until`).
     Skipped,
+}
+
+/// Why the runner runs a stage.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RunReason {
+    /// `--force` names it or a stage it depends on.
+    Forced,
+    /// The manifest has no record of it.
+    New,
+    /// Its fingerprint differs from the recorded one.
+    Changed,
+    /// It finished, but its outputs are not all there.
+    OutputsMissing,
+    /// It was interrupted while running or committing: finished shards are kept.
+    Resume,
+    /// It failed the last time.
+    FailedBefore,
+}
+
+impl RunReason {
+    /// The reason as `run --explain` prints it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            RunReason::Forced => "forced",
+            RunReason::New => "new",
+            RunReason::Changed => "changed",
+            RunReason::OutputsMissing => "outputs missing",
+            RunReason::Resume => "resume",
+            RunReason::FailedBefore => "failed before",
+        }
+    }
 }
 
 /// One line of `annotrace run --explain`.
@@ -117,7 +148,7 @@ impl std::fmt::Display for PlannedStage {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let action = match &self.action {
             Action::Cached => "cached".to_string(),
-            Action::Run(why) => format!("run ({why})"),
+            Action::Run(why) => format!("run ({})", why.as_str()),
             Action::Skipped => "not selected".to_string(),
         };
         write!(
@@ -276,18 +307,20 @@ fn plan_with(
             let action = if selected.as_ref().is_some_and(|s| !s.contains(&def.id)) {
                 Action::Skipped
             } else if forced.contains(&def.id) {
-                Action::Run("forced")
+                Action::Run(RunReason::Forced)
             } else {
                 match manifest.stages.get(&def.id) {
-                    None => Action::Run("new"),
-                    Some(r) if r.fingerprint != fp => Action::Run("changed"),
+                    None => Action::Run(RunReason::New),
+                    Some(r) if r.fingerprint != fp => Action::Run(RunReason::Changed),
                     Some(r) => match r.status {
                         StageStatus::Finished if manifest.outputs_present(run, &def.id) => {
                             Action::Cached
                         }
-                        StageStatus::Finished => Action::Run("outputs missing"),
-                        StageStatus::Running | StageStatus::Committing => Action::Run("resume"),
-                        StageStatus::Failed => Action::Run("failed before"),
+                        StageStatus::Finished => Action::Run(RunReason::OutputsMissing),
+                        StageStatus::Running | StageStatus::Committing => {
+                            Action::Run(RunReason::Resume)
+                        }
+                        StageStatus::Failed => Action::Run(RunReason::FailedBefore),
                     },
                 }
             };
@@ -410,7 +443,7 @@ fn run_locked(
         let staging = run.staging(&def.id);
         let previous = manifest.stages.get(&def.id).cloned();
         let resuming = previous.as_ref().is_some_and(|p| {
-            p.fingerprint == planned.fingerprint && planned.action == Action::Run("resume")
+            p.fingerprint == planned.fingerprint && planned.action == Action::Run(RunReason::Resume)
         });
         if let Some(prev) = previous
             .as_ref()

@@ -463,24 +463,18 @@ impl EvolveStage {
             }
         };
         if !use_llm {
-            let m = MutateProposer::new(None, self.max_edits)
-                .map_err(|e| StageError::Input(e.to_string()))?;
+            let m = MutateProposer::new(None, self.max_edits)?;
             return Ok((Box::new(m), None));
         }
         let mut settings = self.llm.clone();
         settings.seed = Some(settings.seed.unwrap_or(seed));
-        let config = LlmConfig::resolve(&settings, &|k| std::env::var(k).ok())
-            .map_err(|e| StageError::Input(format!("llm: {e}")))?;
+        let config = LlmConfig::resolve(&settings, &|k| std::env::var(k).ok())?;
         let dir = self
             .prompts
             .clone()
             .or_else(|| Some(self.project.join("prompts")).filter(|d| d.is_dir()));
-        let prompts = Prompts::load(dir.as_deref())
-            .map_err(|e| StageError::Input(format!("prompts: {e}")))?;
-        let client = Arc::new(
-            LlmClient::new(config, Some(ctx.run()))
-                .map_err(|e| StageError::Input(format!("llm: {e}")))?,
-        );
+        let prompts = Prompts::load(dir.as_deref())?;
+        let client = Arc::new(LlmClient::new(config, Some(ctx.run()))?);
         let proposer = LlmProposer::new(client.clone(), Arc::new(prompts));
         Ok((Box::new(proposer), Some(client)))
     }
@@ -537,17 +531,23 @@ impl Stage for EvolveStage {
             traces.extend(read_traces(ctx.run(), &set)?);
         }
         if traces.len() < 3 {
-            return Err(StageError::Input(format!(
-                "evolve needs at least 3 {env} traces in the run (found {}): add a simulate or import stage as input",
-                traces.len()
-            )));
+            return Err(StageError::TooFewTraces {
+                stage: "evolve",
+                what: format!("{env} traces in the run"),
+                needed: 3,
+                found: traces.len(),
+                hint: ": add a simulate or import stage as input",
+            });
         }
         let (train, holdout) = split(traces, config.seed, self.holdout, self.max_traces);
         if train.len() < 2 {
-            return Err(StageError::Input(format!(
-                "only {} training trace(s) after the held-out split",
-                train.len()
-            )));
+            return Err(StageError::TooFewTraces {
+                stage: "evolve",
+                what: "training traces after the held-out split".into(),
+                needed: 2,
+                found: train.len(),
+                hint: ": lower `holdout` or add traces",
+            });
         }
         ctx.progress()
             .set_total(ctx.stage_id(), config.budget * self.labels.len() as u64);
@@ -556,8 +556,7 @@ impl Stage for EvolveStage {
         let dx_s = t_dx.elapsed().as_secs_f64();
         let mut limits = self.setup.limits.clone();
         limits.trace_cache = limits.trace_cache.max(train.len() + holdout.len() + 4);
-        let pool =
-            crate::detect::WorkerPool::new(limits).map_err(|e| StageError::Input(e.to_string()))?;
+        let pool = crate::detect::WorkerPool::new(limits)?;
         let (proposer, llm_client) = self.proposer(ctx, config.seed)?;
         let checkpoint = StagingCheckpoint {
             ctx,
@@ -641,8 +640,7 @@ impl Stage for EvolveStage {
         let base = self.setup.library.detectors.clone();
         let result = discovery.run(base, &self.labels, &mut after);
         if let Some(c) = &llm_client {
-            c.flush()
-                .map_err(|e| StageError::Input(format!("llm_calls: {e}")))?;
+            c.flush()?;
         }
         let (library, results) = match result {
             Ok(x) => x,
@@ -651,7 +649,7 @@ impl Stage for EvolveStage {
                     .failure
                     .borrow_mut()
                     .take()
-                    .unwrap_or_else(|| StageError::Input(e.to_string())));
+                    .unwrap_or_else(|| e.into()));
             }
         };
         if !reused {
@@ -671,7 +669,7 @@ impl Stage for EvolveStage {
             config.budget
         );
         write_library(&out_dir, &name, env, &description, &library)
-            .map_err(|e| StageError::Input(format!("{}: {e}", out_dir.display())))?;
+            .map_err(|e| StageError::io(&out_dir, e))?;
         let wall: f64 = results.iter().map(|r| r.outcome.wall_s).sum();
         let prop: f64 = results.iter().map(|r| r.outcome.propose_s).sum();
         let accepted = results.iter().filter(|r| r.accepted).count();

@@ -214,7 +214,7 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     };
     bounds
         .dims(&PoolEnv::default())
-        .map_err(|e| BuildError::param("v0_max", e))?;
+        .map_err(|e| BuildError::param("v0_max", e.to_string()))?;
     Ok(Box::new(OptimiseStage {
         scenes: count("scenes", p.scenes, 1)? as usize,
         scene_seed: p.scene_seed,
@@ -271,8 +271,7 @@ impl Stage for OptimiseStage {
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
         let mut env = PoolEnv::default();
         env.trace.dt = self.dt;
-        let scenes =
-            scenes(&env, self.layout, self.scenes, self.scene_seed).map_err(StageError::Input)?;
+        let scenes = scenes(&env, self.layout, self.scenes, self.scene_seed)?;
         let settings = Settings {
             env,
             bounds: self.bounds,
@@ -300,10 +299,16 @@ impl Stage for OptimiseStage {
             }
             let pool_ref = pool.as_ref().expect("just started");
             let schema = schema.get_or_insert_with(|| probe_schema(&self.library, pool_ref));
-            let program = compile(&goal.program, schema)
-                .map_err(|e| StageError::Input(format!("goal {id:?}: program: {e}")))?;
-            let rule = Rule::parse(&goal.verify)
-                .map_err(|e| StageError::Input(format!("goal {id:?}: verify: {e}")))?;
+            let program = compile(&goal.program, schema).map_err(|source| StageError::Goal {
+                id: id.clone(),
+                part: "program",
+                source: Box::new(source),
+            })?;
+            let rule = Rule::parse(&goal.verify).map_err(|source| StageError::Goal {
+                id: id.clone(),
+                part: "verify",
+                source: Box::new(source),
+            })?;
             let task = GoalTask {
                 id: id.clone(),
                 detectors: detectors_for(&self.library, &labels_used(&program)),
@@ -333,8 +338,7 @@ impl Stage for OptimiseStage {
                 &chains,
                 Some(pool_ref),
                 |_| progress.advance(ctx.stage_id(), 1),
-            )
-            .map_err(StageError::Input)?;
+            )?;
             // Chain seeds are hashes; the table records the seed's index 0..seeds.
             let seed_index: BTreeMap<u64, i64> = chains
                 .iter()
@@ -429,8 +433,7 @@ impl Stage for OptimiseStage {
         }
         let cs = curves(points.iter().map(|(k, b, s, ok)| (k.as_str(), *b, *s, *ok)));
         let dir = ctx.run().exports_dir().join(ctx.stage_id());
-        std::fs::create_dir_all(&dir)
-            .map_err(|e| StageError::Input(format!("{}: {e}", dir.display())))?;
+        std::fs::create_dir_all(&dir).map_err(|e| StageError::io(&dir, e))?;
         let title = format!(
             "{} ({} goals × {} scenes × {} seeds)",
             self.title,
@@ -438,8 +441,7 @@ impl Stage for OptimiseStage {
             self.scenes,
             self.seeds
         );
-        let io =
-            |p: &PathBuf, e: std::io::Error| StageError::Input(format!("{}: {e}", p.display()));
+        let io = |p: &PathBuf, e: std::io::Error| StageError::io(p, e);
         let svg_path = dir.join("success_vs_budget.svg");
         write_atomic(&svg_path, svg(&cs, &title).as_bytes()).map_err(|e| io(&svg_path, e))?;
         let png_path = dir.join("success_vs_budget.png");
