@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use annotrace::pipeline::{PipelineSpec, RunOptions, explain, run as run_pipeline};
 
 use super::progress::Terminal;
-use super::{CliError, CliResult, fault_from_env, run_error};
+use super::{CliResult, fault_from_env, run_error};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
