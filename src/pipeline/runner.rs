@@ -29,7 +29,7 @@ use super::progress::Progress;
 use super::spec::PipelineSpec;
 use super::stage::{FaultPlan, Stage, StageContext, StageError};
 use crate::digest::hex;
-use crate::store::{RunDir, StoreError, remove_files};
+use crate::store::{RunDir, Staging, StoreError, remove_files};
 
 /// Options of one `annotrace run`.
 #[derive(Clone, Debug, Default)]
@@ -404,6 +404,15 @@ pub fn run(
     result
 }
 
+/// One invocation of the runner over a locked run folder: what every step of a stage needs.
+struct Session<'a> {
+    spec: &'a PipelineSpec,
+    opts: &'a RunOptions,
+    progress: &'a dyn Progress,
+    built: &'a Built,
+    run: &'a RunDir,
+}
+
 fn run_locked(
     spec: &PipelineSpec,
     opts: &RunOptions,
@@ -420,6 +429,13 @@ fn run_locked(
             seed: spec.seed,
         });
     }
+    let session = Session {
+        spec,
+        opts,
+        progress,
+        built,
+        run,
+    };
     let plan = plan_with(spec, opts, built, run, &manifest);
     let mut reports = Vec::new();
     for (planned, &i) in plan.iter().zip(&built.order) {
@@ -449,37 +465,87 @@ fn run_locked(
             .as_ref()
             .filter(|p| resuming && p.status == StageStatus::Committing)
         {
-            // Killed while moving files into place: finish the move.
-            staging.commit()?;
-            let mut rec = prev.clone();
-            rec.status = StageStatus::Finished;
-            rec.finished = Some(now());
-            manifest.stages.insert(def.id.clone(), rec.clone());
-            manifest.save(run)?;
-            progress.stage_finished(&def.id, "resumed commit");
-            reports.push(StageReport {
-                id: def.id.clone(),
-                cached: false,
-                rows: rec.rows,
-                summary: rec.summary,
-                seconds: 0.0,
-            });
+            reports.push(session.finish_commit(&mut manifest, &staging, &def.id, prev)?);
             continue;
         }
+        session.reset_staging(&staging, &def.id, previous.as_ref(), resuming)?;
+        reports.push(session.execute(&mut manifest, planned, i, staging)?);
+    }
+    Ok(RunReport {
+        run_dir: run.root().to_path_buf(),
+        stages: reports,
+    })
+}
+
+impl Session<'_> {
+    /// A stage killed while moving its files into place: finishes the move and records it finished.
+    fn finish_commit(
+        &self,
+        manifest: &mut Manifest,
+        staging: &Staging,
+        id: &str,
+        prev: &StageRecord,
+    ) -> Result<StageReport, RunError> {
+        let (run, progress) = (self.run, self.progress);
+        // Killed while moving files into place: finish the move.
+        staging.commit()?;
+        let mut rec = prev.clone();
+        rec.status = StageStatus::Finished;
+        rec.finished = Some(now());
+        manifest.stages.insert(id.to_string(), rec.clone());
+        manifest.save(run)?;
+        progress.stage_finished(id, "resumed commit");
+        Ok(StageReport {
+            id: id.to_string(),
+            cached: false,
+            rows: rec.rows,
+            summary: rec.summary,
+            seconds: 0.0,
+        })
+    }
+
+    /// Prepares the staging folder: a resumed stage keeps its finished shards, any other starts empty
+    /// (its previous outputs removed).
+    fn reset_staging(
+        &self,
+        staging: &Staging,
+        id: &str,
+        previous: Option<&StageRecord>,
+        resuming: bool,
+    ) -> Result<(), RunError> {
+        let (run, progress) = (self.run, self.progress);
         if resuming {
             let dropped = staging.discard_unfinished()?;
             progress.note(
-                &def.id,
+                id,
                 &format!("resuming: finished shards kept, {dropped} partial file(s) dropped"),
             );
         } else {
-            if let Some(prev) = &previous {
+            if let Some(prev) = previous {
                 let files: Vec<PathBuf> = prev.outputs.iter().map(|o| run.root().join(o)).collect();
                 remove_files(&files)?;
             }
             staging.remove()?;
         }
+        Ok(())
+    }
 
+    /// Runs stage number `i` and commits its outputs, recording each step in the manifest.
+    fn execute(
+        &self,
+        manifest: &mut Manifest,
+        planned: &PlannedStage,
+        i: usize,
+        staging: Staging,
+    ) -> Result<StageReport, RunError> {
+        let Session {
+            spec,
+            opts,
+            progress,
+            built,
+            run,
+        } = *self;
+        let def = &spec.stages[i];
         let started = Instant::now();
         let mut record = StageRecord {
             kind: def.kind.name.to_string(),
@@ -549,16 +615,12 @@ fn run_locked(
         manifest.stages.insert(def.id.clone(), record);
         manifest.save(run)?;
         progress.stage_finished(&def.id, &output.line);
-        reports.push(StageReport {
+        Ok(StageReport {
             id: def.id.clone(),
             cached: false,
             rows: output.rows,
             summary: output.summary,
             seconds,
-        });
+        })
     }
-    Ok(RunReport {
-        run_dir: run.root().to_path_buf(),
-        stages: reports,
-    })
 }
