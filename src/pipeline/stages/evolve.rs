@@ -526,7 +526,7 @@ impl EvolveStage {
         let out_dir = self
             .output
             .clone()
-            .unwrap_or_else(|| ctx.run().exports_dir().join(&stage).join("library"));
+            .unwrap_or_else(|| ctx.run().exports_dir().join(stage).join("library"));
         let name = format!("{}-evolved", self.setup.library.name);
         let description = format!(
             "{} grown by evolve stage {stage} (seed {}, {} strategy, {} proposer, budget {} per label)",
