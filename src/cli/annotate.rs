@@ -122,7 +122,7 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
          FROM detector_calls c WHERE c.env = '{}' GROUP BY c.label ORDER BY c.label",
         args.env
     );
-    let result = q.sql(&sql).map_err(CliError::failed)?;
+    let result = q.sql(&sql)?;
     print!(
         "{}",
         render_string(

@@ -9,6 +9,7 @@
 use std::path::PathBuf;
 
 use annotrace::llm::LlmSettings;
+use annotrace::pipeline::ErrorCategory;
 use annotrace::pipeline::stages::evolve::{EvolveParams, EvolveSummary, KIND, ProposerChoice};
 use annotrace::search::Strategy;
 use annotrace::trace::Env;
@@ -171,8 +172,12 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
         remove_new_run_on_failure: false,
     }
     .run(&KIND, &params, quiet)?;
-    let s: EvolveSummary = serde_json::from_value(stage.summary.clone())
-        .map_err(|e| CliError::failed(anyhow::anyhow!("internal error: evolve summary: {e}")))?;
+    let s: EvolveSummary = serde_json::from_value(stage.summary.clone()).map_err(|e| {
+        CliError::new(
+            ErrorCategory::Internal,
+            anyhow::anyhow!("internal error: evolve summary: {e}"),
+        )
+    })?;
     println!(
         "evolve {} ({} strategy, {} proposer, seed {}, budget {} per label){}: {} training / {} held-out trace(s)",
         id,

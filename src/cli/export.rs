@@ -3,9 +3,8 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use annotrace::store::{AtomicFile, ReadTraceError, RunDir, read_trace};
+use annotrace::store::{AtomicFile, RunDir, read_trace};
 use annotrace::trace::json::write_trace;
-use anyhow::Context;
 
 use super::{CliError, CliResult};
 
@@ -27,32 +26,23 @@ pub struct Args {
 
 pub fn run(args: Args) -> CliResult {
     let run = RunDir::new(&args.run);
-    let trace = read_trace(&run, &args.trace).map_err(|e| match e {
-        ReadTraceError::NotFound { .. } => CliError::input(e),
-        other => CliError::failed(other),
-    })?;
+    let trace = read_trace(&run, &args.trace).map_err(CliError::of)?;
     match &args.out {
         Some(path) => {
-            let mut f = AtomicFile::create(path)
-                .with_context(|| format!("creating {}", path.display()))
-                .map_err(CliError::failed)?;
+            let mut f = AtomicFile::create(path).map_err(|e| CliError::io(path, e))?;
             write_trace(&mut std::io::BufWriter::new(&mut f), &trace, args.pretty)
-                .with_context(|| format!("writing {}", path.display()))
-                .map_err(CliError::failed)?;
-            f.write_all(b"\n")
-                .map_err(|e| CliError::failed(anyhow::Error::from(e)))?;
-            f.commit()
-                .with_context(|| format!("writing {}", path.display()))
-                .map_err(CliError::failed)?;
+                .map_err(|e| CliError::io(path, e.into()))?;
+            f.write_all(b"\n").map_err(|e| CliError::io(path, e))?;
+            f.commit().map_err(|e| CliError::io(path, e))?;
         }
         None => {
             let stdout = std::io::stdout();
             let mut out = std::io::BufWriter::new(stdout.lock());
             write_trace(&mut out, &trace, args.pretty)
-                .map_err(|e| CliError::failed(anyhow::Error::from(std::io::Error::from(e))))?;
+                .map_err(|e| CliError::of(std::io::Error::from(e)).context("standard output"))?;
             writeln!(out)
                 .and_then(|()| out.flush())
-                .map_err(|e| CliError::failed(anyhow::Error::from(e)))?;
+                .map_err(|e| CliError::of(e).context("standard output"))?;
         }
     }
     Ok(0)

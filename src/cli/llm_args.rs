@@ -96,13 +96,9 @@ impl LlmArgs {
     }
 }
 
-/// Maps a client error to an exit code: configuration and replay misses are the user's (2), the
-/// endpoint's failures and the budget are run-time failures (1).
+/// A client error, with its category: configuration and replay misses are the user's (2), an
+/// unreachable or failing endpoint is a service failure (3), a bad answer or the budget a run-time
+/// failure (1).
 pub fn llm_error(e: LlmError) -> CliError {
-    match e {
-        e @ (LlmError::Config(_) | LlmError::ReplayMiss { .. } | LlmError::Template { .. }) => {
-            CliError::input(e)
-        }
-        e => CliError::failed(e),
-    }
+    CliError::of(e)
 }

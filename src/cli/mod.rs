@@ -1,8 +1,17 @@
 //! The command line: one file per command turns clap arguments into library calls and prints results.
 //!
-//! Exit codes, decided in one place ([`main`]): 0 success; 1 the command finished but some items failed
-//! (invalid traces skipped, a stage failed at run time); 2 bad input or configuration (a malformed file,
-//! an unknown option value, an invalid pipeline); broken pipes exit quietly with 0.
+//! Exit codes are decided in one place, [`exit_code`], from the library's
+//! [`ErrorCategory`](annotrace::pipeline::ErrorCategory) of the error a command returns:
+//!
+//! | code | category | meaning |
+//! |---|---|---|
+//! | 0 | | success (a broken pipe on the output also exits quietly with 0) |
+//! | 1 | `Failed` | the command finished but some items failed (invalid traces skipped, a stage failed at run time, an unusable answer) |
+//! | 2 | `Input` | bad input or configuration (a malformed file, an unknown option value, an invalid pipeline, a missing file) |
+//! | 3 | `Service` | an external service is unavailable (the LLM endpoint unreachable or failing after retries, the Python detector workers cannot start) |
+//! | 4 | `Io` | reading or writing the run folder or an output failed (disk full, permission denied) |
+//! | 5 | `Locked` | another annotrace process holds the run folder |
+//! | 70 | `Internal` | a bug in annotrace (please report it) |
 //!
 //! The environment is read here only: `ANNOTRACE_LOG` (log filter, e.g. `debug`) and `ANNOTRACE_FAULT`
 //! (a test switch that stops a run on purpose, see `docs/pipelines.md`); the LLM endpoint's
@@ -29,33 +38,81 @@ mod tables;
 
 use std::process::ExitCode;
 
+use annotrace::pipeline::{Categorize, ErrorCategory};
 use clap::{Parser, Subcommand};
 
-/// An error with the exit code it maps to.
+/// The exit code of each error category: the one table of the command line (documented above, in
+/// README's "Exit codes" and in docs/pipelines.md).
+pub fn exit_code(category: ErrorCategory) -> u8 {
+    match category {
+        ErrorCategory::Failed => 1,
+        ErrorCategory::Input => 2,
+        ErrorCategory::Service => 3,
+        ErrorCategory::Io => 4,
+        ErrorCategory::Locked => 5,
+        ErrorCategory::Internal => 70,
+    }
+}
+
+/// An error with its category (which decides the exit code).
 #[derive(Debug)]
 pub struct CliError {
-    pub code: u8,
+    pub category: ErrorCategory,
     pub error: anyhow::Error,
 }
 
 impl CliError {
-    /// Bad input or configuration (exit 2).
-    pub fn input(error: impl Into<anyhow::Error>) -> Self {
+    /// An error of a given category.
+    pub fn new(category: ErrorCategory, error: impl Into<anyhow::Error>) -> Self {
         CliError {
-            code: 2,
+            category,
             error: error.into(),
         }
     }
-    /// A run-time failure (exit 1).
+    /// Bad input or configuration that the command line itself detects (an option's value, a
+    /// combination of options).
+    pub fn input(error: impl Into<anyhow::Error>) -> Self {
+        CliError::new(ErrorCategory::Input, error)
+    }
+    /// The command ran but did not succeed (an unusable answer, a summary that cannot be read).
     pub fn failed(error: impl Into<anyhow::Error>) -> Self {
+        CliError::new(ErrorCategory::Failed, error)
+    }
+    /// An I/O error on `path` (a file the command writes or reads): a missing file is the user's
+    /// input, anything else an I/O failure.
+    pub fn io(path: &std::path::Path, error: std::io::Error) -> Self {
+        CliError::new(
+            error.category(),
+            anyhow::Error::from(error).context(path.display().to_string()),
+        )
+    }
+    /// Adds context to the message, keeping the category.
+    pub fn context(self, context: impl std::fmt::Display + Send + Sync + 'static) -> Self {
         CliError {
-            code: 1,
-            error: error.into(),
+            category: self.category,
+            error: self.error.context(context),
         }
+    }
+    /// An error of the library, with the category it knows.
+    pub fn of<E>(error: E) -> Self
+    where
+        E: Categorize + std::error::Error + Send + Sync + 'static,
+    {
+        CliError::new(error.category(), error)
     }
 }
 
-/// Every command returns the exit code it wants on success (0, or 1 for partial failure).
+impl<E> From<E> for CliError
+where
+    E: Categorize + std::error::Error + Send + Sync + 'static,
+{
+    fn from(error: E) -> Self {
+        CliError::of(error)
+    }
+}
+
+/// Every command returns the exit code it wants on success: 0, or
+/// `exit_code(ErrorCategory::Failed)` when it finished with failed items.
 pub type CliResult = Result<u8, CliError>;
 
 #[derive(Parser, Debug)]
@@ -64,8 +121,10 @@ pub type CliResult = Result<u8, CliError>;
     version,
     about = "Discover high-level patterns in physics simulation traces",
     long_about = "annotrace stores simulation traces as Parquet tables in a run folder, runs pipelines of stages \
-                  over them, and answers SQL over the results.\n\nExit codes: 0 success, 1 finished with failed \
-                  items, 2 bad input or configuration."
+                  over them, and answers SQL over the results.\n\nExit codes: 0 success; 1 finished with failed \
+                  items or a stage failed; 2 bad input or configuration; 3 an external service is unavailable \
+                  (LLM endpoint, Python detector workers); 4 an I/O error on the run folder or an output \
+                  (disk full, permission); 5 the run folder is locked by another process; 70 internal error."
 )]
 struct Cli {
     /// Print only errors (no progress, no summaries on stderr).
@@ -135,7 +194,7 @@ pub fn main() -> ExitCode {
                 return ExitCode::SUCCESS;
             }
             eprintln!("error: {:#}", e.error);
-            ExitCode::from(e.code)
+            ExitCode::from(exit_code(e.category))
         }
     }
 }
@@ -185,7 +244,9 @@ pub(crate) fn open_query(dir: &std::path::Path) -> Result<annotrace::query::RunQ
             dir.display()
         )));
     }
-    annotrace::query::RunQuery::open(&annotrace::store::RunDir::new(dir)).map_err(CliError::failed)
+    Ok(annotrace::query::RunQuery::open(
+        &annotrace::store::RunDir::new(dir),
+    )?)
 }
 
 /// The fault plan from `ANNOTRACE_FAULT`, for tests of resumption.
@@ -199,23 +260,7 @@ pub(crate) fn fault_from_env() -> Result<Option<annotrace::pipeline::FaultPlan>,
     }
 }
 
-/// Maps a runner error to an exit code: bad input or configuration is 2, anything else 1.
+/// A runner error, with its category.
 pub(crate) fn run_error(e: annotrace::pipeline::RunError) -> CliError {
-    use annotrace::pipeline::{RunError, StageError};
-    let code = match &e {
-        RunError::Spec(_) | RunError::UnknownStage { .. } => 2,
-        RunError::Stage {
-            source: StageError::InvalidTrace(_) | StageError::Source(_) | StageError::Input(_),
-            ..
-        } => 2,
-        RunError::Stage {
-            source: StageError::Query(_),
-            ..
-        } => 2,
-        _ => 1,
-    };
-    CliError {
-        code,
-        error: e.into(),
-    }
+    CliError::of(e)
 }

@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 
 use annotrace::digest::sha256_hex;
 use annotrace::pipeline::{
-    PipelineSpec, RunOptions, SpecError, StageDef, StageKind, StageParams, StageReport,
-    run as run_pipeline,
+    ErrorCategory, PipelineSpec, RunOptions, SpecError, StageDef, StageKind, StageParams,
+    StageReport, run as run_pipeline,
 };
 use anyhow::Context;
 
@@ -52,7 +52,10 @@ impl OneStage<'_> {
         };
         let report = run_pipeline(&spec, &opts, &Terminal::new(quiet)).map_err(run_error)?;
         report.stages.into_iter().next().ok_or_else(|| {
-            CliError::failed(anyhow::anyhow!("internal error: the stage did not run"))
+            CliError::new(
+                ErrorCategory::Internal,
+                anyhow::anyhow!("internal error: the stage did not run"),
+            )
         })
     }
 }

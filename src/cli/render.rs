@@ -15,9 +15,8 @@ use annotrace::envs::phyre::TaskSet as PhyreTasks;
 use annotrace::envs::phyre::render::{self as phyre_render, RenderOptions as PhyreRenderOptions};
 use annotrace::envs::pool::PoolConfig;
 use annotrace::envs::pool::render::{RenderOptions, render_png, render_strip_png, strip_times};
-use annotrace::store::{AtomicFile, ReadTraceError, RunDir, read_trace};
+use annotrace::store::{AtomicFile, RunDir, read_trace};
 use annotrace::trace::Env;
-use anyhow::Context;
 
 use super::{CliError, CliResult};
 
@@ -111,10 +110,7 @@ pub fn run(args: Args) -> CliResult {
         None => PoolConfig::default_7ft(),
     };
     let run = RunDir::new(run_dir);
-    let trace = read_trace(&run, trace_id).map_err(|e| match e {
-        ReadTraceError::NotFound { .. } => CliError::input(e),
-        other => CliError::failed(other),
-    })?;
+    let trace = read_trace(&run, trace_id).map_err(CliError::of)?;
     if trace.env == Env::Iphyre {
         let games = IphyreGames::default_games().map_err(CliError::failed)?;
         let game = games.get(&trace.task_id).ok();
@@ -167,14 +163,8 @@ pub fn run(args: Args) -> CliResult {
 
 /// Writes `png` to `out` atomically.
 fn write_png(out: &std::path::Path, png: &[u8]) -> CliResult {
-    let mut f = AtomicFile::create(out)
-        .with_context(|| format!("creating {}", out.display()))
-        .map_err(CliError::failed)?;
-    f.write_all(png)
-        .with_context(|| format!("writing {}", out.display()))
-        .map_err(CliError::failed)?;
-    f.commit()
-        .with_context(|| format!("writing {}", out.display()))
-        .map_err(CliError::failed)?;
+    let mut f = AtomicFile::create(out).map_err(|e| CliError::io(out, e))?;
+    f.write_all(png).map_err(|e| CliError::io(out, e))?;
+    f.commit().map_err(|e| CliError::io(out, e))?;
     Ok(0)
 }

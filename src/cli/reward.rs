@@ -10,7 +10,7 @@ use annotrace::envs::Environment;
 use annotrace::envs::pool::{PoolEnv, Scene, Shot};
 use annotrace::reward::annotate::{annotate, detectors_for, probe_schema};
 use annotrace::reward::{AnnotatedTrace, RewardError, Schema, compile, evaluate, labels_used};
-use annotrace::store::{ReadTraceError, RunDir, read_trace};
+use annotrace::store::{RunDir, read_trace};
 use annotrace::trace::Env;
 
 use super::{CliError, CliResult};
@@ -124,12 +124,12 @@ pub(crate) fn library_dir(given: Option<&Path>, env: Env) -> Location {
 }
 
 pub(crate) fn load_library(dir: &Location) -> Result<Library, CliError> {
-    Library::open(dir).map_err(|e| CliError::input(anyhow::anyhow!("{e}")))
+    Library::open(dir).map_err(CliError::of)
 }
 
 pub(crate) fn pool() -> Result<WorkerPool, CliError> {
     WorkerPool::new(SandboxLimits::default())
-        .map_err(|e| CliError::failed(anyhow::anyhow!("starting the detector workers: {e}")))
+        .map_err(|e| CliError::of(e).context("starting the detector workers"))
 }
 
 /// A program error as the CLI prints it: the message, then the offending line with a caret.
@@ -170,10 +170,7 @@ fn eval(a: EvalArgs) -> CliResult {
         )));
     }
     let run = RunDir::new(&a.run);
-    let trace = read_trace(&run, &a.trace).map_err(|e| match e {
-        ReadTraceError::NotFound { .. } => CliError::input(e),
-        other => CliError::failed(other),
-    })?;
+    let trace = read_trace(&run, &a.trace).map_err(CliError::of)?;
     let lib = load_library(&library_dir(a.library.as_deref(), trace.env))?;
     if lib.env != trace.env {
         return Err(CliError::input(anyhow::anyhow!(
@@ -186,7 +183,7 @@ fn eval(a: EvalArgs) -> CliResult {
     // The run's annotations of this library (all traces: they teach the parameter keys).
     let stored: Vec<Annotation> = match run.table("annotations") {
         Ok(_) => read_annotations(&run, trace.env, None)
-            .map_err(|e| CliError::failed(anyhow::anyhow!("reading annotations: {e}")))?
+            .map_err(|e| CliError::of(e).context("reading annotations"))?
             .into_iter()
             .filter(|x| lib.detectors.iter().any(|d| d.id == x.detector_id))
             .collect(),
@@ -348,7 +345,7 @@ fn synthesise(a: SynthArgs) -> CliResult {
     let record = a.run.as_ref().map(RunDir::new);
     let client = LlmClient::new(config, record.as_ref()).map_err(llm_error)?;
     let result = run_synthesis(&client, &req);
-    client.flush().map_err(CliError::failed)?;
+    client.flush().map_err(llm_error)?;
     let result = result.map_err(llm_error)?;
     for (i, at) in result.attempts.iter().enumerate() {
         eprintln!(
@@ -363,7 +360,7 @@ fn synthesise(a: SynthArgs) -> CliResult {
         Some(p) => {
             if let Some(out) = &a.out {
                 annotrace::store::write_atomic(out, format!("{}\n", p.source.trim()).as_bytes())
-                    .map_err(|e| CliError::failed(anyhow::anyhow!("{}: {e}", out.display())))?;
+                    .map_err(|e| CliError::io(out, e))?;
             }
             println!("{}", p.source.trim());
             Ok(0)

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use annotrace::pipeline::{PipelineSpec, RunOptions, explain, run as run_pipeline};
 
 use super::progress::Terminal;
-use super::{CliError, CliResult, fault_from_env, run_error};
+use super::{CliResult, fault_from_env, run_error};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -26,7 +26,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args, quiet: bool) -> CliResult {
-    let spec = PipelineSpec::from_file(&args.pipeline).map_err(CliError::input)?;
+    let spec = PipelineSpec::from_file(&args.pipeline)?;
     let opts = RunOptions {
         run_dir: args.run_dir,
         force: args.force,

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use annotrace::detect::tables::read_annotations;
 use annotrace::detect::{annotated_text, count_tokens};
-use annotrace::store::{ReadTraceError, RunDir, read_trace};
+use annotrace::store::{RunDir, read_trace};
 
 use super::{CliError, CliResult};
 
@@ -30,12 +30,9 @@ pub fn run(args: Args) -> CliResult {
         )));
     }
     let run = RunDir::new(&args.run);
-    let trace = read_trace(&run, &args.trace).map_err(|e| match e {
-        ReadTraceError::NotFound { .. } => CliError::input(e),
-        other => CliError::failed(other),
-    })?;
+    let trace = read_trace(&run, &args.trace).map_err(CliError::of)?;
     let annotations = read_annotations(&run, trace.env, Some(&trace.trace_id))
-        .map_err(|e| CliError::failed(anyhow::anyhow!("reading annotations: {e}")))?;
+        .map_err(|e| CliError::of(e).context("reading annotations"))?;
     let text = annotated_text(&trace, &annotations);
     print!("{text}");
     if !args.no_count {

@@ -68,7 +68,7 @@ fn load_library(args: &Args) -> Result<Library, CliError> {
             )));
         }
     };
-    let lib = Library::open(&dir).map_err(CliError::input)?;
+    let lib = Library::open(&dir)?;
     if let Some(env) = args.env
         && env != lib.env
     {
@@ -118,7 +118,7 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
     };
     let result = suggest_labels(&client, &prompts, &library, &params);
     // The call is recorded whether or not its answer parsed.
-    client.flush().map_err(CliError::failed)?;
+    client.flush().map_err(llm_error)?;
     let s = match result {
         Ok(s) => s,
         Err(LabelsError::Llm(e)) => return Err(llm_error(e)),

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use super::{CliError, CliResult, open_query};
+use super::{CliResult, open_query};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -16,7 +16,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> CliResult {
     let q = open_query(&args.run)?;
-    for t in q.tables().map_err(CliError::failed)? {
+    for t in q.tables()? {
         println!("{}: {} rows in {} file(s)", t.name, t.rows, t.files);
         if !args.brief {
             for f in t.schema.fields() {

@@ -10,6 +10,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
+use super::OptimiseError;
 use super::anneal::{Annealer, Dim, Schedule};
 use crate::detect::{Annotation, Detector, WorkerPool};
 use crate::envs::Environment;
@@ -101,7 +102,7 @@ impl Default for ShotBounds {
 
 impl ShotBounds {
     /// The search box, checked against the environment's legal ranges.
-    pub fn dims(&self, env: &PoolEnv) -> Result<Vec<Dim>, String> {
+    pub fn dims(&self, env: &PoolEnv) -> Result<Vec<Dim>, OptimiseError> {
         let space = env.action_space();
         let legal = |name: &str| {
             space
@@ -115,18 +116,18 @@ impl ShotBounds {
             if lo >= l && hi <= h && lo < hi {
                 Ok(())
             } else {
-                Err(format!(
+                Err(OptimiseError::Bounds(format!(
                     "{name} range [{lo}, {hi}] must be non-empty and inside the legal [{l}, {h}]"
-                ))
+                )))
             }
         };
         inside("V0", self.v0)?;
         inside("theta", self.theta)?;
         if !(self.max_offset > 0.0 && self.max_offset < 1.0) {
-            return Err(format!(
+            return Err(OptimiseError::Bounds(format!(
                 "max_offset must be in (0, 1) (a² + b² < 1), found {}",
                 self.max_offset
-            ));
+            )));
         }
         let (plo, phi) = legal("phi");
         Ok(vec![
@@ -247,13 +248,17 @@ pub fn run_chains(
     chains: &[Chain],
     pool: Option<&WorkerPool>,
     mut on_step: impl FnMut(usize),
-) -> Result<(Vec<CheckpointRow>, Timings), String> {
+) -> Result<(Vec<CheckpointRow>, Timings), OptimiseError> {
     let dims = settings.bounds.dims(&settings.env)?;
     if chains.iter().any(|c| c.goal >= goals.len()) {
-        return Err("a chain names a goal that does not exist".into());
+        return Err(OptimiseError::Internal(
+            "a chain names a goal that does not exist",
+        ));
     }
     if pool.is_none() && chains.iter().any(|c| c.kind == RewardKind::Dense) {
-        return Err("dense chains need a detector worker pool".into());
+        return Err(OptimiseError::Internal(
+            "dense chains need a detector worker pool",
+        ));
     }
     let mut states: Vec<State> = chains
         .iter()

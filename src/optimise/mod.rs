@@ -18,3 +18,26 @@ pub use billiards::{
     Chain, CheckpointRow, GoalTask, RewardKind, Settings, ShotBounds, Timings, run_chains,
 };
 pub use scenes::{Layout, scenes};
+
+/// Why the optimisation experiment could not run.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum OptimiseError {
+    /// The shot bounds are empty or outside the environment's legal ranges.
+    #[error("{0}")]
+    Bounds(String),
+    /// A scene could not be built.
+    #[error(transparent)]
+    Env(#[from] crate::envs::EnvError),
+    /// A scattered scene found no free spot for a ball.
+    #[error("scatter scene {index}: no free spot for ball {ball}")]
+    Scatter {
+        /// The scene's index.
+        index: usize,
+        /// The ball.
+        ball: &'static str,
+    },
+    /// The caller broke a precondition (an annotrace bug).
+    #[error("internal error, please report it: {0}")]
+    Internal(&'static str),
+}

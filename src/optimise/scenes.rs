@@ -2,6 +2,7 @@
 //! and the cue ball scattered over the table (the default: from a tight rack, most goals' "the cue
 //! ball first hits ball k" cannot happen, since k is buried in the cluster).
 
+use super::OptimiseError;
 use crate::envs::Environment;
 use crate::envs::pool::rack::scene_seed;
 use crate::envs::pool::{Goal, PoolEnv, Scene, SceneBall};
@@ -32,14 +33,19 @@ impl std::str::FromStr for Layout {
 }
 
 /// `n` scenes of `layout`; scene `i` depends only on (`seed`, `i`).
-pub fn scenes(env: &PoolEnv, layout: Layout, n: usize, seed: u64) -> Result<Vec<Scene>, String> {
+pub fn scenes(
+    env: &PoolEnv,
+    layout: Layout,
+    n: usize,
+    seed: u64,
+) -> Result<Vec<Scene>, OptimiseError> {
     match layout {
-        Layout::Rack => env.scenes(n, seed).map_err(|e| e.to_string()),
+        Layout::Rack => Ok(env.scenes(n, seed)?),
         Layout::Scatter => (0..n).map(|i| scatter(env, seed, i)).collect(),
     }
 }
 
-fn scatter(env: &PoolEnv, seed: u64, i: usize) -> Result<Scene, String> {
+fn scatter(env: &PoolEnv, seed: u64, i: usize) -> Result<Scene, OptimiseError> {
     let r = env.config.ball.r;
     let t = &env.config.table;
     let mut rng = SplitMix64::new(scene_seed(seed ^ 0x5CA7_7E12, i as u64));
@@ -67,7 +73,7 @@ fn scatter(env: &PoolEnv, seed: u64, i: usize) -> Result<Scene, String> {
             }
         }
         if !placed {
-            return Err(format!("scatter scene {i}: no free spot for ball {id}"));
+            return Err(OptimiseError::Scatter { index: i, ball: id });
         }
     }
     let scene = Scene {
@@ -77,7 +83,9 @@ fn scatter(env: &PoolEnv, seed: u64, i: usize) -> Result<Scene, String> {
         goal: Goal::pot_nine(),
         seed: Some(seed),
     };
-    scene.validate(&env.config).map_err(|e| e.to_string())?;
+    scene
+        .validate(&env.config)
+        .map_err(crate::envs::EnvError::from)?;
     Ok(scene)
 }
 

@@ -7,6 +7,7 @@
 //!
 //! Entry point: `PipelineSpec::from_file(path)` then `run(&spec, &RunOptions::default(), &())`.
 
+mod category;
 mod manifest;
 mod params;
 mod progress;
@@ -19,12 +20,14 @@ mod toml_doc;
 
 use std::path::PathBuf;
 
+pub use category::{Categorize, ErrorCategory};
 pub use manifest::{Manifest, PipelineInfo, StageRecord, StageStatus};
 pub use params::{ParamDoc, ParamDocs, ParamError, ParamType, ParamsOf, StageParams};
 pub use progress::Progress;
 pub use registry::{BuildError, STAGE_KINDS, StageKind, find_kind, kind_names, params_markdown};
 pub use runner::{
-    Action, PlannedStage, RunError, RunOptions, RunReport, StageReport, error_chain, explain, run,
+    Action, PlannedStage, RunError, RunOptions, RunReason, RunReport, StageReport, error_chain,
+    explain, run,
 };
 pub use spec::{PipelineSpec, StageDef, project_dir_of, valid_id};
 pub use stage::{FaultAction, FaultPlan, FaultPoint, Stage, StageContext, StageError, StageOutput};

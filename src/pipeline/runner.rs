@@ -29,7 +29,7 @@ use super::progress::Progress;
 use super::spec::PipelineSpec;
 use super::stage::{FaultPlan, Stage, StageContext, StageError};
 use crate::digest::hex;
-use crate::store::{RunDir, StoreError, remove_files};
+use crate::store::{RunDir, Staging, StoreError, remove_files};
 
 /// Options of one `annotrace run`.
 #[derive(Clone, Debug, Default)]
@@ -93,9 +93,40 @@ pub enum Action {
     /// Finished with the same fingerprint: skipped.
     Cached,
     /// Will run, for this reason.
-    Run(&'static str),
+    Run(RunReason),
     /// Not selected (`--until`).
     Skipped,
+}
+
+/// Why the runner runs a stage.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RunReason {
+    /// `--force` names it or a stage it depends on.
+    Forced,
+    /// The manifest has no record of it.
+    New,
+    /// Its fingerprint differs from the recorded one.
+    Changed,
+    /// It finished, but its outputs are not all there.
+    OutputsMissing,
+    /// It was interrupted while running or committing: finished shards are kept.
+    Resume,
+    /// It failed the last time.
+    FailedBefore,
+}
+
+impl RunReason {
+    /// The reason as `run --explain` prints it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            RunReason::Forced => "forced",
+            RunReason::New => "new",
+            RunReason::Changed => "changed",
+            RunReason::OutputsMissing => "outputs missing",
+            RunReason::Resume => "resume",
+            RunReason::FailedBefore => "failed before",
+        }
+    }
 }
 
 /// One line of `annotrace run --explain`.
@@ -117,7 +148,7 @@ impl std::fmt::Display for PlannedStage {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let action = match &self.action {
             Action::Cached => "cached".to_string(),
-            Action::Run(why) => format!("run ({why})"),
+            Action::Run(why) => format!("run ({})", why.as_str()),
             Action::Skipped => "not selected".to_string(),
         };
         write!(
@@ -276,18 +307,20 @@ fn plan_with(
             let action = if selected.as_ref().is_some_and(|s| !s.contains(&def.id)) {
                 Action::Skipped
             } else if forced.contains(&def.id) {
-                Action::Run("forced")
+                Action::Run(RunReason::Forced)
             } else {
                 match manifest.stages.get(&def.id) {
-                    None => Action::Run("new"),
-                    Some(r) if r.fingerprint != fp => Action::Run("changed"),
+                    None => Action::Run(RunReason::New),
+                    Some(r) if r.fingerprint != fp => Action::Run(RunReason::Changed),
                     Some(r) => match r.status {
                         StageStatus::Finished if manifest.outputs_present(run, &def.id) => {
                             Action::Cached
                         }
-                        StageStatus::Finished => Action::Run("outputs missing"),
-                        StageStatus::Running | StageStatus::Committing => Action::Run("resume"),
-                        StageStatus::Failed => Action::Run("failed before"),
+                        StageStatus::Finished => Action::Run(RunReason::OutputsMissing),
+                        StageStatus::Running | StageStatus::Committing => {
+                            Action::Run(RunReason::Resume)
+                        }
+                        StageStatus::Failed => Action::Run(RunReason::FailedBefore),
                     },
                 }
             };
@@ -371,6 +404,15 @@ pub fn run(
     result
 }
 
+/// One invocation of the runner over a locked run folder: what every step of a stage needs.
+struct Session<'a> {
+    spec: &'a PipelineSpec,
+    opts: &'a RunOptions,
+    progress: &'a dyn Progress,
+    built: &'a Built,
+    run: &'a RunDir,
+}
+
 fn run_locked(
     spec: &PipelineSpec,
     opts: &RunOptions,
@@ -387,6 +429,13 @@ fn run_locked(
             seed: spec.seed,
         });
     }
+    let session = Session {
+        spec,
+        opts,
+        progress,
+        built,
+        run,
+    };
     let plan = plan_with(spec, opts, built, run, &manifest);
     let mut reports = Vec::new();
     for (planned, &i) in plan.iter().zip(&built.order) {
@@ -410,43 +459,93 @@ fn run_locked(
         let staging = run.staging(&def.id);
         let previous = manifest.stages.get(&def.id).cloned();
         let resuming = previous.as_ref().is_some_and(|p| {
-            p.fingerprint == planned.fingerprint && planned.action == Action::Run("resume")
+            p.fingerprint == planned.fingerprint && planned.action == Action::Run(RunReason::Resume)
         });
         if let Some(prev) = previous
             .as_ref()
             .filter(|p| resuming && p.status == StageStatus::Committing)
         {
-            // Killed while moving files into place: finish the move.
-            staging.commit()?;
-            let mut rec = prev.clone();
-            rec.status = StageStatus::Finished;
-            rec.finished = Some(now());
-            manifest.stages.insert(def.id.clone(), rec.clone());
-            manifest.save(run)?;
-            progress.stage_finished(&def.id, "resumed commit");
-            reports.push(StageReport {
-                id: def.id.clone(),
-                cached: false,
-                rows: rec.rows,
-                summary: rec.summary,
-                seconds: 0.0,
-            });
+            reports.push(session.finish_commit(&mut manifest, &staging, &def.id, prev)?);
             continue;
         }
+        session.reset_staging(&staging, &def.id, previous.as_ref(), resuming)?;
+        reports.push(session.execute(&mut manifest, planned, i, staging)?);
+    }
+    Ok(RunReport {
+        run_dir: run.root().to_path_buf(),
+        stages: reports,
+    })
+}
+
+impl Session<'_> {
+    /// A stage killed while moving its files into place: finishes the move and records it finished.
+    fn finish_commit(
+        &self,
+        manifest: &mut Manifest,
+        staging: &Staging,
+        id: &str,
+        prev: &StageRecord,
+    ) -> Result<StageReport, RunError> {
+        let (run, progress) = (self.run, self.progress);
+        // Killed while moving files into place: finish the move.
+        staging.commit()?;
+        let mut rec = prev.clone();
+        rec.status = StageStatus::Finished;
+        rec.finished = Some(now());
+        manifest.stages.insert(id.to_string(), rec.clone());
+        manifest.save(run)?;
+        progress.stage_finished(id, "resumed commit");
+        Ok(StageReport {
+            id: id.to_string(),
+            cached: false,
+            rows: rec.rows,
+            summary: rec.summary,
+            seconds: 0.0,
+        })
+    }
+
+    /// Prepares the staging folder: a resumed stage keeps its finished shards, any other starts empty
+    /// (its previous outputs removed).
+    fn reset_staging(
+        &self,
+        staging: &Staging,
+        id: &str,
+        previous: Option<&StageRecord>,
+        resuming: bool,
+    ) -> Result<(), RunError> {
+        let (run, progress) = (self.run, self.progress);
         if resuming {
             let dropped = staging.discard_unfinished()?;
             progress.note(
-                &def.id,
+                id,
                 &format!("resuming: finished shards kept, {dropped} partial file(s) dropped"),
             );
         } else {
-            if let Some(prev) = &previous {
+            if let Some(prev) = previous {
                 let files: Vec<PathBuf> = prev.outputs.iter().map(|o| run.root().join(o)).collect();
                 remove_files(&files)?;
             }
             staging.remove()?;
         }
+        Ok(())
+    }
 
+    /// Runs stage number `i` and commits its outputs, recording each step in the manifest.
+    fn execute(
+        &self,
+        manifest: &mut Manifest,
+        planned: &PlannedStage,
+        i: usize,
+        staging: Staging,
+    ) -> Result<StageReport, RunError> {
+        let Session {
+            spec,
+            opts,
+            progress,
+            built,
+            run,
+        } = *self;
+        let def = &spec.stages[i];
         let started = Instant::now();
         let mut record = StageRecord {
             kind: def.kind.name.to_string(),
@@ -516,16 +615,12 @@ fn run_locked(
         manifest.stages.insert(def.id.clone(), record);
         manifest.save(run)?;
         progress.stage_finished(&def.id, &output.line);
-        reports.push(StageReport {
+        Ok(StageReport {
             id: def.id.clone(),
             cached: false,
             rows: output.rows,
             summary: output.summary,
             seconds,
-        });
+        })
     }
-    Ok(RunReport {
-        run_dir: run.root().to_path_buf(),
-        stages: reports,
-    })
 }

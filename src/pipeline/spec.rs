@@ -188,6 +188,142 @@ impl Ctx<'_> {
     }
 }
 
+/// The `[pipeline]` table's settings.
+struct Header {
+    name: String,
+    description: Option<String>,
+    seed: u64,
+    run_dir: Option<PathBuf>,
+}
+
+impl Ctx<'_> {
+    /// Reads the `[pipeline]` table `e` into `h`.
+    fn header(&self, e: &Entry, project_dir: &Path, h: &mut Header) -> Result<(), SpecError> {
+        let cx = self;
+        let NodeValue::Table(entries) = &e.value.value else {
+            return Err(cx.invalid(e.key_line, "`pipeline` must be a table: [pipeline]"));
+        };
+        for p in entries {
+            match p.key.as_str() {
+                "name" => {
+                    h.name = cx.string(&p.value, "`name`")?;
+                    if !valid_id(&h.name) {
+                        return Err(cx.invalid(
+                            p.value.line,
+                            format!(
+                                "pipeline name {:?} must use letters, digits, `_` and `-` only",
+                                h.name
+                            ),
+                        ));
+                    }
+                }
+                "description" => h.description = Some(cx.string(&p.value, "`description`")?),
+                "seed" => match p.value.value {
+                    NodeValue::Int(s) if s >= 0 => h.seed = s as u64,
+                    ref other => {
+                        return Err(cx.invalid(
+                            p.value.line,
+                            format!(
+                                "`seed` must be a non-negative integer, found {}",
+                                other.type_name()
+                            ),
+                        ));
+                    }
+                },
+                "run_dir" => h.run_dir = Some(project_dir.join(cx.string(&p.value, "`run_dir`")?)),
+                _ => {
+                    return Err(cx.unknown_key(
+                        p,
+                        "[pipeline]",
+                        &["name", "description", "seed", "run_dir"],
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Reads one `[[stage]]` table; `earlier` are the stages before it (for duplicate ids).
+    fn stage(&self, node: &Node, earlier: &[StageDef]) -> Result<StageDef, SpecError> {
+        let (cx, file) = (self, self.file);
+        let NodeValue::Table(entries) = &node.value else {
+            return Err(cx.invalid(node.line, "each stage must be a table"));
+        };
+        let get = |key: &str| entries.iter().find(|e| e.key == key);
+        let line = get("id").map_or(node.line, |e| e.key_line);
+        let id = match get("id") {
+            Some(e) => cx.string(&e.value, "`id`")?,
+            None => {
+                return Err(cx.invalid(
+                    entries.first().map_or(node.line, |e| e.key_line),
+                    "stage has no `id`",
+                ));
+            }
+        };
+        if !valid_id(&id) {
+            return Err(cx.invalid(line, format!("stage id {id:?} must use letters, digits, `_` and `-` only, starting with a letter or digit")));
+        }
+        if let Some(first) = earlier.iter().find(|s| s.id == id) {
+            return Err(SpecError::DuplicateId {
+                file: file.to_path_buf(),
+                line,
+                id,
+                first_line: first.line,
+            });
+        }
+        let kind_entry = get("kind").ok_or_else(|| {
+            cx.invalid(
+                line,
+                format!(
+                    "stage \"{id}\" has no `kind` (known: {})",
+                    kind_names().join(", ")
+                ),
+            )
+        })?;
+        let kind_name = cx.string(&kind_entry.value, "`kind`")?;
+        let kind = find_kind(&kind_name).ok_or_else(|| SpecError::UnknownKind {
+            file: file.to_path_buf(),
+            line: kind_entry.key_line,
+            kind: kind_name.clone(),
+            known: kind_names().join(", "),
+            suggestion: suggest(&kind_name, &kind_names()),
+        })?;
+        let mut inputs = Vec::new();
+        if let Some(e) = get("inputs") {
+            let NodeValue::Array(items) = &e.value.value else {
+                return Err(cx.invalid(
+                    e.value.line,
+                    format!("stage \"{id}\": `inputs` must be an array of stage ids"),
+                ));
+            };
+            for item in items {
+                inputs.push(cx.string(item, "each input")?);
+            }
+        }
+        let description = get("description")
+            .map(|e| cx.string(&e.value, "`description`"))
+            .transpose()?;
+        let param_entries: Vec<&Entry> = entries
+            .iter()
+            .filter(|e| !matches!(e.key.as_str(), "id" | "kind" | "inputs" | "description"))
+            .collect();
+        let (params, mut param_lines) =
+            params::resolve(file, &id, line, kind.name, &kind.params, &param_entries)?;
+        if let Some(e) = get("inputs") {
+            param_lines.push(("inputs".to_string(), e.key_line));
+        }
+        Ok(StageDef {
+            id,
+            kind,
+            inputs,
+            params,
+            description,
+            line,
+            param_lines,
+        })
+    }
+}
+
 impl PipelineSpec {
     /// Reads and validates a pipeline file.
     pub fn from_file(path: &Path) -> Result<Self, SpecError> {
@@ -210,60 +346,21 @@ impl PipelineSpec {
     pub fn from_toml(file: &Path, text: &str) -> Result<Self, SpecError> {
         let cx = Ctx { file };
         let doc = toml_doc::parse(file, text)?;
-        let mut name = file
-            .file_stem()
-            .and_then(|s| s.to_str())
-            .unwrap_or("pipeline")
-            .to_string();
-        let mut description = None;
-        let mut seed = 0u64;
         let project_dir = project_dir_of(file);
-        let mut run_dir = None;
+        let mut header = Header {
+            name: file
+                .file_stem()
+                .and_then(|s| s.to_str())
+                .unwrap_or("pipeline")
+                .to_string(),
+            description: None,
+            seed: 0,
+            run_dir: None,
+        };
         let mut stage_nodes: Vec<&Node> = Vec::new();
         for e in &doc {
             match e.key.as_str() {
-                "pipeline" => {
-                    let NodeValue::Table(entries) = &e.value.value else {
-                        return Err(
-                            cx.invalid(e.key_line, "`pipeline` must be a table: [pipeline]")
-                        );
-                    };
-                    for p in entries {
-                        match p.key.as_str() {
-                            "name" => {
-                                name = cx.string(&p.value, "`name`")?;
-                                if !valid_id(&name) {
-                                    return Err(cx.invalid(p.value.line, format!("pipeline name {name:?} must use letters, digits, `_` and `-` only")));
-                                }
-                            }
-                            "description" => {
-                                description = Some(cx.string(&p.value, "`description`")?)
-                            }
-                            "seed" => match p.value.value {
-                                NodeValue::Int(s) if s >= 0 => seed = s as u64,
-                                ref other => {
-                                    return Err(cx.invalid(
-                                        p.value.line,
-                                        format!(
-                                            "`seed` must be a non-negative integer, found {}",
-                                            other.type_name()
-                                        ),
-                                    ));
-                                }
-                            },
-                            "run_dir" => {
-                                run_dir = Some(project_dir.join(cx.string(&p.value, "`run_dir`")?))
-                            }
-                            _ => {
-                                return Err(cx.unknown_key(
-                                    p,
-                                    "[pipeline]",
-                                    &["name", "description", "seed", "run_dir"],
-                                ));
-                            }
-                        }
-                    }
-                }
+                "pipeline" => cx.header(e, &project_dir, &mut header)?,
                 "stage" => {
                     let NodeValue::Array(items) = &e.value.value else {
                         return Err(
@@ -278,93 +375,18 @@ impl PipelineSpec {
         if stage_nodes.is_empty() {
             return Err(cx.invalid(1, "the pipeline has no [[stage]] tables"));
         }
-
         let mut stages: Vec<StageDef> = Vec::new();
         for node in stage_nodes {
-            let NodeValue::Table(entries) = &node.value else {
-                return Err(cx.invalid(node.line, "each stage must be a table"));
-            };
-            let get = |key: &str| entries.iter().find(|e| e.key == key);
-            let line = get("id").map_or(node.line, |e| e.key_line);
-            let id = match get("id") {
-                Some(e) => cx.string(&e.value, "`id`")?,
-                None => {
-                    return Err(cx.invalid(
-                        entries.first().map_or(node.line, |e| e.key_line),
-                        "stage has no `id`",
-                    ));
-                }
-            };
-            if !valid_id(&id) {
-                return Err(cx.invalid(line, format!("stage id {id:?} must use letters, digits, `_` and `-` only, starting with a letter or digit")));
-            }
-            if let Some(first) = stages.iter().find(|s| s.id == id) {
-                return Err(SpecError::DuplicateId {
-                    file: file.to_path_buf(),
-                    line,
-                    id,
-                    first_line: first.line,
-                });
-            }
-            let kind_entry = get("kind").ok_or_else(|| {
-                cx.invalid(
-                    line,
-                    format!(
-                        "stage \"{id}\" has no `kind` (known: {})",
-                        kind_names().join(", ")
-                    ),
-                )
-            })?;
-            let kind_name = cx.string(&kind_entry.value, "`kind`")?;
-            let kind = find_kind(&kind_name).ok_or_else(|| SpecError::UnknownKind {
-                file: file.to_path_buf(),
-                line: kind_entry.key_line,
-                kind: kind_name.clone(),
-                known: kind_names().join(", "),
-                suggestion: suggest(&kind_name, &kind_names()),
-            })?;
-            let mut inputs = Vec::new();
-            if let Some(e) = get("inputs") {
-                let NodeValue::Array(items) = &e.value.value else {
-                    return Err(cx.invalid(
-                        e.value.line,
-                        format!("stage \"{id}\": `inputs` must be an array of stage ids"),
-                    ));
-                };
-                for item in items {
-                    inputs.push(cx.string(item, "each input")?);
-                }
-            }
-            let description = get("description")
-                .map(|e| cx.string(&e.value, "`description`"))
-                .transpose()?;
-            let param_entries: Vec<&Entry> = entries
-                .iter()
-                .filter(|e| !matches!(e.key.as_str(), "id" | "kind" | "inputs" | "description"))
-                .collect();
-            let (params, mut param_lines) =
-                params::resolve(file, &id, line, kind.name, &kind.params, &param_entries)?;
-            if let Some(e) = get("inputs") {
-                param_lines.push(("inputs".to_string(), e.key_line));
-            }
-            stages.push(StageDef {
-                id,
-                kind,
-                inputs,
-                params,
-                description,
-                line,
-                param_lines,
-            });
+            let def = cx.stage(node, &stages)?;
+            stages.push(def);
         }
-
         let spec = PipelineSpec {
             file: file.to_path_buf(),
-            name,
-            description,
-            seed,
+            name: header.name,
+            description: header.description,
+            seed: header.seed,
             project_dir,
-            run_dir,
+            run_dir: header.run_dir,
             stages,
             sha256: hex(&Sha256::digest(text.as_bytes())),
         };

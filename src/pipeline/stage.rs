@@ -37,7 +37,8 @@ pub struct StageOutput {
     pub line: String,
 }
 
-/// A stage failed.
+/// A stage failed. Every variant keeps its cause; [`Categorize`](super::Categorize) says what kind of
+/// failure it is (bad input, an unavailable service, a disk error, a bug).
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum StageError {
@@ -47,19 +48,80 @@ pub enum StageError {
     /// An input file could not be read.
     #[error(transparent)]
     Source(#[from] SourceError),
+    /// The rows of a trace in the run's tables do not form a valid trace.
+    #[error("{}: trace {trace_id}", path.display())]
+    BadTraceRows {
+        /// The `traces` file.
+        path: PathBuf,
+        /// The trace.
+        trace_id: String,
+        /// What is wrong.
+        #[source]
+        source: Box<crate::trace::batch::DecodeError>,
+    },
     /// Reading or writing the run failed.
     #[error(transparent)]
     Store(#[from] StoreError),
+    /// Reading or writing a file outside the run's tables failed (an export, an SQL file).
+    #[error("{}", path.display())]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The I/O error.
+        #[source]
+        source: std::io::Error,
+    },
     /// A query failed.
     #[error(transparent)]
     Query(#[from] QueryError),
     /// The detector worker pool could not start or failed as a whole.
     #[error(transparent)]
     Workers(#[from] crate::detect::DetectError),
+    /// A detector library could not be read.
+    #[error(transparent)]
+    Library(#[from] crate::detect::LibraryError),
+    /// The LLM client failed (configuration, an unreachable endpoint, its `llm_calls` table).
+    #[error("llm: {0}")]
+    Llm(Box<crate::llm::LlmError>),
+    /// An evolutionary search could not go on.
+    #[error(transparent)]
+    Search(Box<crate::search::SearchError>),
+    /// A proposer could not be set up.
+    #[error(transparent)]
+    Proposer(#[from] crate::search::ProposeError),
+    /// A goal's reward program or verification rule does not compile.
+    #[error("goal {id:?}: {part}")]
+    Goal {
+        /// The goal.
+        id: String,
+        /// `program` or `verify`.
+        part: &'static str,
+        /// The compiler's error.
+        #[source]
+        source: Box<crate::reward::RewardError>,
+    },
+    /// The optimisation experiment could not run.
+    #[error(transparent)]
+    Optimise(Box<crate::optimise::OptimiseError>),
+    /// The run holds too few traces for the stage.
+    #[error("{stage} needs at least {needed} {what} (found {found}){hint}")]
+    TooFewTraces {
+        /// The stage kind.
+        stage: &'static str,
+        /// Which traces (`pooltool traces in the run`, `training traces after the held-out split`).
+        what: String,
+        /// The minimum.
+        needed: usize,
+        /// How many there are.
+        found: usize,
+        /// What to do about it (empty, or `: add …`).
+        hint: &'static str,
+    },
     /// Building a batch failed (an annotrace bug if it happens).
     #[error("internal error, please report it: {0}")]
     Internal(String),
-    /// The input is unusable for another reason the message explains.
+    /// Bad input data that the message explains, for the rare case no typed variant fits. Prefer a
+    /// typed variant that keeps its cause: this one is always categorised as the user's input.
     #[error("{0}")]
     Input(String),
     /// A simulator produced a state that is not finite (NaN or infinite).
@@ -80,6 +142,34 @@ pub enum StageError {
     /// A fault injected for testing.
     #[error("injected fault: {0}")]
     Injected(String),
+}
+
+impl From<crate::llm::LlmError> for StageError {
+    fn from(e: crate::llm::LlmError) -> Self {
+        StageError::Llm(Box::new(e))
+    }
+}
+
+impl From<crate::search::SearchError> for StageError {
+    fn from(e: crate::search::SearchError) -> Self {
+        StageError::Search(Box::new(e))
+    }
+}
+
+impl From<crate::optimise::OptimiseError> for StageError {
+    fn from(e: crate::optimise::OptimiseError) -> Self {
+        StageError::Optimise(Box::new(e))
+    }
+}
+
+impl StageError {
+    /// An I/O error on `path`.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        StageError::Io {
+            path: path.into(),
+            source,
+        }
+    }
 }
 
 impl From<arrow::error::ArrowError> for StageError {

@@ -85,7 +85,7 @@ pub enum SearchError {
         message: String,
     },
     /// The proposer cannot be reached.
-    #[error("label {label:?}: {source}")]
+    #[error("label {label:?}")]
     Proposer {
         /// The label.
         label: String,

@@ -463,26 +463,82 @@ impl EvolveStage {
             }
         };
         if !use_llm {
-            let m = MutateProposer::new(None, self.max_edits)
-                .map_err(|e| StageError::Input(e.to_string()))?;
+            let m = MutateProposer::new(None, self.max_edits)?;
             return Ok((Box::new(m), None));
         }
         let mut settings = self.llm.clone();
         settings.seed = Some(settings.seed.unwrap_or(seed));
-        let config = LlmConfig::resolve(&settings, &|k| std::env::var(k).ok())
-            .map_err(|e| StageError::Input(format!("llm: {e}")))?;
+        let config = LlmConfig::resolve(&settings, &|k| std::env::var(k).ok())?;
         let dir = self
             .prompts
             .clone()
             .or_else(|| Some(self.project.join("prompts")).filter(|d| d.is_dir()));
-        let prompts = Prompts::load(dir.as_deref())
-            .map_err(|e| StageError::Input(format!("prompts: {e}")))?;
-        let client = Arc::new(
-            LlmClient::new(config, Some(ctx.run()))
-                .map_err(|e| StageError::Input(format!("llm: {e}")))?,
-        );
+        let prompts = Prompts::load(dir.as_deref())?;
+        let client = Arc::new(LlmClient::new(config, Some(ctx.run()))?);
         let proposer = LlmProposer::new(client.clone(), Arc::new(prompts));
         Ok((Box::new(proposer), Some(client)))
+    }
+
+    /// The run's traces of `env`, split into training and held-out sets (at least 3 traces, 2 for
+    /// training).
+    fn load_split(
+        &self,
+        ctx: &StageContext<'_>,
+        env: Env,
+        seed: u64,
+    ) -> Result<(Vec<Trace>, Vec<Trace>), StageError> {
+        let mut traces = Vec::new();
+        for set in trace_file_sets(ctx.run(), env)? {
+            traces.extend(read_traces(ctx.run(), &set)?);
+        }
+        if traces.len() < 3 {
+            return Err(StageError::TooFewTraces {
+                stage: "evolve",
+                what: format!("{env} traces in the run"),
+                needed: 3,
+                found: traces.len(),
+                hint: ": add a simulate or import stage as input",
+            });
+        }
+        let (train, holdout) = split(traces, seed, self.holdout, self.max_traces);
+        if train.len() < 2 {
+            return Err(StageError::TooFewTraces {
+                stage: "evolve",
+                what: "training traces after the held-out split".into(),
+                needed: 2,
+                found: train.len(),
+                hint: ": lower `holdout` or add traces",
+            });
+        }
+        Ok((train, holdout))
+    }
+
+    /// Writes the grown library (to `output`, default `exports/<stage>/library`) and returns its folder.
+    fn write_evolved(
+        &self,
+        ctx: &StageContext<'_>,
+        config: &SearchConfig,
+        proposer: &str,
+        library: &[crate::detect::Detector],
+    ) -> Result<PathBuf, StageError> {
+        let stage = ctx.stage_id();
+        let env = self.setup.env;
+        let out_dir = self
+            .output
+            .clone()
+            .unwrap_or_else(|| ctx.run().exports_dir().join(stage).join("library"));
+        let name = format!("{}-evolved", self.setup.library.name);
+        let description = format!(
+            "{} grown by evolve stage {stage} (seed {}, {} strategy, {} proposer, budget {} per label)",
+            self.setup.library.name,
+            config.seed,
+            config.strategy.as_str(),
+            proposer,
+            config.budget
+        );
+        write_library(&out_dir, &name, env, &description, library)
+            .map_err(|e| StageError::io(&out_dir, e))?;
+        Ok(out_dir)
     }
 
     fn training_distances(
@@ -516,6 +572,90 @@ impl EvolveStage {
     }
 }
 
+/// Where [`StagingCheckpoint::write_label`] writes a finished label's rows.
+struct LabelTables<'a> {
+    stage: &'a str,
+    env: Env,
+    config: &'a SearchConfig,
+    proposer: &'a str,
+}
+
+impl StagingCheckpoint<'_, '_> {
+    /// Writes label number `m`'s candidates, summary and convergence rows as shard `L<m>.final`
+    /// (once: a finished shard's row counts are read back), adding the counts to `rows`.
+    fn write_label(
+        &self,
+        t: &LabelTables<'_>,
+        m: u32,
+        r: &crate::search::LabelResult,
+        rows: &mut std::collections::BTreeMap<String, u64>,
+    ) -> Result<(), SearchError> {
+        let ctx = self.ctx;
+        let o = &r.outcome;
+        let shard = format!("L{m:03}.final");
+        let done = ctx.finished_shard(&shard).map_err(|e| self.fail(e))?;
+        if let Some(rec) = done {
+            for (t, n) in rec["rows"].as_object().into_iter().flatten() {
+                *rows.entry(t.clone()).or_default() += n.as_u64().unwrap_or(0);
+            }
+            return Ok(());
+        }
+        let mut written = serde_json::Map::new();
+        let mut put = |table: &str,
+                       b: Result<arrow::array::RecordBatch, arrow::error::ArrowError>|
+         -> Result<(), SearchError> {
+            let b = b.map_err(|e| self.fail(e.into()))?;
+            if b.num_rows() == 0 {
+                return Ok(());
+            }
+            let n = ctx
+                .write_batch(table, t.env, &shard, &b)
+                .map_err(|e| self.fail(e))?;
+            *rows.entry(table.to_string()).or_default() += n;
+            written.insert(table.into(), json!(n));
+            Ok(())
+        };
+        put(
+            "candidates",
+            candidates_batch(t.stage, t.config.budget, &o.records),
+        )?;
+        put(
+            "evolution_labels",
+            labels_batch(t.stage, t.config, t.proposer, m, r),
+        )?;
+        put(
+            "evolution_convergence",
+            convergence_batch(t.stage, &r.convergence),
+        )?;
+        ctx.finish_shard(&shard, &json!({"rows": written}))
+            .map_err(|e| self.fail(e))
+    }
+}
+
+/// A finished label's summary entry and its terminal fragment (`label: ν a → b`).
+fn label_summary(r: &crate::search::LabelResult) -> (LabelSummary, String) {
+    let o = &r.outcome;
+    let summary = LabelSummary {
+        label: o.label.clone(),
+        seed_nu: o.seed_nu,
+        best_nu: o.best.terms.nu,
+        best_terms: o.best.terms,
+        accepted: r.accepted,
+        candidates: o.records.len() as u64,
+        best_by_step: o.best_by_step.clone(),
+        wall_s: o.wall_s,
+        propose_s: o.propose_s,
+    };
+    let line = format!(
+        "{}: ν {:.4} → {:.4}{}",
+        o.label,
+        o.seed_nu,
+        o.best.terms.nu,
+        if r.accepted { "" } else { " (rejected)" }
+    );
+    (summary, line)
+}
+
 impl Stage for EvolveStage {
     fn fingerprint_extra(&self) -> Result<Value, StageError> {
         let h = |s: &str| crate::search::code_hash(s);
@@ -532,23 +672,7 @@ impl Stage for EvolveStage {
         let env = self.setup.env;
         let mut config = self.config.clone();
         config.seed = self.seed.unwrap_or(ctx.seed());
-        let mut traces = Vec::new();
-        for set in trace_file_sets(ctx.run(), env)? {
-            traces.extend(read_traces(ctx.run(), &set)?);
-        }
-        if traces.len() < 3 {
-            return Err(StageError::Input(format!(
-                "evolve needs at least 3 {env} traces in the run (found {}): add a simulate or import stage as input",
-                traces.len()
-            )));
-        }
-        let (train, holdout) = split(traces, config.seed, self.holdout, self.max_traces);
-        if train.len() < 2 {
-            return Err(StageError::Input(format!(
-                "only {} training trace(s) after the held-out split",
-                train.len()
-            )));
-        }
+        let (train, holdout) = self.load_split(ctx, env, config.seed)?;
         ctx.progress()
             .set_total(ctx.stage_id(), config.budget * self.labels.len() as u64);
         let t_dx = std::time::Instant::now();
@@ -556,8 +680,7 @@ impl Stage for EvolveStage {
         let dx_s = t_dx.elapsed().as_secs_f64();
         let mut limits = self.setup.limits.clone();
         limits.trace_cache = limits.trace_cache.max(train.len() + holdout.len() + 4);
-        let pool =
-            crate::detect::WorkerPool::new(limits).map_err(|e| StageError::Input(e.to_string()))?;
+        let pool = crate::detect::WorkerPool::new(limits)?;
         let (proposer, llm_client) = self.proposer(ctx, config.seed)?;
         let checkpoint = StagingCheckpoint {
             ctx,
@@ -581,68 +704,21 @@ impl Stage for EvolveStage {
         let mut label_lines = Vec::new();
         let mut labels_summary = Vec::new();
         let mut after = |m: u32, r: &crate::search::LabelResult| -> Result<(), SearchError> {
-            let o = &r.outcome;
-            labels_summary.push(LabelSummary {
-                label: o.label.clone(),
-                seed_nu: o.seed_nu,
-                best_nu: o.best.terms.nu,
-                best_terms: o.best.terms,
-                accepted: r.accepted,
-                candidates: o.records.len() as u64,
-                best_by_step: o.best_by_step.clone(),
-                wall_s: o.wall_s,
-                propose_s: o.propose_s,
-            });
-            label_lines.push(format!(
-                "{}: ν {:.4} → {:.4}{}",
-                o.label,
-                o.seed_nu,
-                o.best.terms.nu,
-                if r.accepted { "" } else { " (rejected)" }
-            ));
-            let shard = format!("L{m:03}.final");
-            let done = ctx.finished_shard(&shard).map_err(|e| checkpoint.fail(e))?;
-            if let Some(rec) = done {
-                for (t, n) in rec["rows"].as_object().into_iter().flatten() {
-                    *rows.entry(t.clone()).or_default() += n.as_u64().unwrap_or(0);
-                }
-                return Ok(());
-            }
-            let mut written = serde_json::Map::new();
-            let mut put = |table: &str,
-                           b: Result<arrow::array::RecordBatch, arrow::error::ArrowError>|
-             -> Result<(), SearchError> {
-                let b = b.map_err(|e| checkpoint.fail(e.into()))?;
-                if b.num_rows() == 0 {
-                    return Ok(());
-                }
-                let n = ctx
-                    .write_batch(table, env, &shard, &b)
-                    .map_err(|e| checkpoint.fail(e))?;
-                *rows.entry(table.to_string()).or_default() += n;
-                written.insert(table.into(), json!(n));
-                Ok(())
+            let (summary, line) = label_summary(r);
+            labels_summary.push(summary);
+            label_lines.push(line);
+            let tables = LabelTables {
+                stage: &stage,
+                env,
+                config: &config,
+                proposer: proposer.name(),
             };
-            put(
-                "candidates",
-                candidates_batch(&stage, config.budget, &o.records),
-            )?;
-            put(
-                "evolution_labels",
-                labels_batch(&stage, &config, proposer.name(), m, r),
-            )?;
-            put(
-                "evolution_convergence",
-                convergence_batch(&stage, &r.convergence),
-            )?;
-            ctx.finish_shard(&shard, &json!({"rows": written}))
-                .map_err(|e| checkpoint.fail(e))
+            checkpoint.write_label(&tables, m, r, &mut rows)
         };
         let base = self.setup.library.detectors.clone();
         let result = discovery.run(base, &self.labels, &mut after);
         if let Some(c) = &llm_client {
-            c.flush()
-                .map_err(|e| StageError::Input(format!("llm_calls: {e}")))?;
+            c.flush()?;
         }
         let (library, results) = match result {
             Ok(x) => x,
@@ -651,27 +727,13 @@ impl Stage for EvolveStage {
                     .failure
                     .borrow_mut()
                     .take()
-                    .unwrap_or_else(|| StageError::Input(e.to_string())));
+                    .unwrap_or_else(|| e.into()));
             }
         };
         if !reused {
             *rows.entry("trace_distances".into()).or_default() += dx.upper.len() as u64;
         }
-        let out_dir = self
-            .output
-            .clone()
-            .unwrap_or_else(|| ctx.run().exports_dir().join(&stage).join("library"));
-        let name = format!("{}-evolved", self.setup.library.name);
-        let description = format!(
-            "{} grown by evolve stage {stage} (seed {}, {} strategy, {} proposer, budget {} per label)",
-            self.setup.library.name,
-            config.seed,
-            config.strategy.as_str(),
-            proposer.name(),
-            config.budget
-        );
-        write_library(&out_dir, &name, env, &description, &library)
-            .map_err(|e| StageError::Input(format!("{}: {e}", out_dir.display())))?;
+        let out_dir = self.write_evolved(ctx, &config, proposer.name(), &library)?;
         let wall: f64 = results.iter().map(|r| r.outcome.wall_s).sum();
         let prop: f64 = results.iter().map(|r| r.outcome.propose_s).sum();
         let accepted = results.iter().filter(|r| r.accepted).count();

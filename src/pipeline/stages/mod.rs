@@ -85,8 +85,9 @@ impl SqlSource {
     pub(crate) fn text(&self) -> Result<String, super::StageError> {
         match self {
             SqlSource::Inline(s) => Ok(s.clone()),
-            SqlSource::File(p) => std::fs::read_to_string(p)
-                .map_err(|e| super::StageError::Input(format!("{}: {e}", p.display()))),
+            SqlSource::File(p) => {
+                std::fs::read_to_string(p).map_err(|e| super::StageError::io(p, e))
+            }
         }
     }
 }

@@ -214,7 +214,7 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     };
     bounds
         .dims(&PoolEnv::default())
-        .map_err(|e| BuildError::param("v0_max", e))?;
+        .map_err(|e| BuildError::param("v0_max", e.to_string()))?;
     Ok(Box::new(OptimiseStage {
         scenes: count("scenes", p.scenes, 1)? as usize,
         scene_seed: p.scene_seed,
@@ -271,8 +271,7 @@ impl Stage for OptimiseStage {
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
         let mut env = PoolEnv::default();
         env.trace.dt = self.dt;
-        let scenes =
-            scenes(&env, self.layout, self.scenes, self.scene_seed).map_err(StageError::Input)?;
+        let scenes = scenes(&env, self.layout, self.scenes, self.scene_seed)?;
         let settings = Settings {
             env,
             bounds: self.bounds,
@@ -294,122 +293,118 @@ impl Stage for OptimiseStage {
                 ctx.progress().advance(ctx.stage_id(), self.budget as u64);
                 continue;
             }
-            let goal = self.goals.get(id).expect("checked at build");
             if pool.is_none() {
                 pool = Some(self.setup.pool()?);
             }
             let pool_ref = pool.as_ref().expect("just started");
             let schema = schema.get_or_insert_with(|| probe_schema(&self.library, pool_ref));
-            let program = compile(&goal.program, schema)
-                .map_err(|e| StageError::Input(format!("goal {id:?}: program: {e}")))?;
-            let rule = Rule::parse(&goal.verify)
-                .map_err(|e| StageError::Input(format!("goal {id:?}: verify: {e}")))?;
-            let task = GoalTask {
-                id: id.clone(),
-                detectors: detectors_for(&self.library, &labels_used(&program)),
-                program,
-                rule,
-            };
-            let mut chains = Vec::new();
-            for (si, scene) in scenes.iter().enumerate() {
-                for s in 0..self.seeds {
-                    let seed = mix(ctx.seed() ^ mix(gi as u64 + 1) ^ mix((si as u64) << 20 | s));
-                    for &kind in &self.rewards {
-                        chains.push(Chain {
-                            goal: 0,
-                            scene: scene.clone(),
-                            seed,
-                            kind,
-                        });
-                    }
+            let task = self.goal_task(id, schema)?;
+            let chains = self.chains(ctx.seed(), gi, &scenes);
+            records.push(self.run_goal(ctx, &settings, &shard, task, &chains, pool_ref)?);
+        }
+        let (cs, files) = self.plot(ctx)?;
+        Ok(self.output(&records, &cs, files))
+    }
+}
+
+impl OptimiseStage {
+    /// Goal `id`'s compiled reward program and verification rule, with the detectors it uses.
+    fn goal_task(&self, id: &str, schema: &crate::reward::Schema) -> Result<GoalTask, StageError> {
+        let goal = self.goals.get(id).expect("checked at build");
+        let program = compile(&goal.program, schema).map_err(|source| StageError::Goal {
+            id: id.to_string(),
+            part: "program",
+            source: Box::new(source),
+        })?;
+        let rule = Rule::parse(&goal.verify).map_err(|source| StageError::Goal {
+            id: id.to_string(),
+            part: "verify",
+            source: Box::new(source),
+        })?;
+        Ok(GoalTask {
+            id: id.to_string(),
+            detectors: detectors_for(&self.library, &labels_used(&program)),
+            program,
+            rule,
+        })
+    }
+
+    /// The chains of goal number `gi`: every scene × seed × reward type, seeded from the run's seed.
+    fn chains(&self, run_seed: u64, gi: usize, scenes: &[crate::envs::pool::Scene]) -> Vec<Chain> {
+        let mut chains = Vec::new();
+        for (si, scene) in scenes.iter().enumerate() {
+            for s in 0..self.seeds {
+                let seed = mix(run_seed ^ mix(gi as u64 + 1) ^ mix((si as u64) << 20 | s));
+                for &kind in &self.rewards {
+                    chains.push(Chain {
+                        goal: 0,
+                        scene: scene.clone(),
+                        seed,
+                        kind,
+                    });
                 }
             }
-            let ordinal = ctx.shard_started();
-            let t0 = std::time::Instant::now();
-            let progress = ctx.progress();
-            let (rows, timings) = run_chains(
-                &settings,
-                std::slice::from_ref(&task),
-                &chains,
-                Some(pool_ref),
-                |_| progress.advance(ctx.stage_id(), 1),
-            )
-            .map_err(StageError::Input)?;
-            // Chain seeds are hashes; the table records the seed's index 0..seeds.
-            let seed_index: BTreeMap<u64, i64> = chains
-                .iter()
-                .enumerate()
-                .map(|(i, c)| {
-                    (
-                        c.seed,
-                        ((i / self.rewards.len()) as u64 % self.seeds) as i64,
-                    )
-                })
-                .collect();
-            let wall = t0.elapsed().as_secs_f64();
-            let batch = RecordBatch::try_new(
-                schema_ref(),
-                vec![
-                    Arc::new(StringArray::from_iter_values(
-                        rows.iter().map(|r| r.goal.as_str()),
-                    )),
-                    Arc::new(StringArray::from_iter_values(
-                        rows.iter().map(|r| r.scene.as_str()),
-                    )),
-                    Arc::new(Int64Array::from_iter_values(
-                        rows.iter()
-                            .map(|r| seed_index.get(&r.seed).copied().unwrap_or(0)),
-                    )),
-                    Arc::new(StringArray::from_iter_values(
-                        rows.iter().map(|r| r.kind.as_str()),
-                    )),
-                    Arc::new(Int64Array::from_iter_values(
-                        rows.iter().map(|r| r.budget as i64),
-                    )),
-                    Arc::new(BooleanArray::from(
-                        rows.iter().map(|r| r.success).collect::<Vec<_>>(),
-                    )),
-                    Arc::new(Float64Array::from_iter_values(
-                        rows.iter().map(|r| r.best_reward),
-                    )),
-                    Arc::new(Int64Array::from_iter_values(
-                        rows.iter().map(|r| r.best_sample as i64),
-                    )),
-                    Arc::new(Float64Array::from_iter_values(
-                        rows.iter().map(|r| r.shot.v0),
-                    )),
-                    Arc::new(Float64Array::from_iter_values(
-                        rows.iter().map(|r| r.shot.phi),
-                    )),
-                    Arc::new(Float64Array::from_iter_values(
-                        rows.iter().map(|r| r.shot.theta),
-                    )),
-                    Arc::new(Float64Array::from_iter_values(
-                        rows.iter().map(|r| r.shot.a),
-                    )),
-                    Arc::new(Float64Array::from_iter_values(
-                        rows.iter().map(|r| r.shot.b),
-                    )),
-                ],
-            )?;
-            ctx.checkpoint_mid_shard(ordinal)?;
-            let n = ctx.write_batch("optimisation", Env::Pooltool, &shard, &batch)?;
-            let record = json!({
-                "goal": id,
-                "rows": n,
-                "chains": chains.len(),
-                "wall_s": wall,
-                "timings": {
-                    "samples": timings.samples, "dense_samples": timings.dense_samples,
-                    "simulate_s": timings.simulate_s, "annotate_s": timings.annotate_s,
-                    "score_s": timings.score_s, "failed_simulations": timings.failed_simulations,
-                    "failed_calls": timings.failed_calls, "program_errors": timings.program_errors,
-                },
-            });
-            ctx.finish_shard(&shard, &record)?;
-            records.push(record);
         }
-        // The figure, from every staged shard (this attempt's and an earlier one's).
+        chains
+    }
+
+    /// Runs one goal's chains, writes its rows as shard `shard` and returns the shard's record.
+    fn run_goal(
+        &self,
+        ctx: &StageContext<'_>,
+        settings: &Settings,
+        shard: &str,
+        task: GoalTask,
+        chains: &[Chain],
+        pool: &crate::detect::WorkerPool,
+    ) -> Result<Value, StageError> {
+        let ordinal = ctx.shard_started();
+        let t0 = std::time::Instant::now();
+        let progress = ctx.progress();
+        let (rows, timings) = run_chains(
+            settings,
+            std::slice::from_ref(&task),
+            chains,
+            Some(pool),
+            |_| progress.advance(ctx.stage_id(), 1),
+        )?;
+        // Chain seeds are hashes; the table records the seed's index 0..seeds.
+        let seed_index: BTreeMap<u64, i64> = chains
+            .iter()
+            .enumerate()
+            .map(|(i, c)| {
+                (
+                    c.seed,
+                    ((i / self.rewards.len()) as u64 % self.seeds) as i64,
+                )
+            })
+            .collect();
+        let wall = t0.elapsed().as_secs_f64();
+        let batch = rows_batch(&rows, &seed_index)?;
+        ctx.checkpoint_mid_shard(ordinal)?;
+        let n = ctx.write_batch("optimisation", Env::Pooltool, shard, &batch)?;
+        let record = json!({
+            "goal": task.id,
+            "rows": n,
+            "chains": chains.len(),
+            "wall_s": wall,
+            "timings": {
+                "samples": timings.samples, "dense_samples": timings.dense_samples,
+                "simulate_s": timings.simulate_s, "annotate_s": timings.annotate_s,
+                "score_s": timings.score_s, "failed_simulations": timings.failed_simulations,
+                "failed_calls": timings.failed_calls, "program_errors": timings.program_errors,
+            },
+        });
+        ctx.finish_shard(shard, &record)?;
+        Ok(record)
+    }
+
+    /// The figure of success against budget, from every staged shard (this attempt's and an earlier
+    /// one's): the curves and the two files written.
+    fn plot(
+        &self,
+        ctx: &StageContext<'_>,
+    ) -> Result<(Vec<crate::optimise::plot::Curve>, Vec<PathBuf>), StageError> {
         let mut points: Vec<(String, u64, u64, bool)> = Vec::new();
         for f in ctx.staging().table_files("optimisation")? {
             for b in crate::store::read_file(&f)? {
@@ -429,8 +424,7 @@ impl Stage for OptimiseStage {
         }
         let cs = curves(points.iter().map(|(k, b, s, ok)| (k.as_str(), *b, *s, *ok)));
         let dir = ctx.run().exports_dir().join(ctx.stage_id());
-        std::fs::create_dir_all(&dir)
-            .map_err(|e| StageError::Input(format!("{}: {e}", dir.display())))?;
+        std::fs::create_dir_all(&dir).map_err(|e| StageError::io(&dir, e))?;
         let title = format!(
             "{} ({} goals × {} scenes × {} seeds)",
             self.title,
@@ -438,16 +432,25 @@ impl Stage for OptimiseStage {
             self.scenes,
             self.seeds
         );
-        let io =
-            |p: &PathBuf, e: std::io::Error| StageError::Input(format!("{}: {e}", p.display()));
         let svg_path = dir.join("success_vs_budget.svg");
-        write_atomic(&svg_path, svg(&cs, &title).as_bytes()).map_err(|e| io(&svg_path, e))?;
+        write_atomic(&svg_path, svg(&cs, &title).as_bytes())
+            .map_err(|e| StageError::io(&svg_path, e))?;
         let png_path = dir.join("success_vs_budget.png");
         write_atomic(&png_path, &png(&cs).map_err(StageError::Internal)?)
-            .map_err(|e| io(&png_path, e))?;
+            .map_err(|e| StageError::io(&png_path, e))?;
+        Ok((cs, vec![svg_path, png_path]))
+    }
+
+    /// The stage's output: rows, summed timings and the final success rate of each reward type.
+    fn output(
+        &self,
+        records: &[Value],
+        cs: &[crate::optimise::plot::Curve],
+        files: Vec<PathBuf>,
+    ) -> StageOutput {
         let mut totals: BTreeMap<String, f64> = BTreeMap::new();
         let mut rows_total = 0u64;
-        for r in &records {
+        for r in records {
             rows_total += r["rows"].as_u64().unwrap_or(0);
             for (k, v) in r["timings"].as_object().into_iter().flatten() {
                 *totals.entry(k.clone()).or_default() += v.as_f64().unwrap_or(0.0);
@@ -459,9 +462,9 @@ impl Stage for OptimiseStage {
             .collect();
         let mut rows = BTreeMap::new();
         rows.insert("optimisation".to_string(), rows_total);
-        Ok(StageOutput {
+        StageOutput {
             rows,
-            files: vec![svg_path, png_path],
+            files,
             summary: json!({
                 "goals": self.goal_ids, "goal_file": self.goals.path, "library": self.library.name,
                 "scenes": self.scenes, "scene_seed": self.scene_seed, "layout": format!("{:?}", self.layout).to_lowercase(), "seeds": self.seeds,
@@ -480,8 +483,60 @@ impl Stage for OptimiseStage {
                     .collect::<Vec<_>>()
                     .join(", ")
             ),
-        })
+        }
     }
+}
+
+/// The `optimisation` rows of one goal as a batch (seeds as their index 0..seeds).
+fn rows_batch(
+    rows: &[crate::optimise::CheckpointRow],
+    seed_index: &BTreeMap<u64, i64>,
+) -> Result<RecordBatch, arrow::error::ArrowError> {
+    RecordBatch::try_new(
+        schema_ref(),
+        vec![
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|r| r.goal.as_str()),
+            )),
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|r| r.scene.as_str()),
+            )),
+            Arc::new(Int64Array::from_iter_values(
+                rows.iter()
+                    .map(|r| seed_index.get(&r.seed).copied().unwrap_or(0)),
+            )),
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|r| r.kind.as_str()),
+            )),
+            Arc::new(Int64Array::from_iter_values(
+                rows.iter().map(|r| r.budget as i64),
+            )),
+            Arc::new(BooleanArray::from(
+                rows.iter().map(|r| r.success).collect::<Vec<_>>(),
+            )),
+            Arc::new(Float64Array::from_iter_values(
+                rows.iter().map(|r| r.best_reward),
+            )),
+            Arc::new(Int64Array::from_iter_values(
+                rows.iter().map(|r| r.best_sample as i64),
+            )),
+            Arc::new(Float64Array::from_iter_values(
+                rows.iter().map(|r| r.shot.v0),
+            )),
+            Arc::new(Float64Array::from_iter_values(
+                rows.iter().map(|r| r.shot.phi),
+            )),
+            Arc::new(Float64Array::from_iter_values(
+                rows.iter().map(|r| r.shot.theta),
+            )),
+            Arc::new(Float64Array::from_iter_values(
+                rows.iter().map(|r| r.shot.a),
+            )),
+            Arc::new(Float64Array::from_iter_values(
+                rows.iter().map(|r| r.shot.b),
+            )),
+        ],
+    )
 }
 
 fn schema_ref() -> Arc<Schema> {

@@ -136,7 +136,11 @@ pub(crate) fn read_traces(run: &RunDir, set: &TraceFileSet) -> Result<Vec<Trace>
             frames: &slice(&frames, rf.get(id)),
             events: &slice(&events, re.get(id)),
         })
-        .map_err(|e| StageError::Input(format!("{}: trace {id}: {e}", path.display())))?;
+        .map_err(|source| StageError::BadTraceRows {
+            path: path.clone(),
+            trace_id: id.to_string(),
+            source: Box::new(source),
+        })?;
         out.push(trace);
     }
     Ok(out)
