@@ -272,8 +272,41 @@ pub fn markdown(scores: &[LabelScore]) -> String {
     out
 }
 
+/// A hash of the ground-truth rules' source (this module's files, compiled in): the `accuracy` stage's
+/// fingerprint includes it, so a changed rule rescores instead of serving a cached table.
+pub fn rules_fingerprint() -> String {
+    const SOURCES: [&str; 7] = [
+        include_str!("mod.rs"),
+        include_str!("airborne.rs"),
+        include_str!("contacts.rs"),
+        include_str!("geometry.rs"),
+        include_str!("iphyre.rs"),
+        include_str!("phyre.rs"),
+        include_str!("pooltool.rs"),
+    ];
+    crate::digest::sha256_hex(SOURCES.concat().as_bytes())[..16].to_string()
+}
+
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn the_rules_fingerprint_covers_every_file_of_the_module() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/detect/accuracy");
+        let n = std::fs::read_dir(dir)
+            .unwrap()
+            .filter(|e| {
+                e.as_ref()
+                    .unwrap()
+                    .path()
+                    .extension()
+                    .is_some_and(|x| x == "rs")
+            })
+            .count();
+        assert_eq!(n, 7, "add the new file to rules_fingerprint's SOURCES");
+        assert_eq!(super::rules_fingerprint().len(), 16);
+    }
+
     use serde_json::json;
 
     use super::*;

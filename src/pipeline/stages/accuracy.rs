@@ -147,10 +147,12 @@ fn batch(scores: &[LabelScore]) -> Result<RecordBatch, StageError> {
 }
 
 impl Stage for AccuracyStage {
+    /// The library's hash, the worker and the ground-truth rules: changing any of them rescores.
     fn fingerprint_extra(&self) -> Result<Value, StageError> {
         Ok(json!({
             "library": self.setup.library.fingerprint(),
             "worker": crate::detect::worker_fingerprint(),
+            "truth": crate::detect::accuracy::rules_fingerprint(),
         }))
     }
 
