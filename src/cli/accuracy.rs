@@ -1,10 +1,10 @@
 //! `annotrace accuracy`: scores a library's event-grounded labels against the simulator's events of a
 //! run (precision, recall, F1 per label), as a one-stage `accuracy` pipeline; prints a Markdown table.
 
-use annotrace::pipeline::stages::accuracy::{AccuracyParams, KIND};
+use annotrace::pipeline::stages::accuracy::{AccuracyParams, AccuracySummary, KIND};
 
-use super::CliResult;
 use super::annotate::SandboxArgs;
+use super::{CliError, CliResult};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -33,21 +33,19 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
         .sandbox
         .one_stage("accuracy", &params.sandbox)?
         .run(&KIND, &params, quiet)?;
-    println!("{}", stage.summary["markdown"].as_str().unwrap_or_default());
-    println!("{}", stage_line(&stage.summary));
-    Ok(0)
-}
-
-fn stage_line(s: &serde_json::Value) -> String {
-    format!(
+    let s: AccuracySummary = serde_json::from_value(stage.summary.clone())
+        .map_err(|e| CliError::failed(anyhow::anyhow!("internal error: accuracy summary: {e}")))?;
+    println!("{}", s.markdown);
+    println!(
         "{} trace(s), tolerance {} s, contacts merged within {} s{}",
-        s["traces"],
-        s["tolerance"],
-        s["merge"],
-        if s["hide_events"] == true {
+        s.traces,
+        s.tolerance,
+        s.merge,
+        if s.hide_events {
             ", detectors given no event log"
         } else {
             ""
         }
-    )
+    );
+    Ok(0)
 }

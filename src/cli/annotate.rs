@@ -7,7 +7,7 @@
 use std::path::PathBuf;
 
 use annotrace::digest::hex;
-use annotrace::pipeline::stages::annotate::KIND;
+use annotrace::pipeline::stages::annotate::{AnnotateSummary, KIND};
 use annotrace::pipeline::stages::detector_setup::SandboxParams;
 use annotrace::query::{Format, RenderOptions, render_string};
 use annotrace::trace::Env;
@@ -88,30 +88,25 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
     let stage = args
         .one_stage("annotate", &params)?
         .run(&KIND, &params, quiet)?;
-    let s = &stage.summary;
+    let s: AnnotateSummary = serde_json::from_value(stage.summary.clone())
+        .map_err(|e| CliError::failed(anyhow::anyhow!("internal error: annotate summary: {e}")))?;
     println!(
         "annotated {} {} trace(s) with {} detector(s) of {}: {} annotation(s); calls: {}",
-        s["traces"],
+        s.traces,
         args.env,
-        s["detectors"],
-        s["library"].as_str().unwrap_or("?"),
-        s["annotations"],
-        s["statuses"]
-            .as_object()
-            .map(|m| m
-                .iter()
-                .map(|(k, v)| format!("{v} {k}"))
-                .collect::<Vec<_>>()
-                .join(", "))
-            .unwrap_or_default()
+        s.detectors,
+        s.library,
+        s.annotations,
+        s.statuses
+            .iter()
+            .map(|(k, v)| format!("{v} {k}"))
+            .collect::<Vec<_>>()
+            .join(", ")
     );
-    if let Some(layers) = s.get("sandbox").filter(|l| !l.is_null()) {
+    if let Some(layers) = &s.sandbox {
         println!(
             "sandbox: landlock {}, seccomp {}, python guard {}, Python {}",
-            layers["landlock"].as_str().unwrap_or("?"),
-            layers["seccomp"].as_str().unwrap_or("?"),
-            layers["python_guard"],
-            layers["python"].as_str().unwrap_or("?"),
+            layers.landlock, layers.seccomp, layers.python_guard, layers.python,
         );
     }
     // Per-detector breakdown from the tables just written.
@@ -132,12 +127,6 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
             &RenderOptions::default()
         )
     );
-    let failed: u64 = s["statuses"]
-        .as_object()
-        .into_iter()
-        .flatten()
-        .filter(|(k, _)| k.as_str() != "ok")
-        .map(|(_, v)| v.as_u64().unwrap_or(0))
-        .sum();
+    let failed = s.failed_calls();
     Ok(u8::from(failed > 0))
 }

@@ -73,6 +73,48 @@ pub static KIND: StageKind = StageKind {
     build,
 };
 
+/// What an `accuracy` stage reports (its manifest summary, read back by `annotrace accuracy`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct AccuracySummary {
+    /// The environment.
+    pub env: Env,
+    /// The library's name.
+    pub library: String,
+    /// Traces scored.
+    pub traces: u64,
+    /// Traces without the events that ground the labels (not scored).
+    pub unscored: u64,
+    /// Time tolerance (s) around a detection's span.
+    pub tolerance: f64,
+    /// Contacts closer than this (s) are one event.
+    pub merge: f64,
+    /// Whether the detectors saw the traces without their event log.
+    pub hide_events: bool,
+    /// Detector calls by status.
+    pub statuses: BTreeMap<String, u64>,
+    /// One score per scored label.
+    pub scores: Vec<ScoreSummary>,
+    /// The scores as a Markdown table.
+    pub markdown: String,
+}
+
+/// One label's score.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ScoreSummary {
+    /// The label.
+    pub label: String,
+    /// Ground-truth events.
+    pub events: u64,
+    /// Detections.
+    pub detections: u64,
+    /// Precision.
+    pub precision: f64,
+    /// Recall.
+    pub recall: f64,
+    /// F1.
+    pub f1: f64,
+}
+
 /// The `accuracy` stage.
 #[derive(Debug)]
 pub struct AccuracyStage {
@@ -232,21 +274,29 @@ impl Stage for AccuracyStage {
         Ok(StageOutput {
             rows,
             files: Vec::new(),
-            summary: json!({
-                "env": self.setup.env.as_str(),
-                "library": lib.name,
-                "traces": n_traces - unscored,
-                "unscored": unscored,
-                "tolerance": self.tolerance,
-                "merge": self.merge,
-                "hide_events": self.hide_events,
-                "statuses": statuses,
-                "scores": ordered.iter().map(|s| json!({
-                    "label": s.label, "events": s.events, "detections": s.detections,
-                    "precision": s.precision(), "recall": s.recall(), "f1": s.f1(),
-                })).collect::<Vec<_>>(),
-                "markdown": markdown(&ordered),
-            }),
+            summary: serde_json::to_value(AccuracySummary {
+                env: self.setup.env,
+                library: lib.name.clone(),
+                traces: (n_traces - unscored) as u64,
+                unscored: unscored as u64,
+                tolerance: self.tolerance,
+                merge: self.merge,
+                hide_events: self.hide_events,
+                statuses: statuses.clone(),
+                scores: ordered
+                    .iter()
+                    .map(|s| ScoreSummary {
+                        label: s.label.clone(),
+                        events: s.events,
+                        detections: s.detections,
+                        precision: s.precision(),
+                        recall: s.recall(),
+                        f1: s.f1(),
+                    })
+                    .collect(),
+                markdown: markdown(&ordered),
+            })
+            .unwrap_or(Value::Null),
             line: format!(
                 "{} trace(s), {} event-grounded label(s) of {}: lowest F1 {min_f1:.3}{}",
                 n_traces - unscored,

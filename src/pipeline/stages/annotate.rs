@@ -6,6 +6,7 @@
 //! that fails (syntax, forbidden construct, exception, timeout, memory, invalid output) is a
 //! `detector_calls` row with its status and error, never a failed stage.
 
+use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
 
@@ -17,7 +18,7 @@ use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
-use crate::trace::Trace;
+use crate::trace::{Env, Trace};
 
 /// The `annotate` stage kind.
 pub static KIND: StageKind = StageKind {
@@ -32,6 +33,38 @@ pub static KIND: StageKind = StageKind {
     params: ParamsOf::of::<SandboxParams>(),
     build,
 };
+
+/// What an `annotate` stage reports (its manifest summary, read back by `annotrace annotate`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct AnnotateSummary {
+    /// The environment.
+    pub env: Env,
+    /// The library's name.
+    pub library: String,
+    /// Its detectors.
+    pub detectors: u64,
+    /// Traces annotated.
+    pub traces: u64,
+    /// Annotations written.
+    pub annotations: u64,
+    /// Detector calls by status (`ok`, `timeout`, `exception`, …).
+    pub statuses: BTreeMap<String, u64>,
+    /// The sandbox layers the workers ran under (absent when every shard was reused).
+    pub sandbox: Option<crate::detect::SandboxLayers>,
+    /// Seconds spent per phase (reading, batching, detector wall time, protocol, …), summed.
+    pub timings: BTreeMap<String, f64>,
+}
+
+impl AnnotateSummary {
+    /// Detector calls that did not succeed.
+    pub fn failed_calls(&self) -> u64 {
+        self.statuses
+            .iter()
+            .filter(|(k, _)| k.as_str() != "ok")
+            .map(|(_, v)| v)
+            .sum()
+    }
+}
 
 /// The `annotate` stage.
 #[derive(Debug)]
@@ -177,16 +210,17 @@ impl Stage for AnnotateStage {
         Ok(StageOutput {
             rows,
             files: Vec::new(),
-            summary: json!({
-                "env": env.as_str(),
-                "library": lib.name,
-                "detectors": lib.detectors.len(),
-                "traces": traces,
-                "annotations": anns,
-                "statuses": statuses,
-                "sandbox": layers,
-                "timings": stats,
-            }),
+            summary: serde_json::to_value(AnnotateSummary {
+                env,
+                library: lib.name.clone(),
+                detectors: lib.detectors.len() as u64,
+                traces,
+                annotations: anns,
+                statuses,
+                sandbox: serde_json::from_value(layers).ok(),
+                timings: stats,
+            })
+            .unwrap_or(Value::Null),
             line,
         })
     }
