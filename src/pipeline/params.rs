@@ -399,6 +399,44 @@ fn check_type(doc: &ParamDoc, node: &Node) -> Result<Value, String> {
     })
 }
 
+/// The tag key and its value (given, or the default) of a kind whose parameters depend on it, or
+/// `(None, None)` for a kind with one parameter list; a value naming no variant is an error at its line.
+fn chosen_variant(
+    all: &ParamDocs,
+    entries: &[&Entry],
+    stage_id: &str,
+) -> Result<(Option<String>, Option<String>), (usize, String)> {
+    let ParamDocs::ByTag {
+        tag,
+        default,
+        variants,
+    } = all
+    else {
+        return Ok((None, None));
+    };
+    let value = match entries.iter().find(|e| &e.key == tag) {
+        None => default.clone(),
+        Some(e) => match &e.value.value {
+            NodeValue::Str(s) if variants.iter().any(|(v, _)| v == s) => s.clone(),
+            other => {
+                let choices = ParamType::Choice(variants.iter().map(|(v, _)| v.clone()).collect());
+                let found = match other {
+                    NodeValue::Str(s) => format!("\"{s}\""),
+                    o => o.type_name().to_string(),
+                };
+                return Err((
+                    e.value.line,
+                    format!(
+                        "stage \"{stage_id}\": `{tag}` must be {}, found {found}",
+                        choices.describe()
+                    ),
+                ));
+            }
+        },
+    };
+    Ok((Some(tag.clone()), Some(value)))
+}
+
 /// A stage's canonical parameters (defaults filled in) and the line of each given key.
 pub(crate) type Resolved = (Map<String, Value>, Vec<(String, usize)>);
 
@@ -421,39 +459,8 @@ pub(crate) fn resolve(
         message,
     };
     let all = params.docs();
-    // Which variant applies (kinds whose parameters depend on the environment).
-    let (tag, tag_value) = match &all {
-        ParamDocs::Flat(_) => (None, None),
-        ParamDocs::ByTag {
-            tag,
-            default,
-            variants,
-        } => {
-            let given = entries.iter().find(|e| &e.key == tag);
-            let value = match given {
-                None => default.clone(),
-                Some(e) => match &e.value.value {
-                    NodeValue::Str(s) if variants.iter().any(|(v, _)| v == s) => s.clone(),
-                    other => {
-                        let choices =
-                            ParamType::Choice(variants.iter().map(|(v, _)| v.clone()).collect());
-                        let found = match other {
-                            NodeValue::Str(s) => format!("\"{s}\""),
-                            o => o.type_name().to_string(),
-                        };
-                        return Err(invalid(
-                            e.value.line,
-                            format!(
-                                "stage \"{stage_id}\": `{tag}` must be {}, found {found}",
-                                choices.describe()
-                            ),
-                        ));
-                    }
-                },
-            };
-            (Some(tag.clone()), Some(value))
-        }
-    };
+    let (tag, tag_value) =
+        chosen_variant(&all, entries, stage_id).map_err(|(line, m)| invalid(line, m))?;
     let docs = all
         .for_tag(tag_value.as_deref())
         .expect("the tag value was checked against the variants");
