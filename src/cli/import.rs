@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use annotrace::digest::hex;
-use annotrace::pipeline::stages::import::{ImportParams, KIND};
+use annotrace::pipeline::stages::import::{ImportParams, ImportSummary, KIND};
 use annotrace::query::{Format, RenderOptions, render_string};
 use annotrace::trace::Env;
 use arrow::array::{RecordBatch, StringArray};
@@ -75,10 +75,11 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
         remove_new_run_on_failure: true,
     }
     .run(&KIND, &params, quiet)?;
-    let summary = &stage.summary;
-    let traces = summary["traces"].as_u64().unwrap_or(0);
+    let s: ImportSummary = serde_json::from_value(stage.summary.clone())
+        .map_err(|e| CliError::failed(anyhow::anyhow!("internal error: import summary: {e}")))?;
+    let traces = s.traces;
     let frames = stage.rows.get("frames").copied().unwrap_or(0);
-    let rejected = summary["rejected_count"].as_u64().unwrap_or(0);
+    let rejected = s.rejected_count;
     println!(
         "{} {traces} {} trace(s) ({frames} frame rows) into {}{}",
         if stage.cached {
@@ -92,11 +93,11 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
     );
     if rejected > 0 {
         println!("{rejected} invalid trace(s) skipped:");
-        println!("{}", rejections_table(&summary["rejected"]));
-        if rejected as usize > summary["rejected"].as_array().map_or(0, Vec::len) {
+        println!("{}", rejections_table(&s.rejected));
+        if rejected as usize > s.rejected.len() {
             println!(
                 "(the manifest lists the first {} of them)",
-                summary["rejected"].as_array().map_or(0, Vec::len)
+                s.rejected.len()
             );
         }
         return Ok(1);
@@ -104,8 +105,7 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
     Ok(0)
 }
 
-fn rejections_table(rows: &serde_json::Value) -> String {
-    let rows = rows.as_array().cloned().unwrap_or_default();
+fn rejections_table(rows: &[serde_json::Value]) -> String {
     let col = |f: &dyn Fn(&serde_json::Value) -> String| -> StringArray {
         rows.iter().map(|r| Some(f(r))).collect()
     };

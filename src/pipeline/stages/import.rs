@@ -108,6 +108,21 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     }))
 }
 
+/// What an `import` stage reports (its manifest summary, read back by `annotrace import`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ImportSummary {
+    /// The environment.
+    pub env: Env,
+    /// Input files read.
+    pub files: u64,
+    /// Traces imported.
+    pub traces: u64,
+    /// Invalid traces skipped (with `skip_invalid`).
+    pub rejected_count: u64,
+    /// The first rejections: file, line or trace number, task id, JSON path, fault kind and message.
+    pub rejected: Vec<Value>,
+}
+
 /// The `import` stage.
 #[derive(Debug)]
 pub struct ImportStage {
@@ -196,13 +211,14 @@ impl Stage for ImportStage {
         Ok(StageOutput {
             rows: totals.rows.clone(),
             files: Vec::new(),
-            summary: json!({
-                "env": self.env.as_str(),
-                "files": files.len(),
-                "traces": totals.traces,
-                "rejected_count": totals.rejected_count,
-                "rejected": totals.rejected,
-            }),
+            summary: serde_json::to_value(ImportSummary {
+                env: self.env,
+                files: files.len() as u64,
+                traces: totals.traces,
+                rejected_count: totals.rejected_count,
+                rejected: totals.rejected,
+            })
+            .unwrap_or(Value::Null),
             line,
         })
     }
