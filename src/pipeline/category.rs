@@ -121,6 +121,8 @@ impl Categorize for StageError {
             StageError::Internal(_) => ErrorCategory::Internal,
             // A simulator that blew up on valid input: the run failed, the input was not wrong.
             StageError::NonFinite { .. } => ErrorCategory::Failed,
+            // A scene, task or click list the environment refuses: the input's fault.
+            StageError::Simulation { .. } => ErrorCategory::Input,
             StageError::Injected(_) => ErrorCategory::Failed,
         }
     }

@@ -124,6 +124,15 @@ pub enum StageError {
     /// typed variant that keeps its cause: this one is always categorised as the user's input.
     #[error("{0}")]
     Input(String),
+    /// An environment refused to simulate one item (a scene, task or episode), with its cause.
+    #[error("{item}: {source}")]
+    Simulation {
+        /// The item (`scene pool-7-000003`, `trace …`, `task 00004:063`).
+        item: String,
+        /// The environment's error.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
     /// A simulator produced a state that is not finite (NaN or infinite).
     #[error(
         "trace {trace}: the simulation produced a non-finite {field} (timestep {step}, object #{object}); \

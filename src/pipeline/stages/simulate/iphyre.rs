@@ -297,7 +297,10 @@ impl Simulation for IphyreSimulation {
                 sinks.write("scenes", &batch)?;
             }
             let result = Episode::new(game, &clicks, &self.params, true)
-                .map_err(|e| StageError::Input(format!("trace {trace_id}: {e}")))?
+                .map_err(|e| StageError::Simulation {
+                    item: format!("trace {trace_id}"),
+                    source: e.into(),
+                })?
                 .run();
             let trace = trace_of(&result, game, &trace_id);
             traces += 1;

@@ -225,13 +225,17 @@ impl PhyreSimulation {
             Work::Dataset { seed, .. } => {
                 let index = set.position(&task.task_id).unwrap_or(0) as u64;
                 random_valid_action(task, &mut action_rng(*seed, index, sample))
-                    .map_err(|e| StageError::Input(format!("task {}: {e}", task.task_id)))?
-                    .ok_or_else(|| {
-                        StageError::Input(format!(
-                            "task {}: no valid action found in {} draws",
-                            task.task_id,
+                    .map_err(|e| StageError::Simulation {
+                        item: format!("task {}", task.task_id),
+                        source: e.into(),
+                    })?
+                    .ok_or_else(|| StageError::Simulation {
+                        item: format!("task {}", task.task_id),
+                        source: format!(
+                            "no valid action found in {} draws",
                             crate::envs::phyre::MAX_DRAWS
-                        ))
+                        )
+                        .into(),
                     })
             }
         }
@@ -281,16 +285,19 @@ impl Simulation for PhyreSimulation {
         lo: u64,
         hi: u64,
     ) -> Result<Value, StageError> {
-        let set = TaskSet::default_tasks().map_err(|e| StageError::Input(e.to_string()))?;
+        let set = TaskSet::default_tasks().map_err(|e| StageError::Simulation {
+            item: "PHYRE tasks".to_string(),
+            source: e.into(),
+        })?;
         let (mut traces, mut successes, mut invalid, mut steps) = (0u64, 0u64, 0u64, 0u64);
         let mut task: Option<Task> = None;
         for i in lo..hi {
             let (task_id, sample, trace_id) = self.item(i);
             if task.as_ref().is_none_or(|t| t.task_id != task_id) {
-                task = Some(
-                    set.get(task_id)
-                        .map_err(|e| StageError::Input(e.to_string()))?,
-                );
+                task = Some(set.get(task_id).map_err(|e| StageError::Simulation {
+                    item: "PHYRE tasks".to_string(),
+                    source: e.into(),
+                })?);
             }
             let Some(task) = task.as_ref() else { continue };
             let scene_id = format!("phyre-{}", task_id.replace(':', "-"));
@@ -307,8 +314,12 @@ impl Simulation for PhyreSimulation {
                 sinks.write("scenes", &batch)?;
             }
             let action = self.action(task, sample, set)?;
-            let result = episode::run(task, &action, &self.params, &self.record)
-                .map_err(|e| StageError::Input(format!("trace {trace_id}: {e}")))?;
+            let result = episode::run(task, &action, &self.params, &self.record).map_err(|e| {
+                StageError::Simulation {
+                    item: format!("trace {trace_id}"),
+                    source: e.into(),
+                }
+            })?;
             let trace = trace_of(&result, task, &trace_id);
             traces += 1;
             successes += u64::from(result.status == Status::Solved);

@@ -272,7 +272,10 @@ impl Simulation for PoolSimulation {
             let (scene, shots) = self.scene_work(index);
             let system = scene
                 .system(&self.config)
-                .map_err(|e| StageError::Input(format!("scene {}: {e}", scene.scene_id)))?;
+                .map_err(|e| StageError::Simulation {
+                    item: format!("scene {}", scene.scene_id),
+                    source: e.into(),
+                })?;
             let mut spec = scene.to_json();
             spec["table"] = json!(self.config.name);
             spec["index"] = json!(index);
@@ -285,8 +288,11 @@ impl Simulation for PoolSimulation {
             )?;
             sinks.write("scenes", &batch)?;
             for (trace_id, shot) in &shots {
-                let sim = simulate(&system, shot, &self.sim)
-                    .map_err(|e| StageError::Input(format!("trace {trace_id}: {e}")))?;
+                let sim =
+                    simulate(&system, shot, &self.sim).map_err(|e| StageError::Simulation {
+                        item: format!("trace {trace_id}"),
+                        source: e.into(),
+                    })?;
                 let trace = trace_of(&sim, &scene, shot, trace_id, &self.trace);
                 traces += 1;
                 successes += u64::from(trace.outcome.success);
