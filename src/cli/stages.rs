@@ -13,17 +13,11 @@ pub struct Args {
 
 fn print_params(docs: &[ParamDoc], indent: &str) {
     for p in docs {
-        let req = if p.required {
-            "required".to_string()
-        } else if let Some(d) = &p.default {
-            format!("default {d}")
-        } else {
-            "optional".to_string()
-        };
         println!(
-            "{indent}{:<18} {} ({req}): {}",
+            "{indent}{:<18} {} ({}): {}",
             p.name,
             p.ty.describe(),
+            p.default_text(),
             p.doc
         );
     }

@@ -98,6 +98,17 @@ pub struct ParamDoc {
     pub doc: String,
 }
 
+impl ParamDoc {
+    /// `required`, `default <value>` or `optional`, as listings print it.
+    pub fn default_text(&self) -> String {
+        match (&self.default, self.required) {
+            (_, true) => "required".to_string(),
+            (Some(d), false) => format!("default {d}"),
+            (None, false) => "optional".to_string(),
+        }
+    }
+}
+
 /// A kind's parameters: one list, or one list per value of a tag key (`env`).
 #[derive(Clone, Debug, PartialEq)]
 pub enum ParamDocs {

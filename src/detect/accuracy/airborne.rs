@@ -31,12 +31,7 @@ fn intervals(env: Env, trace: &Trace, merge_s: f64) -> BTreeMap<String, Vec<(f64
     let last = trace.timesteps.last().map_or(0.0, |s| s.t);
     let mut by_pair: BTreeMap<Vec<String>, Vec<(f64, f64)>> = BTreeMap::new();
     if has_contact_log(trace) {
-        let mut events: Vec<_> = trace
-            .events
-            .iter()
-            .filter(|e| e.t.is_some() && (e.kind == "contact_begin" || e.kind == "contact_end"))
-            .collect();
-        events.sort_by(|a, b| a.t.partial_cmp(&b.t).unwrap_or(std::cmp::Ordering::Equal));
+        let events = super::contacts::contact_events(trace);
         let mut open: BTreeMap<Vec<String>, bool> = BTreeMap::new();
         for e in events {
             let t = e.t.unwrap_or(0.0);

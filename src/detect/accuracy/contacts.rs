@@ -15,16 +15,22 @@ pub fn has_contact_log(trace: &Trace) -> bool {
         .any(|e| e.kind == "contact_begin" || e.kind == "contact_end")
 }
 
-/// The merged contacts of a trace: `(t, pair)` of each `contact_begin` that does not follow the same
-/// pair's last `contact_end` (or, without one, its last `contact_begin`) within `merge_s`.
-pub fn merged_contacts(trace: &Trace, merge_s: f64) -> Vec<(f64, Vec<String>)> {
+/// A trace's timed `contact_begin` and `contact_end` events in time order; events of one time keep
+/// their order (stable sort: an end before the begin that follows it).
+pub(super) fn contact_events(trace: &Trace) -> Vec<&crate::trace::Event> {
     let mut events: Vec<_> = trace
         .events
         .iter()
         .filter(|e| e.t.is_some() && (e.kind == "contact_begin" || e.kind == "contact_end"))
         .collect();
-    // Stable: events of one time keep their order (an end before the begin that follows it).
     events.sort_by(|a, b| a.t.partial_cmp(&b.t).unwrap_or(std::cmp::Ordering::Equal));
+    events
+}
+
+/// The merged contacts of a trace: `(t, pair)` of each `contact_begin` that does not follow the same
+/// pair's last `contact_end` (or, without one, its last `contact_begin`) within `merge_s`.
+pub fn merged_contacts(trace: &Trace, merge_s: f64) -> Vec<(f64, Vec<String>)> {
+    let events = contact_events(trace);
     let mut last: BTreeMap<Vec<String>, f64> = BTreeMap::new();
     let mut out = Vec::new();
     for e in events {
