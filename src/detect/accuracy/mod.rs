@@ -17,7 +17,10 @@ mod airborne;
 mod contacts;
 pub mod geometry;
 mod iphyre;
+mod iphyre_motion;
+mod kin;
 mod phyre;
+mod phyre_motion;
 mod pooltool;
 
 use std::collections::BTreeMap;
@@ -115,10 +118,34 @@ pub const POOLTOOL_GROUNDED: &[&str] = &[
 ];
 
 /// The event-grounded I-PHYRE labels.
-pub const IPHYRE_GROUNDED: &[&str] = &["collision", "object removal", "airborne motion"];
+pub const IPHYRE_GROUNDED: &[&str] = &[
+    "collision",
+    "support contact",
+    "falling object",
+    "swinging object",
+    "object removal",
+    "sliding contact",
+    "airborne motion",
+    "bounce",
+    "spring pull towards",
+    "spring resist movement",
+    "lever launch",
+];
 
 /// The event-grounded PHYRE labels.
-pub const PHYRE_GROUNDED: &[&str] = &["moving object hits stationary object", "airborne motion"];
+pub const PHYRE_GROUNDED: &[&str] = &[
+    "moving object hits stationary object",
+    "near collision",
+    "support relationship",
+    "lose support",
+    "falling object",
+    "rolling object",
+    "sliding contact",
+    "airborne motion",
+    "bounce",
+    "grid cell transition",
+    "tip over",
+];
 
 /// The event-grounded labels of `env`, in the paper's order.
 pub fn grounded(env: Env) -> &'static [&'static str] {
@@ -144,9 +171,13 @@ pub fn truth(env: Env, trace: &Trace, merge_s: f64) -> Vec<TruthEvent> {
         }
         Env::Iphyre | Env::Phyre => {
             let mut v = if env == Env::Iphyre {
-                iphyre_truth(trace, merge_s)
+                let mut v = iphyre_truth(trace, merge_s);
+                v.extend(iphyre_motion::iphyre_motion_truth(trace, merge_s));
+                v
             } else {
-                phyre_truth(trace, merge_s)
+                let mut v = phyre_truth(trace, merge_s);
+                v.extend(phyre_motion::phyre_motion_truth(trace, merge_s));
+                v
             };
             v.extend(airborne::airborne_truth(env, trace, merge_s));
             v
@@ -275,13 +306,16 @@ pub fn markdown(scores: &[LabelScore]) -> String {
 /// A hash of the ground-truth rules' source (this module's files, compiled in): the `accuracy` stage's
 /// fingerprint includes it, so a changed rule rescores instead of serving a cached table.
 pub fn rules_fingerprint() -> String {
-    const SOURCES: [&str; 7] = [
+    const SOURCES: [&str; 10] = [
         include_str!("mod.rs"),
         include_str!("airborne.rs"),
         include_str!("contacts.rs"),
         include_str!("geometry.rs"),
         include_str!("iphyre.rs"),
+        include_str!("iphyre_motion.rs"),
+        include_str!("kin.rs"),
         include_str!("phyre.rs"),
+        include_str!("phyre_motion.rs"),
         include_str!("pooltool.rs"),
     ];
     crate::digest::sha256_hex(SOURCES.concat().as_bytes())[..16].to_string()
@@ -303,7 +337,7 @@ mod tests {
                     .is_some_and(|x| x == "rs")
             })
             .count();
-        assert_eq!(n, 7, "add the new file to rules_fingerprint's SOURCES");
+        assert_eq!(n, 10, "add the new file to rules_fingerprint's SOURCES");
         assert_eq!(super::rules_fingerprint().len(), 16);
     }
 
