@@ -9,28 +9,53 @@ use super::contacts::{has_contact_log, merged_contacts};
 use super::geometry::phyre_contacts;
 use crate::trace::Trace;
 
-/// PHYRE: a body at least this fast (px/s) in the frame before a contact is moving.
+/// PHYRE: a body whose mean speed (px/s) over [`PHYRE_WINDOW_S`] before a contact is at least this
+/// moves.
 pub const PHYRE_MOVING: f64 = 20.0;
 
-/// PHYRE: a body at most this fast (px/s) in the frame before a contact is at rest.
+/// PHYRE: a body whose mean speed (px/s) over [`PHYRE_WINDOW_S`] before a contact is at most this is
+/// at rest.
 pub const PHYRE_AT_REST: f64 = 5.0;
 
-/// Speeds (px/s) of the PHYRE bodies in the last frame at or before `t`, by id.
-fn phyre_speeds(trace: &Trace, t: f64) -> BTreeMap<String, f64> {
-    let k = trace.timesteps.partition_point(|s| s.t <= t);
+/// PHYRE: the window (s) before the last frame ahead of a contact over which a body's mean speed is
+/// measured, from its positions.
+pub const PHYRE_WINDOW_S: f64 = 0.1;
+
+/// Mean speeds (px/s) of the PHYRE bodies from their displacement between the last frame strictly
+/// before `t` and the frame [`PHYRE_WINDOW_S`] before that (or the trace's first frame), by id. Not the
+/// velocity fields the detectors read: positions only. Implicit walls (absent) count as at rest.
+fn phyre_mean_speeds(trace: &Trace, t: f64) -> BTreeMap<String, f64> {
+    let steps = &trace.timesteps;
+    let k = steps.partition_point(|s| s.t < t).saturating_sub(1);
     let mut out = BTreeMap::new();
-    if let Some(step) = trace.timesteps.get(k.saturating_sub(1)) {
-        for o in &step.objects {
-            if let crate::trace::Body::Phyre(p) = &o.body {
-                out.insert(p.object_index.to_string(), p.vx.hypot(p.vy));
-            }
-        }
+    let Some(last) = steps.get(k) else {
+        return out;
+    };
+    let j = steps.partition_point(|s| s.t <= last.t - PHYRE_WINDOW_S + 1e-9);
+    let first = &steps[j.saturating_sub(1).min(k)];
+    let dt = last.t - first.t;
+    let pos = |s: &crate::trace::Timestep| -> BTreeMap<String, [f64; 2]> {
+        s.objects
+            .iter()
+            .filter_map(|o| match &o.body {
+                crate::trace::Body::Phyre(p) => Some((p.object_index.to_string(), [p.x, p.y])),
+                _ => None,
+            })
+            .collect()
+    };
+    let (a, b) = (pos(first), pos(last));
+    for (id, q) in b {
+        let speed = match a.get(&id) {
+            Some(p) if dt > 0.0 => (q[0] - p[0]).hypot(q[1] - p[1]) / dt,
+            _ => 0.0,
+        };
+        out.insert(id, speed);
     }
     out
 }
 
-/// The ground truth of a PHYRE trace: merged `contact_begin` events where one body moves and the other
-/// is at rest in the frame before the contact.
+/// The ground truth of a PHYRE trace: merged contacts where one body moves and the other is at rest,
+/// by their mean speeds from positions over the window before the contact.
 pub fn phyre_truth(trace: &Trace, merge_s: f64) -> Vec<TruthEvent> {
     let contacts = if has_contact_log(trace) {
         merged_contacts(trace, merge_s)
@@ -40,8 +65,8 @@ pub fn phyre_truth(trace: &Trace, merge_s: f64) -> Vec<TruthEvent> {
     contacts
         .into_iter()
         .filter_map(|(t, balls)| {
-            // The frame strictly before the contact step (the contact frame already shows the impact).
-            let speeds = phyre_speeds(trace, t - 1e-9);
+            // Up to the frame strictly before the contact (the contact frame already shows the impact).
+            let speeds = phyre_mean_speeds(trace, t);
             let v: Vec<f64> = balls
                 .iter()
                 .map(|b| speeds.get(b).copied().unwrap_or(0.0))
