@@ -1,12 +1,15 @@
 //! Text for language models: an annotated trace as compact lines, and a token count.
 //!
 //! [`annotated_text`] writes a header (trace, environment, task, length, outcome), the scene (the
-//! objects of the first timestep, environment by environment), then one line per pattern in a stable
+//! objects of the first timestep, environment by environment), what the trace records (its event kinds
+//! and payload fields, and the optional object fields it has or lacks, so the text never implies a
+//! field an imported trace does not hold), then one line per pattern in a stable
 //! order (start step, end step, label, detector, position in its output):
 //!
 //! ```text
 //! trace pool-7-000003-000 (pooltool, task pool-7-000003): 41 steps, t 0.00-3.90 s; outcome no_pocket, success false
 //! scene: 10 balls: cue (0.84, 0.46); 1 (0.50, 1.49); …
+//! records: events physics_ball_ball 3, physics_stick_ball 1, …; payload fields agents, ball, …
 //! patterns (steps, time, label: objects; key parameters):
 //! 0-0 t0.00 cue strike: cue struck cue ball (0.84,0.46); V0=5.04 phi=140.36
 //! 3-4 t0.39 ball collision: cue striking ball (0.42,1.45), 1 struck ball (0.50,1.49); contacts=1
@@ -149,6 +152,76 @@ fn key_parameters(a: &Annotation) -> String {
         .join(" ")
 }
 
+/// What the trace records beyond the format's required fields: its event kinds with counts (or none),
+/// the payload fields its events carry, whether a PHYRE / I-PHYRE trace logs contacts, and the optional
+/// object fields present or missing.
+fn records(trace: &Trace) -> String {
+    use std::collections::BTreeMap;
+    let mut kinds: BTreeMap<&str, usize> = BTreeMap::new();
+    let mut fields: std::collections::BTreeSet<&str> = Default::default();
+    for e in &trace.events {
+        *kinds.entry(e.kind.as_str()).or_default() += 1;
+        if let Some(Value::Object(p)) = &e.payload {
+            fields.extend(p.keys().map(String::as_str));
+        }
+    }
+    let mut parts = Vec::new();
+    if kinds.is_empty() {
+        parts.push("no events".to_string());
+    } else {
+        let list: Vec<String> = kinds.iter().map(|(k, n)| format!("{k} {n}")).collect();
+        parts.push(format!("events {}", list.join(", ")));
+        if !fields.is_empty() {
+            let f: Vec<&str> = fields.into_iter().collect();
+            parts.push(format!("payload fields {}", f.join(", ")));
+        }
+    }
+    let first = trace
+        .timesteps
+        .first()
+        .map(|s| s.objects.as_slice())
+        .unwrap_or_default();
+    match trace.env {
+        crate::trace::Env::Pooltool => {
+            if trace.extra.contains_key("shot") {
+                parts.push("top-level shot".into());
+            }
+        }
+        crate::trace::Env::Phyre | crate::trace::Env::Iphyre => {
+            if !kinds.contains_key("contact_begin") {
+                parts.push("no contact log".into());
+            }
+        }
+    }
+    match trace.env {
+        crate::trace::Env::Iphyre => {
+            let has = first
+                .iter()
+                .any(|o| matches!(&o.body, Body::Iphyre(b) if b.vx.is_some()));
+            parts.push(if has {
+                "objects with angle, vx, vy, angular_velocity".into()
+            } else {
+                "objects without angle, vx, vy, angular_velocity".into()
+            });
+        }
+        crate::trace::Env::Phyre => {
+            let walls = first
+                .iter()
+                .any(|o| matches!(&o.body, Body::Phyre(p) if p.shape == "wall"));
+            if !walls {
+                parts.push("walls not listed".into());
+            }
+            if let Some(Value::String(src)) = trace.extra.get("velocity_source") {
+                if src.starts_with("estimated") {
+                    parts.push("velocities estimated from positions".into());
+                }
+            }
+        }
+        crate::trace::Env::Pooltool => {}
+    }
+    format!("records: {}", parts.join("; "))
+}
+
 /// The annotated trace as text for a language model (see the module docs for the layout).
 pub fn annotated_text(trace: &Trace, annotations: &[Annotation]) -> String {
     let mut out = String::new();
@@ -169,6 +242,7 @@ pub fn annotated_text(trace: &Trace, annotations: &[Annotation]) -> String {
         trace.outcome.success
     );
     let _ = writeln!(out, "{}", scene(trace));
+    let _ = writeln!(out, "{}", records(trace));
     let mut sorted: Vec<&Annotation> = annotations
         .iter()
         .filter(|a| a.trace_id == trace.trace_id)
@@ -353,11 +427,12 @@ mod tests {
             "{text}"
         );
         assert!(lines[1].starts_with("scene: 2 balls: "), "{text}");
+        assert!(lines[2].starts_with("records: "), "{text}");
         assert_eq!(
-            lines[3],
+            lines[4],
             "0-1 t0.00 cue strike: 0 struck (0.50,1.25); speed=2.50"
         );
-        assert!(lines[4].starts_with("3-4 t0.03 ball collision"));
+        assert!(lines[5].starts_with("3-4 t0.03 ball collision"));
         assert!(count_tokens(&text) > 20);
     }
 }
