@@ -1,6 +1,6 @@
 //! "airborne motion" ground truth for PHYRE and I-PHYRE: a free body's flight between contacts. Owns
-//! the per-object contact intervals (from the contact log, or from the frames' touching pairs of
-//! `geometry.rs` for traces that log none) and the flight rule; not the scoring (`mod.rs`).
+//! the flight rule; the per-object contact intervals (from the contact log, or from the frames'
+//! touching pairs for traces that log none) are `kin.rs`; not the scoring (`mod.rs`).
 //!
 //! A flight is a maximal run of frames in which a free dynamic body (I-PHYRE: not held by a joint or a
 //! spring, centre on screen; PHYRE: a dynamic body of the task or the user's ball) is in no contact,
@@ -11,8 +11,8 @@
 use std::collections::BTreeMap;
 
 use super::TruthEvent;
-use super::contacts::{has_contact_log, pair};
-use super::geometry::{dense, iphyre_touching, phyre_dynamic, phyre_touching};
+use super::geometry::phyre_dynamic;
+use super::kin::{episodes, intervals};
 use crate::trace::{Body, Env, Trace};
 
 /// Shortest flight (s) per environment: I-PHYRE, PHYRE.
@@ -23,63 +23,6 @@ pub const MIN_FLIGHT_SPEED: f64 = 10.0;
 
 /// I-PHYRE's screen side (px).
 const SCREEN: f64 = 600.0;
-
-/// Contact intervals `[t0, t1]` of each object. From a log: a pair's contact from its `contact_begin`
-/// to its `contact_end` (to the last frame if it never ends), a re-begin within `merge_s` continuing it.
-/// From frames: a pair's runs of touching frames, gaps up to `merge_s` bridged.
-fn intervals(env: Env, trace: &Trace, merge_s: f64) -> BTreeMap<String, Vec<(f64, f64)>> {
-    let last = trace.timesteps.last().map_or(0.0, |s| s.t);
-    let mut by_pair: BTreeMap<Vec<String>, Vec<(f64, f64)>> = BTreeMap::new();
-    if has_contact_log(trace) {
-        let events = super::contacts::contact_events(trace);
-        let mut open: BTreeMap<Vec<String>, bool> = BTreeMap::new();
-        for e in events {
-            let t = e.t.unwrap_or(0.0);
-            let Some(p) = pair(e.payload.as_ref()) else {
-                continue;
-            };
-            let list = by_pair.entry(p.clone()).or_default();
-            let is_open = open.get(&p).copied().unwrap_or(false);
-            if e.kind == "contact_begin" {
-                if is_open {
-                    continue;
-                }
-                match list.last_mut() {
-                    Some(iv) if t - iv.1 <= merge_s => iv.1 = last,
-                    _ => list.push((t, last)),
-                }
-                open.insert(p, true);
-            } else if is_open {
-                if let Some(iv) = list.last_mut() {
-                    iv.1 = t;
-                }
-                open.insert(p, false);
-            }
-        }
-    } else if dense(trace) {
-        let frames = if env == Env::Iphyre {
-            iphyre_touching(trace)
-        } else {
-            phyre_touching(trace)
-        };
-        for (t, pairs) in frames {
-            for p in pairs {
-                let list = by_pair.entry(p).or_default();
-                match list.last_mut() {
-                    Some(iv) if t - iv.1 <= merge_s + 1e-9 => iv.1 = t,
-                    _ => list.push((t, t)),
-                }
-            }
-        }
-    }
-    let mut out: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
-    for (p, list) in by_pair {
-        for id in p {
-            out.entry(id).or_default().extend(list.iter().copied());
-        }
-    }
-    out
-}
 
 /// Per frame: (t, centre, free) of each object, by id.
 type Track = Vec<(f64, [f64; 2], bool)>;
@@ -121,7 +64,7 @@ pub fn airborne_truth(env: Env, trace: &Trace, merge_s: f64) -> Vec<TruthEvent> 
     } else {
         MIN_FLIGHT_S.1
     };
-    let contacts = intervals(env, trace, merge_s);
+    let contacts = intervals(&episodes(env, trace, merge_s));
     let mut out = Vec::new();
     for (id, track) in tracks(env, trace) {
         let mine = contacts.get(&id).map(Vec::as_slice).unwrap_or_default();

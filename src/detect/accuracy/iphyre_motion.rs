@@ -377,3 +377,64 @@ fn springs_and_swings(tr: &BTreeMap<String, Track>, merge_s: f64, out: &mut Vec<
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::trace::Body;
+
+    /// Two balls on spring 1, 100 px apart, closing at 20 px/s for 0.5 s then at rest; frames 10 ms.
+    fn spring_trace() -> Trace {
+        let mut trace = crate::testutil::synthetic_trace(Env::Iphyre, 0, 101, 2);
+        trace.events.clear();
+        for s in &mut trace.timesteps {
+            let gap = 100.0 - 20.0 * s.t.min(0.5);
+            for (k, o) in s.objects.iter_mut().enumerate() {
+                if let Body::Iphyre(b) = &mut o.body {
+                    let x = if k == 0 { 200.0 } else { 200.0 + gap };
+                    (b.x1, b.x2, b.y1, b.y2) = (x, x, 300.0, 300.0);
+                    b.spring = 1;
+                }
+            }
+        }
+        trace
+    }
+
+    #[test]
+    fn a_spring_closing_is_one_pull_timed_at_its_middle() {
+        let got = iphyre_motion_truth(&spring_trace(), 0.05);
+        let pulls: Vec<&TruthEvent> = got
+            .iter()
+            .filter(|e| e.label == "spring pull towards")
+            .collect();
+        assert_eq!(pulls.len(), 1, "{got:?}");
+        assert!((pulls[0].t - 0.25).abs() < 0.02, "{got:?}");
+        assert_eq!(pulls[0].balls, ["0", "1"]);
+        // Nothing falls, nothing slides: no contacts, no downward motion.
+        assert!(
+            got.iter().all(|e| e.label == "spring pull towards"),
+            "{got:?}"
+        );
+    }
+
+    #[test]
+    fn the_contact_normal_points_from_one_capsule_to_the_other() {
+        let cap = |ends: [P; 2]| Sample {
+            k: 0,
+            t: 0.0,
+            c: [
+                (ends[0][0] + ends[1][0]) / 2.0,
+                (ends[0][1] + ends[1][1]) / 2.0,
+            ],
+            v: [0.0, 0.0],
+            angle: 0.0,
+            w: 0.0,
+            ends,
+            radius: 10.0,
+        };
+        let floor = cap([[0.0, 100.0], [200.0, 100.0]]);
+        let ball = cap([[50.0, 80.0], [50.0, 80.0]]);
+        assert_eq!(normal(&floor, &ball), [0.0, -1.0]); // up the screen
+        assert_eq!(normal(&ball, &floor), [0.0, 1.0]);
+    }
+}

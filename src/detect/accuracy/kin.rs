@@ -363,7 +363,7 @@ mod tests {
         let f = [
             true, true, false, true, true, false, false, false, true, false,
         ];
-        assert_eq!(runs(&t, &f, 0.1, 0.2), [(0, 4)]);
+        assert_eq!(runs(&t, &f, 0.2, 0.2), [(0, 4)]);
         assert_eq!(runs(&t, &f, 0.0, 0.0), [(0, 1), (3, 4), (8, 8)]);
     }
 

@@ -268,3 +268,37 @@ fn near(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::trace::Body;
+
+    /// The user's ball (object 0) falling from y = 200 as y = 200 − 50 t², frames 10 ms, 0.6 s.
+    fn drop_trace() -> Trace {
+        let mut trace = crate::testutil::synthetic_trace(Env::Phyre, 0, 61, 1);
+        trace.events.clear();
+        for s in &mut trace.timesteps {
+            if let Body::Phyre(p) = &mut s.objects[0].body {
+                (p.x, p.y, p.vx, p.vy) = (100.0, 200.0 - 50.0 * s.t * s.t, 0.0, -100.0 * s.t);
+            }
+        }
+        trace
+    }
+
+    #[test]
+    fn a_drop_falls_once_and_crosses_one_grid_row() {
+        let got = phyre_motion_truth(&drop_trace(), 0.05);
+        let labels: Vec<&str> = got.iter().map(|e| e.label).collect();
+        // Falling from 0.3 s (30 px/s) to 0.6 s, 13.5 px down; y 200 → 182 crosses the 192 row line.
+        assert_eq!(
+            labels,
+            ["grid cell transition", "falling object"],
+            "{got:?}"
+        );
+        assert!((got[1].t - 0.45).abs() < 1e-9, "{got:?}");
+        let cross = (8.0_f64 / 50.0).sqrt(); // y = 192 at t = 0.4
+        assert!((got[0].t - cross).abs() < 0.01, "{got:?}");
+        assert!(got.iter().all(|e| e.balls == ["0"]));
+    }
+}
