@@ -211,10 +211,10 @@ fn records(trace: &Trace) -> String {
             if !walls {
                 parts.push("walls not listed".into());
             }
-            if let Some(Value::String(src)) = trace.extra.get("velocity_source") {
-                if src.starts_with("estimated") {
-                    parts.push("velocities estimated from positions".into());
-                }
+            if let Some(Value::String(src)) = trace.extra.get("velocity_source")
+                && src.starts_with("estimated")
+            {
+                parts.push("velocities estimated from positions".into());
             }
         }
         crate::trace::Env::Pooltool => {}
