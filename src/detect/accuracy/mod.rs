@@ -32,7 +32,7 @@ use super::detector::normalise_label;
 use crate::trace::{Env, Trace};
 
 pub use iphyre::iphyre_truth;
-pub use phyre::{PHYRE_AT_REST, PHYRE_MOVING, phyre_truth};
+pub use phyre::{PHYRE_AT_REST, PHYRE_MOVING, PHYRE_WINDOW_S, phyre_truth};
 pub use pooltool::{event_balls, pooltool_state_truth, pooltool_truth};
 
 /// One ground-truth occurrence of a label.
