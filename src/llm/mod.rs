@@ -52,6 +52,7 @@ pub use self::labels::{
     LabelsError, SuggestParams, SuggestedLabel, Suggestions, parse_labels, suggest_labels,
 };
 pub use self::message::{ChatReply, ChatRequest, Message, Part, Role};
+pub(crate) use self::message::base64;
 pub use self::prompt::{
     EvolveContext, LabelsContext, LibraryEntry, ParentView, PromptSource, Prompts, RepairContext,
 };

@@ -9,7 +9,9 @@
 //!   `to`), `CURVE(b)` (between two events of b its heading turns by more than 8° while another ball
 //!   passes within 4 radii without touching it);
 //! - PHYRE / I-PHYRE: `CONTACT(a, b)` (`contact_begin`, `"*"` for any), `EXIT(obj)` (`ball_exit`),
-//!   `SUCCESS()` (the task's success).
+//!   `SUCCESS()` (the task's success). Objects are ids or words naming roles read off the first frame
+//!   (all must hold): colours and shapes (`"green"`, `"red ball"`), `"user"` (PHYRE's placed ball),
+//!   I-PHYRE's `"ball"`, `"eliminable"`, `"dynamic"`, `"fixed"`, `"block"`.
 //!
 //! Combinators: `SEQ(e1, e2, …)` (distinct occurrences in time order, each no earlier than the previous),
 //! `ALL(…)`, `ANY(…)`, `NOT(c)`, `NONE(e)` (no occurrence), `AT_LEAST(e, n)`. An event used as a
@@ -131,6 +133,7 @@ type Hit = (f64, usize);
 struct Verifier<'a> {
     trace: &'a Trace,
     cue: String,
+    roles: std::collections::HashMap<String, Vec<String>>,
 }
 
 fn text(e: &Expr) -> Result<String, RewardError> {
@@ -176,12 +179,70 @@ fn is(id: &str, want: &str) -> bool {
     want == "*" || id.eq_ignore_ascii_case(want)
 }
 
+/// The roles of every object of a PHYRE / I-PHYRE trace's first frame, by id: its colour and shape or
+/// kind (PHYRE: `red`, `green`, `blue`, `purple`, `gray`, `black`, `ball`, `bar`, `jar`, …, `user` for
+/// the placed ball, `dynamic`/`static`; I-PHYRE: `ball`/`red`, `eliminable`/`gray`,
+/// `dynamic`/`blue`, `fixed`/`black`, `block`).
+fn roles(trace: &Trace) -> std::collections::HashMap<String, Vec<String>> {
+    let mut out = std::collections::HashMap::new();
+    let Some(first) = trace.timesteps.first() else {
+        return out;
+    };
+    for o in &first.objects {
+        let (id, r): (i64, Vec<&str>) = match &o.body {
+            Body::Phyre(p) => {
+                let mut r = vec![p.color.as_str(), p.shape.as_str()];
+                if p.is_user_input {
+                    r.push("user");
+                }
+                (p.object_index, r)
+            }
+            Body::Iphyre(b) => {
+                let ball = b.x1 == b.x2 && b.y1 == b.y2;
+                let r = if ball {
+                    vec!["ball", "red"]
+                } else if b.eliminable > 0.5 {
+                    vec!["block", "eliminable", "gray"]
+                } else if b.dynamic > 0.5 {
+                    vec!["block", "dynamic", "blue"]
+                } else {
+                    vec!["block", "fixed", "black"]
+                };
+                (b.index, r)
+            }
+            _ => continue,
+        };
+        out.insert(
+            id.to_string(),
+            r.into_iter().map(str::to_ascii_lowercase).collect(),
+        );
+    }
+    out
+}
+
 impl<'a> Verifier<'a> {
     fn new(trace: &'a Trace) -> Self {
         Verifier {
             trace,
             cue: cue_ball(trace),
+            roles: roles(trace),
         }
+    }
+
+    /// Whether object `id` is `want`: `*`, its id, or (PHYRE / I-PHYRE) words that all name roles
+    /// of it (`"green"`, `"red ball"`, `"user"`, `"eliminable"`).
+    fn matches(&self, id: &str, want: &str) -> bool {
+        if is(id, want) {
+            return true;
+        }
+        let Some(r) = self.roles.get(id) else {
+            return false;
+        };
+        let words: Vec<String> = want
+            .split_whitespace()
+            .map(str::to_ascii_lowercase)
+            .collect();
+        !words.is_empty() && words.iter().all(|w| r.contains(w))
     }
 
     fn require_env(&self, e: &Expr, name: &str, pool: bool) -> Result<(), RewardError> {
@@ -409,8 +470,8 @@ impl<'a> Verifier<'a> {
                     .into_iter()
                     .filter(|(_, _, ids, _)| {
                         ids.len() == 2
-                            && ((is(&ids[0], &a) && is(&ids[1], &b))
-                                || (is(&ids[1], &a) && is(&ids[0], &b)))
+                            && ((self.matches(&ids[0], &a) && self.matches(&ids[1], &b))
+                                || (self.matches(&ids[1], &a) && self.matches(&ids[0], &b)))
                     })
                     .map(|(i, t, _, _)| (t, i))
                     .collect()
@@ -420,7 +481,7 @@ impl<'a> Verifier<'a> {
                 let b = arg(0)?;
                 self.events(&["ball_exit"])
                     .into_iter()
-                    .filter(|(_, _, ids, _)| ids.iter().any(|x| is(x, &b)))
+                    .filter(|(_, _, ids, _)| ids.iter().any(|x| self.matches(x, &b)))
                     .map(|(i, t, _, _)| (t, i))
                     .collect()
             }

@@ -5,7 +5,7 @@ use annotrace::detect::{Library, SandboxLimits, WorkerPool};
 use annotrace::envs::Environment;
 use annotrace::envs::pool::PoolEnv;
 use annotrace::optimise::{
-    Chain, GoalTask, RewardKind, Schedule, Settings, ShotBounds, run_chains,
+    Chain, GoalTask, PoolProblem, RewardKind, Schedule, Settings, ShotBounds, run_chains,
 };
 use annotrace::reward::annotate::detectors_for;
 use annotrace::reward::verify::Rule;
@@ -13,17 +13,13 @@ use annotrace::reward::{Schema, compile, labels_used};
 
 use crate::common::{TestRun, repo};
 
-fn settings(budget: usize) -> Settings {
+fn settings() -> Settings<PoolProblem> {
     let mut env = PoolEnv::default();
     env.trace.dt = 0.05;
     Settings {
-        env,
-        bounds: ShotBounds::default(),
-        schedule: Schedule {
-            budget,
-            ..Schedule::default()
-        },
-        checkpoint: 10,
+        problem: PoolProblem::new(env, ShotBounds::default()).unwrap(),
+        schedule: Schedule::default(),
+        checkpoint: Some(10),
     }
 }
 
@@ -46,13 +42,14 @@ fn annealing_improves_a_dense_reward_and_is_seeded() {
     assert_eq!(task.detectors.len(), 1);
     let env = PoolEnv::default();
     let scene = env.scenes(1, 5).unwrap().remove(0);
-    let chains: Vec<Chain> = [11, 12]
+    let chains: Vec<Chain<_>> = [11, 12]
         .iter()
         .map(|&seed| Chain {
             goal: 0,
             scene: scene.clone(),
             seed,
             kind: RewardKind::Dense,
+            budget: 80,
         })
         .collect();
     let limits = SandboxLimits {
@@ -60,7 +57,7 @@ fn annealing_improves_a_dense_reward_and_is_seeded() {
         ..SandboxLimits::default()
     };
     let pool = WorkerPool::new(limits).unwrap();
-    let s = settings(80);
+    let s = settings();
     let mut steps = 0;
     let (rows, timings) = run_chains(&s, std::slice::from_ref(&task), &chains, Some(&pool), |k| {
         steps = k
@@ -117,8 +114,9 @@ fn sparse_chains_need_no_detectors() {
         scene,
         seed: 3,
         kind: RewardKind::Sparse,
+        budget: 30,
     };
-    let (rows, t) = run_chains(&settings(30), &[task], &[chain], None, |_| {}).unwrap();
+    let (rows, t) = run_chains(&settings(), &[task], &[chain], None, |_| {}).unwrap();
     assert_eq!(t.dense_samples, 0);
     // A cue-ball cushion contact is easy: the sparse chain finds one, and its success is verified.
     let last = rows.last().unwrap();
