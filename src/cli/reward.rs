@@ -280,7 +280,8 @@ fn other_scene(env: Env, spec: &str) -> Result<(String, annotrace::trace::Trace)
     let bad = |e: String| CliError::input(anyhow::anyhow!("--scene {spec}: {e}"));
     match env {
         Env::Phyre => {
-            let set = annotrace::envs::phyre::TaskSet::default_tasks().map_err(|e| bad(e.to_string()))?;
+            let set =
+                annotrace::envs::phyre::TaskSet::default_tasks().map_err(|e| bad(e.to_string()))?;
             let id = if set.contains(spec) {
                 spec.to_string()
             } else {

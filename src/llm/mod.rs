@@ -51,8 +51,8 @@ pub use self::extract::{ExtractError, Fence, extract_code, fences, strip_think};
 pub use self::labels::{
     LabelsError, SuggestParams, SuggestedLabel, Suggestions, parse_labels, suggest_labels,
 };
-pub use self::message::{ChatReply, ChatRequest, Message, Part, Role};
 pub(crate) use self::message::base64;
+pub use self::message::{ChatReply, ChatRequest, Message, Part, Role};
 pub use self::prompt::{
     EvolveContext, LabelsContext, LibraryEntry, ParentView, PromptSource, Prompts, RepairContext,
 };

@@ -246,14 +246,19 @@ mod tests {
     #[test]
     fn few_shot_examples_never_include_the_goal_itself() {
         let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let set =
-            super::super::goals::GoalSet::load(&repo.join("data/goals/pooltool.toml"), repo).unwrap();
+        let set = super::super::goals::GoalSet::load(&repo.join("data/goals/pooltool.toml"), repo)
+            .unwrap();
         let g = &set.goals[0];
         let ex = few_shot(&set.goals, Some(&g.id), &g.sentence, 3);
         assert_eq!(ex.len(), 3);
         assert!(ex.iter().all(|(s, _)| s != &g.sentence));
         // By sentence alone (a sentence file's goal has no id in the goal file).
-        let ex = few_shot(&set.goals, None, &format!(" {} ", g.sentence.to_uppercase()), 20);
+        let ex = few_shot(
+            &set.goals,
+            None,
+            &format!(" {} ", g.sentence.to_uppercase()),
+            20,
+        );
         assert_eq!(ex.len(), set.goals.len() - 1);
         let schema = set.schema.clone();
         let req = SynthRequest {
@@ -269,7 +274,11 @@ mod tests {
         };
         let p = prompt(&req);
         assert!(p.contains(&set.goals[1].sentence) && p.contains("Examples of goals"));
-        assert_eq!(p.matches(&g.sentence).count(), 1, "the goal appears once, as the goal");
+        assert_eq!(
+            p.matches(&g.sentence).count(),
+            1,
+            "the goal appears once, as the goal"
+        );
     }
 
     #[test]

@@ -323,7 +323,8 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
             (Env::Pooltool, q.common, setup, extra)
         }
         OptimiseParams::Phyre(q) => {
-            let set = TaskSet::default_tasks().map_err(|e| BuildError::param("tasks", e.to_string()))?;
+            let set =
+                TaskSet::default_tasks().map_err(|e| BuildError::param("tasks", e.to_string()))?;
             let only = match &q.tasks {
                 Some(list) => super::simulate::select_tasks(set, list)
                     .map_err(|e| BuildError::param("tasks", e))?,
@@ -436,7 +437,10 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     }
     let budget = count("budget", c.budget, 1)? as usize;
     let step = count("checkpoint", c.checkpoint, 1)? as usize;
-    let mut budgets: Vec<usize> = (1..).map(|k| k * step).take_while(|&b| b < budget).collect();
+    let mut budgets: Vec<usize> = (1..)
+        .map(|k| k * step)
+        .take_while(|&b| b < budget)
+        .collect();
     budgets.push(budget);
     Ok(Box::new(OptimiseStage {
         env,
@@ -557,7 +561,10 @@ impl OptimiseStage {
     }
 
     /// Every goal's program: the goal file's, or the input synthesise stage's accepted one.
-    fn programs(&self, ctx: &StageContext<'_>) -> Result<BTreeMap<String, ProgramText>, StageError> {
+    fn programs(
+        &self,
+        ctx: &StageContext<'_>,
+    ) -> Result<BTreeMap<String, ProgramText>, StageError> {
         let mut out = BTreeMap::new();
         if !self.programs_from_table {
             for id in &self.goal_ids {
@@ -584,7 +591,11 @@ impl OptimiseStage {
                     r.goal,
                     ProgramText {
                         text,
-                        origin: if r.origin == "llm" { "synthesised" } else { "goal file" },
+                        origin: if r.origin == "llm" {
+                            "synthesised"
+                        } else {
+                            "goal file"
+                        },
                     },
                 );
             }
@@ -640,8 +651,16 @@ impl OptimiseStage {
             let prog = &programs[id];
             let task = self.goal_task(id, &prog.text, schema)?;
             let (chains, seed_index) = self.chains(ctx.seed(), gi, scenes);
-            let mut record =
-                self.run_goal(ctx, &settings, &shard, task, &chains, &seed_index, pool_ref, scenes)?;
+            let mut record = self.run_goal(
+                ctx,
+                &settings,
+                &shard,
+                task,
+                &chains,
+                &seed_index,
+                pool_ref,
+                scenes,
+            )?;
             record["program_origin"] = json!(prog.origin);
             records.push(record);
         }
@@ -807,7 +826,11 @@ impl OptimiseStage {
             best.scene,
             best.action,
             best.best_reward,
-            if best.success { "verified" } else { "not verified" },
+            if best.success {
+                "verified"
+            } else {
+                "not verified"
+            },
             best.best_sample,
             top
         );

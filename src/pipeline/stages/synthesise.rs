@@ -310,7 +310,9 @@ fn batch(rows: &[ProgramRow]) -> Result<RecordBatch, arrow::error::ArrowError> {
             Arc::new(BooleanArray::from(
                 rows.iter().map(|r| r.program.is_some()).collect::<Vec<_>>(),
             )),
-            Arc::new(Int64Array::from_iter_values(rows.iter().map(|r| r.attempts))),
+            Arc::new(Int64Array::from_iter_values(
+                rows.iter().map(|r| r.attempts),
+            )),
             js(|r| &r.errors),
             js(|r| &r.calls),
         ],
@@ -465,7 +467,9 @@ impl SynthesiseStage {
                 scene_summary: scene_text.clone(),
                 examples: few_shot(
                     &self.goals.goals,
-                    Some(&it.id).filter(|_| it.program.is_some()).map(|s| s.as_str()),
+                    Some(&it.id)
+                        .filter(|_| it.program.is_some())
+                        .map(|s| s.as_str()),
                     &it.sentence,
                     self.examples,
                 ),
@@ -489,7 +493,11 @@ impl SynthesiseStage {
                 origin: "llm".into(),
                 program: out.program.map(|p| p.source.trim().to_string()),
                 attempts: out.attempts.len() as i64,
-                errors: out.attempts.iter().filter_map(|a| a.error.clone()).collect(),
+                errors: out
+                    .attempts
+                    .iter()
+                    .filter_map(|a| a.error.clone())
+                    .collect(),
                 calls: out.attempts.iter().map(|a| a.call_id.clone()).collect(),
             });
             ctx.progress().advance(ctx.stage_id(), 1);
