@@ -128,11 +128,11 @@ fn sparse_chains_need_no_detectors() {
 fn optimise_pipeline_writes_table_figure_and_summary() {
     let t = TestRun::new();
     let text =
-        std::fs::read_to_string(repo().join("pipelines/pooltool-optimisation.toml")).unwrap();
+        std::fs::read_to_string(repo().join("pipelines/optimisation-pooltool.toml")).unwrap();
     let text = text
-        .replace("scenes = 10 ", "scenes = 1 ")
+        .replace("scenes = 2 ", "scenes = 1 ")
         .replace("seeds = 2 ", "seeds = 1 ")
-        .replace("budget = 200 ", "budget = 10 ")
+        .replace("budget = 100 ", "budget = 10 ")
         .replace(
             "checkpoint = 50",
             "checkpoint = 5\ngoal_ids = [\"two-cushions-pot-8\", \"touch-2-cushion\"]\nworkers = 2",
