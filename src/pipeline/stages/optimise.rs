@@ -824,7 +824,7 @@ impl OptimiseStage {
         let caption = format!(
             "{} · action {} · reward {:.3} · {} (sample {} of {})",
             best.scene,
-            best.action,
+            rounded(&best.action),
             best.best_reward,
             if best.success {
                 "verified"
@@ -957,6 +957,24 @@ impl OptimiseStage {
             ),
         }
     }
+}
+
+/// `v` with every number rounded to 3 decimals, as compact JSON (for captions).
+fn rounded(v: &Value) -> String {
+    fn walk(v: &Value) -> Value {
+        match v {
+            Value::Number(n) => n
+                .as_f64()
+                .map(|f| json!((f * 1000.0).round() / 1000.0))
+                .unwrap_or_else(|| v.clone()),
+            Value::Array(a) => Value::Array(a.iter().map(walk).collect()),
+            Value::Object(o) => {
+                Value::Object(o.iter().map(|(k, x)| (k.clone(), walk(x))).collect())
+            }
+            other => other.clone(),
+        }
+    }
+    walk(v).to_string()
 }
 
 /// The `optimisation` rows of one goal as a batch (seeds as their index 0..seeds).
