@@ -312,7 +312,7 @@ pub struct IphyreProblem {
 }
 
 impl IphyreProblem {
-    /// The clicks of point `x` on `game`: block k at time x[k] when x[k] ≤ horizon.
+    /// The clicks of point `x` on `game`: block k at time `x[k]` when `x[k] ≤ horizon`.
     pub fn clicks(&self, game: &Game, x: &[f64]) -> Vec<Click> {
         game.eliminable()
             .zip(x)

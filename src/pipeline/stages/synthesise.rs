@@ -421,7 +421,7 @@ impl SynthesiseStage {
         }
     }
 
-    fn from_goal_file(&self) -> Result<Vec<ProgramRow>, StageError> {
+    fn copy_goal_file(&self) -> Result<Vec<ProgramRow>, StageError> {
         self.items
             .iter()
             .map(|it| {
@@ -521,7 +521,7 @@ impl Stage for SynthesiseStage {
         let rows = if llm {
             self.with_llm(ctx)?
         } else {
-            self.from_goal_file()?
+            self.copy_goal_file()?
         };
         let b = batch(&rows).map_err(|e| StageError::Internal(e.to_string()))?;
         let n = ctx.write_batch("reward_programs", self.env, "000", &b)?;
