@@ -371,7 +371,12 @@ impl Problem for IphyreProblem {
             .iter()
             .map(|o| {
                 let what = match (o.kind, o.eliminable, o.dynamic) {
-                    (crate::envs::iphyre::ObjectKind::Ball, _, _) => "red ball",
+                    (crate::envs::iphyre::ObjectKind::Ball, _, _) => {
+                        return format!(
+                            "id {} red ball at ({:.0}, {:.0}) px, radius {:.0}",
+                            o.index, o.p1[0], o.p1[1], o.radius
+                        );
+                    }
                     (_, true, _) => "gray eliminable block",
                     (_, _, true) => "blue dynamic block",
                     _ => "black fixed block",
@@ -384,7 +389,7 @@ impl Problem for IphyreProblem {
             .collect();
         format!(
             "I-PHYRE game {:?}: a 600×600 px screen, origin at the top-left, y down, gravity down; the \
-             episode lasts {:.0} s and succeeds when every ball leaves through the bottom. Objects: {}.\n\
+             episode lasts up to {:.0} s and succeeds (and stops) when every ball has left through the bottom edge. Objects: {}.\n\
              The action removes gray eliminable blocks: one removal time per block (seconds, up to \
              {:.1} s), or never.",
             game.name,
