@@ -187,7 +187,7 @@ fn optimise_rejects_bad_parameters() {
     t.run(&["run", "q.toml", "--run-dir", "out"])
         .code(2)
         .stderr_has(
-            "q.toml:4: stage \"o\": unknown variant `medium`, expected `dense` or `sparse`",
+            "q.toml:6: stage \"o\": `rewards[1]` must be one of \"dense\", \"sparse\", found \"medium\"",
         );
 }
 
