@@ -336,3 +336,38 @@ fn annealing_improves_a_dense_reward_in_phyre_and_iphyre() {
     assert!(curve.windows(2).all(|w| w[1] >= w[0]), "{curve:?}");
     assert!(curve[29] > curve[0], "iphyre: {curve:?}");
 }
+
+/// A sentence file has no hand-written programs: offline it is a clear input error; asking for the
+/// reward_programs table without a synthesise input is refused when the pipeline is checked.
+#[test]
+fn synthesise_and_optimise_refuse_what_they_cannot_do_offline() {
+    let t = TestRun::new();
+    t.write(
+        "goals.txt",
+        "# my goals\nMake the red ball hit the blue object.\n\n",
+    );
+    t.write(
+        "p.toml",
+        "[pipeline]\nname = \"x\"\n[[stage]]\nid = \"s\"\nkind = \"synthesise\"\nenv = \"phyre\"\nsentences = \"goals.txt\"\n",
+    );
+    t.run_env(
+        &["run", "p.toml", "--run-dir", "out"],
+        &[("ANNOTRACE_LLM_BASE_URL", "")],
+    )
+    .code(2)
+    .stderr_has("goal \"s1\" has no hand-written program");
+    t.write(
+        "q.toml",
+        "[pipeline]\nname = \"x\"\n[[stage]]\nid = \"o\"\nkind = \"optimise\"\nenv = \"iphyre\"\nprograms = \"reward_programs\"\n",
+    );
+    t.run(&["run", "q.toml", "--run-dir", "out"])
+        .code(2)
+        .stderr_has("reward_programs needs a synthesise stage among the stage's `inputs`");
+    t.write(
+        "r.toml",
+        "[pipeline]\nname = \"x\"\n[[stage]]\nid = \"o\"\nkind = \"optimise\"\nenv = \"phyre\"\ngoals = \"data/goals/iphyre.toml\"\n",
+    );
+    t.run(&["run", "r.toml", "--run-dir", "out"])
+        .code(2)
+        .stderr_has("is for iphyre, but this stage optimises phyre");
+}
