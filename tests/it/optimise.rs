@@ -130,7 +130,6 @@ fn optimise_pipeline_writes_table_figure_and_summary() {
     let text =
         std::fs::read_to_string(repo().join("pipelines/optimisation-pooltool.toml")).unwrap();
     let text = text
-        .replace("scenes = 2 ", "scenes = 1 ")
         .replace("seeds = 2 ", "seeds = 1 ")
         .replace("budget = 100 ", "budget = 10 ")
         .replace(
