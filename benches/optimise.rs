@@ -15,8 +15,8 @@ use std::time::Instant;
 use annotrace::detect::{Library, SandboxLimits, WorkerPool};
 use annotrace::envs::pool::PoolEnv;
 use annotrace::optimise::{
-    Chain, GoalTask, Layout, RewardKind, Schedule, Settings, ShotBounds, Timings, run_chains,
-    scenes,
+    Chain, GoalTask, Layout, PoolProblem, RewardKind, Schedule, Settings, ShotBounds, Timings,
+    run_chains, scenes,
 };
 use annotrace::reward::annotate::{detectors_for, probe_schema};
 use annotrace::reward::goals::GoalSet;
@@ -45,13 +45,9 @@ fn main() {
     env.trace.dt = 0.02;
     let scenes = scenes(&env, Layout::Scatter, 10, 1000).expect("scenes");
     let settings = Settings {
-        env,
-        bounds: ShotBounds::default(),
-        schedule: Schedule {
-            budget: steps,
-            ..Schedule::default()
-        },
-        checkpoint: 50,
+        problem: PoolProblem::new(env, ShotBounds::default()).expect("bounds"),
+        schedule: Schedule::default(),
+        checkpoint: Some(50),
     };
     let task = |id: &str| {
         let g = goals.get(id).expect("goal");
@@ -73,6 +69,7 @@ fn main() {
                         scene: s.clone(),
                         seed: (i as u64) << 8 | seed,
                         kind,
+                        budget: steps,
                     });
                 }
             }

@@ -36,10 +36,11 @@ enum Command {
 struct SynthArgs {
     /// The goal in natural language.
     goal: String,
-    /// Environment (only billiards has a scene simulator for the execution check here).
+    /// Environment of the goal.
     #[arg(long, default_value = "pooltool")]
     env: Env,
-    /// Billiards scene: a scene JSON file, or SEED:INDEX for a generated 9-ball rack.
+    /// Billiards scene: a scene JSON file, or SEED:INDEX for a generated 9-ball rack; PHYRE: a task
+    /// id (default the first task); I-PHYRE: a game name (default the first game).
     #[arg(long, default_value = "1000:0")]
     scene: String,
     /// Library folder; default: the built-in one, or ./data/libraries/<env> when present.
@@ -272,6 +273,49 @@ fn scene_summary(scene: &Scene, env: &PoolEnv) -> String {
     )
 }
 
+/// A PHYRE task (`--scene 00003:002`, default the first task) or I-PHYRE game (`--scene support`,
+/// default the first game) in words, with a probe episode of it.
+fn other_scene(env: Env, spec: &str) -> Result<(String, annotrace::trace::Trace), CliError> {
+    use annotrace::optimise::{IphyreProblem, PhyreProblem, Problem};
+    let bad = |e: String| CliError::input(anyhow::anyhow!("--scene {spec}: {e}"));
+    match env {
+        Env::Phyre => {
+            let set =
+                annotrace::envs::phyre::TaskSet::default_tasks().map_err(|e| bad(e.to_string()))?;
+            let id = if set.contains(spec) {
+                spec.to_string()
+            } else {
+                set.id_at(0).unwrap_or_default().to_string()
+            };
+            let task = set.get(&id).map_err(|e| bad(e.to_string()))?;
+            let problem = PhyreProblem::default();
+            let trace = problem
+                .simulate(&task, &[0.5, 0.95, 0.1])
+                .map_err(|e| CliError::failed(anyhow::anyhow!("simulating the probe: {e}")))?;
+            Ok((problem.describe(&task), trace))
+        }
+        Env::Iphyre => {
+            let ienv = annotrace::envs::iphyre::IphyreEnv::new().map_err(|e| bad(e.to_string()))?;
+            let game = ienv
+                .games
+                .get(spec)
+                .cloned()
+                .unwrap_or_else(|_| ienv.games.all()[0].clone());
+            let problem = IphyreProblem {
+                env: ienv,
+                horizon: 5.0,
+                never: 0.25,
+            };
+            let never = vec![10.0; game.eliminable().count()];
+            let trace = problem
+                .simulate(&game, &never)
+                .map_err(|e| CliError::failed(anyhow::anyhow!("simulating the probe: {e}")))?;
+            Ok((problem.describe(&game), trace))
+        }
+        Env::Pooltool => Err(bad("billiards scenes are handled above".into())),
+    }
+}
+
 fn synthesise(a: SynthArgs) -> CliResult {
     use super::llm_args::llm_error;
     use annotrace::llm::LlmClient;
@@ -287,7 +331,7 @@ fn synthesise(a: SynthArgs) -> CliResult {
         )));
     }
     let pool_env = PoolEnv::default();
-    let mut probe_trace = None;
+    let probe_trace;
     let mut annotations = Vec::new();
     let mut image = None;
     let (schema, scene_text) = if env == Env::Pooltool {
@@ -319,18 +363,27 @@ fn synthesise(a: SynthArgs) -> CliResult {
         probe_trace = Some(trace);
         (schema, text)
     } else {
-        (
-            Schema::from_library(&lib),
-            format!(
-                "{env} task {} (no scene summary: annotrace simulates only billiards scenes here)",
-                a.scene
-            ),
-        )
+        // PHYRE / I-PHYRE: the task or game in words, and a probe episode (no click, a small ball)
+        // that programs must run on.
+        let (text, trace) = other_scene(env, &a.scene)?;
+        probe_trace = Some(trace);
+        (Schema::from_library(&lib), text)
     };
+    // Few-shot examples: the built-in goal file's goals, never this sentence.
+    let examples = annotrace::reward::goals::GoalSet::open(
+        &annotrace::builtin::Location::file(
+            std::path::Path::new("."),
+            std::path::Path::new(&format!("data/goals/{env}.toml")),
+        ),
+        std::path::Path::new("."),
+    )
+    .map(|g| annotrace::reward::synth::few_shot(&g.goals, None, &a.goal, 3))
+    .unwrap_or_default();
     let req = SynthRequest {
         goal: &a.goal,
         schema: &schema,
         scene_summary: scene_text,
+        examples,
         image,
         probe: probe_trace.as_ref().map(|t| (t, annotations.as_slice())),
         max_repairs: a.max_repairs,

@@ -51,6 +51,7 @@ pub use self::extract::{ExtractError, Fence, extract_code, fences, strip_think};
 pub use self::labels::{
     LabelsError, SuggestParams, SuggestedLabel, Suggestions, parse_labels, suggest_labels,
 };
+pub(crate) use self::message::base64;
 pub use self::message::{ChatReply, ChatRequest, Message, Part, Role};
 pub use self::prompt::{
     EvolveContext, LabelsContext, LibraryEntry, ParentView, PromptSource, Prompts, RepairContext,

@@ -1,22 +1,25 @@
 //! Optimising actions for reward programs: a seeded simulated annealer over a continuous action box
-//! ([`anneal`]) and the billiards experiment of the paper's section 5 ([`billiards`]): goals × scenes ×
-//! seeds × reward types (dense reward program vs sparse binary verification), best-so-far recorded
-//! at checkpoints, success judged by each goal's hand-written verification rule; the plot of success
-//! against budget ([`plot`]).
+//! ([`anneal`]), each environment's action as such a box ([`problem`]: billiards shots, PHYRE's red
+//! ball, I-PHYRE's removal times), and the experiment of the paper's section 5 ([`chains`]): goals ×
+//! scenes × seeds × reward types × budgets (dense reward program vs sparse binary verification), each
+//! chain's best sample judged by the goal's hand-written verification rule; the plot of success
+//! against budget and the optimised-action figure ([`plot`], [`figure`]).
 //!
-//! **Owns:** the annealer, the lockstep batch of chains and its timing split, the plot.
+//! **Owns:** the annealer, the search boxes, the lockstep batch of chains and its timing split, the
+//! figures.
 //! **Does not:** define rewards (`reward/`), run detectors itself (it calls `detect::WorkerPool`
 //! through `reward::annotate`), write tables (`pipeline/stages/optimise.rs`).
 
 pub mod anneal;
-pub mod billiards;
+pub mod chains;
+pub mod figure;
 pub mod plot;
+pub mod problem;
 pub mod scenes;
 
 pub use anneal::{Annealer, Dim, Schedule};
-pub use billiards::{
-    Chain, CheckpointRow, GoalTask, RewardKind, Settings, ShotBounds, Timings, run_chains,
-};
+pub use chains::{Chain, CheckpointRow, GoalTask, RewardKind, Settings, Timings, run_chains};
+pub use problem::{IphyreProblem, PhyreProblem, PoolProblem, Problem, ShotBounds};
 pub use scenes::{Layout, scenes};
 
 /// Why the optimisation experiment could not run.

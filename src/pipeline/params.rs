@@ -56,6 +56,8 @@ pub enum ParamType {
     Bool,
     /// An array of strings.
     StrList,
+    /// An array of strings, each one of a fixed set.
+    ChoiceList(Vec<String>),
     /// A table of anything its struct accepts.
     Table,
 }
@@ -78,6 +80,14 @@ impl ParamType {
             ParamType::Float => "a number".into(),
             ParamType::Bool => "true or false".into(),
             ParamType::StrList => "an array of strings".into(),
+            ParamType::ChoiceList(options) => format!(
+                "an array of {}",
+                options
+                    .iter()
+                    .map(|o| format!("\"{o}\""))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
             ParamType::Table => "a table".into(),
         }
     }
@@ -322,7 +332,13 @@ fn type_of(root: &Value, s: &Value) -> ParamType {
                 ParamType::Int
             }
         }
-        "array" => ParamType::StrList,
+        "array" => {
+            let items = s.get("items").map(|i| resolve_ref(root, i));
+            match items.map(choices_of).filter(|c| !c.is_empty()) {
+                Some(choices) => ParamType::ChoiceList(choices),
+                None => ParamType::StrList,
+            }
+        }
         _ => ParamType::Table,
     }
 }
@@ -389,6 +405,30 @@ fn check_type(doc: &ParamDoc, node: &Node) -> Result<Value, String> {
             return Err(format!("`{}` must be a finite number, found {f}", doc.name));
         }
         (ParamType::Bool, NodeValue::Bool(b)) => Value::Bool(*b),
+        (ParamType::ChoiceList(options), NodeValue::Array(items)) => {
+            let mut out = Vec::with_capacity(items.len());
+            for (i, item) in items.iter().enumerate() {
+                match &item.value {
+                    NodeValue::Str(s) if options.contains(s) => out.push(Value::String(s.clone())),
+                    other => {
+                        return Err(format!(
+                            "`{}[{i}]` must be one of {}, found {}",
+                            doc.name,
+                            options
+                                .iter()
+                                .map(|o| format!("\"{o}\""))
+                                .collect::<Vec<_>>()
+                                .join(", "),
+                            match other {
+                                NodeValue::Str(s) => format!("\"{s}\""),
+                                o => o.type_name().to_string(),
+                            }
+                        ));
+                    }
+                }
+            }
+            Value::Array(out)
+        }
         (ParamType::StrList, NodeValue::Array(items)) => {
             let mut out = Vec::with_capacity(items.len());
             for (i, item) in items.iter().enumerate() {

@@ -53,6 +53,7 @@ pub static STAGE_KINDS: &[&StageKind] = &[
     &stages::simulate::KIND,
     &stages::annotate::KIND,
     &stages::accuracy::KIND,
+    &stages::synthesise::KIND,
     &stages::optimise::KIND,
     &stages::evolve::KIND,
     &stages::sql::KIND,

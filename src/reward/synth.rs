@@ -1,6 +1,7 @@
 //! Synthesis of reward programs from natural-language goals with an LLM, with repair: the prompt
-//! gives the goal, the DSL reference, the library summary (labels, aliases, parameter keys) and a
-//! scene summary (optionally the scene's image); the program is taken from the answer's ```dsl fence;
+//! gives the goal, the DSL reference, the library summary (labels, aliases, parameter keys), a
+//! scene summary (optionally the scene's image) and few-shot (goal, program) examples — the paper's
+//! P_r(G, P, Θ, D, {(Ĝ_k, r̂_k)}) — ([`few_shot`] draws them from a goal file, never the goal itself); the program is taken from the answer's ```dsl fence;
 //! when it does not parse, check or run on a probe trace of the scene, the model is shown its program
 //! and the interpreter's message and asked for a corrected one, up to a retry limit. Every call goes
 //! through [`LlmClient`], which records it in the run's `llm_calls` table when it has a run.
@@ -53,6 +54,8 @@ pub struct SynthRequest<'a> {
     pub schema: &'a Schema,
     /// The scene in words.
     pub scene_summary: String,
+    /// Few-shot (goal sentence, program) examples.
+    pub examples: Vec<(String, String)>,
     /// The scene's initial image (PNG), for vision models.
     pub image: Option<Vec<u8>>,
     /// A probe trace of the scene with its annotations: a program must run on it.
@@ -87,6 +90,36 @@ pub struct Synthesis {
     pub attempts: Vec<Attempt>,
 }
 
+/// Up to `n` (sentence, program) examples from `goals`, in file order, leaving out every goal whose
+/// id or sentence is the one being synthesised (`goal_id`, `sentence`).
+pub fn few_shot(
+    goals: &[super::goals::Goal],
+    goal_id: Option<&str>,
+    sentence: &str,
+    n: usize,
+) -> Vec<(String, String)> {
+    let norm = |s: &str| s.trim().to_lowercase();
+    goals
+        .iter()
+        .filter(|g| Some(g.id.as_str()) != goal_id && norm(&g.sentence) != norm(sentence))
+        .take(n)
+        .map(|g| (g.sentence.clone(), g.program.trim().to_string()))
+        .collect()
+}
+
+/// The few-shot block of the prompt (empty without examples).
+fn examples_text(examples: &[(String, String)]) -> String {
+    if examples.is_empty() {
+        return String::new();
+    }
+    let mut s = String::from("Examples of goals and their reward programs for this environment:\n");
+    for (g, p) in examples {
+        s.push_str(&format!("Goal: {g}\n```dsl\n{p}\n```\n"));
+    }
+    s.push('\n');
+    s
+}
+
 /// The prompt of the first call.
 pub fn prompt(req: &SynthRequest<'_>) -> String {
     format!(
@@ -96,11 +129,13 @@ pub fn prompt(req: &SynthRequest<'_>) -> String {
          DSL reference:\n{dsl}\n\
          Library summary:\n{lib}\n\
          Scene summary:\n{scene}\n\n\
+         {examples}\
          Think first if you like, then give the program alone in a ```dsl fenced block.",
         goal = req.goal,
         dsl = dsl_reference(req.schema.env),
         lib = req.schema.summary(),
         scene = req.scene_summary,
+        examples = examples_text(&req.examples),
     )
 }
 
@@ -207,6 +242,44 @@ pub fn synthesise(client: &LlmClient, req: &SynthRequest<'_>) -> Result<Synthesi
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn few_shot_examples_never_include_the_goal_itself() {
+        let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let set = super::super::goals::GoalSet::load(&repo.join("data/goals/pooltool.toml"), repo)
+            .unwrap();
+        let g = &set.goals[0];
+        let ex = few_shot(&set.goals, Some(&g.id), &g.sentence, 3);
+        assert_eq!(ex.len(), 3);
+        assert!(ex.iter().all(|(s, _)| s != &g.sentence));
+        // By sentence alone (a sentence file's goal has no id in the goal file).
+        let ex = few_shot(
+            &set.goals,
+            None,
+            &format!(" {} ", g.sentence.to_uppercase()),
+            20,
+        );
+        assert_eq!(ex.len(), set.goals.len() - 1);
+        let schema = set.schema.clone();
+        let req = SynthRequest {
+            goal: &g.sentence,
+            schema: &schema,
+            scene_summary: "a table".into(),
+            examples: ex,
+            image: None,
+            probe: None,
+            max_repairs: 0,
+            seed: 1,
+            temperature: None,
+        };
+        let p = prompt(&req);
+        assert!(p.contains(&set.goals[1].sentence) && p.contains("Examples of goals"));
+        assert_eq!(
+            p.matches(&g.sentence).count(),
+            1,
+            "the goal appears once, as the goal"
+        );
+    }
 
     #[test]
     fn extracts_the_program_from_fences_and_answers() {

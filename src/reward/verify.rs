@@ -9,7 +9,9 @@
 //!   `to`), `CURVE(b)` (between two events of b its heading turns by more than 8° while another ball
 //!   passes within 4 radii without touching it);
 //! - PHYRE / I-PHYRE: `CONTACT(a, b)` (`contact_begin`, `"*"` for any), `EXIT(obj)` (`ball_exit`),
-//!   `SUCCESS()` (the task's success).
+//!   `SUCCESS()` (the task's success). Objects are ids or words naming roles read off the first frame
+//!   (all must hold): colours and shapes (`"green"`, `"red ball"`), `"user"` (PHYRE's placed ball),
+//!   I-PHYRE's `"ball"`, `"eliminable"`, `"dynamic"`, `"fixed"`, `"block"`.
 //!
 //! Combinators: `SEQ(e1, e2, …)` (distinct occurrences in time order, each no earlier than the previous),
 //! `ALL(…)`, `ANY(…)`, `NOT(c)`, `NONE(e)` (no occurrence), `AT_LEAST(e, n)`. An event used as a
@@ -131,6 +133,7 @@ type Hit = (f64, usize);
 struct Verifier<'a> {
     trace: &'a Trace,
     cue: String,
+    roles: std::collections::HashMap<String, Vec<String>>,
 }
 
 fn text(e: &Expr) -> Result<String, RewardError> {
@@ -176,12 +179,70 @@ fn is(id: &str, want: &str) -> bool {
     want == "*" || id.eq_ignore_ascii_case(want)
 }
 
+/// The roles of every object of a PHYRE / I-PHYRE trace's first frame, by id: its colour and shape or
+/// kind (PHYRE: `red`, `green`, `blue`, `purple`, `gray`, `black`, `ball`, `bar`, `jar`, …, `user` for
+/// the placed ball, `dynamic`/`static`; I-PHYRE: `ball`/`red`, `eliminable`/`gray`,
+/// `dynamic`/`blue`, `fixed`/`black`, `block`).
+fn roles(trace: &Trace) -> std::collections::HashMap<String, Vec<String>> {
+    let mut out = std::collections::HashMap::new();
+    let Some(first) = trace.timesteps.first() else {
+        return out;
+    };
+    for o in &first.objects {
+        let (id, r): (i64, Vec<&str>) = match &o.body {
+            Body::Phyre(p) => {
+                let mut r = vec![p.color.as_str(), p.shape.as_str()];
+                if p.is_user_input {
+                    r.push("user");
+                }
+                (p.object_index, r)
+            }
+            Body::Iphyre(b) => {
+                let ball = b.x1 == b.x2 && b.y1 == b.y2;
+                let r = if ball {
+                    vec!["ball", "red"]
+                } else if b.eliminable > 0.5 {
+                    vec!["block", "eliminable", "gray"]
+                } else if b.dynamic > 0.5 {
+                    vec!["block", "dynamic", "blue"]
+                } else {
+                    vec!["block", "fixed", "black"]
+                };
+                (b.index, r)
+            }
+            _ => continue,
+        };
+        out.insert(
+            id.to_string(),
+            r.into_iter().map(str::to_ascii_lowercase).collect(),
+        );
+    }
+    out
+}
+
 impl<'a> Verifier<'a> {
     fn new(trace: &'a Trace) -> Self {
         Verifier {
             trace,
             cue: cue_ball(trace),
+            roles: roles(trace),
         }
+    }
+
+    /// Whether object `id` is `want`: `*`, its id, or (PHYRE / I-PHYRE) words that all name roles
+    /// of it (`"green"`, `"red ball"`, `"user"`, `"eliminable"`).
+    fn matches(&self, id: &str, want: &str) -> bool {
+        if is(id, want) {
+            return true;
+        }
+        let Some(r) = self.roles.get(id) else {
+            return false;
+        };
+        let words: Vec<String> = want
+            .split_whitespace()
+            .map(str::to_ascii_lowercase)
+            .collect();
+        !words.is_empty() && words.iter().all(|w| r.contains(w))
     }
 
     fn require_env(&self, e: &Expr, name: &str, pool: bool) -> Result<(), RewardError> {
@@ -409,8 +470,8 @@ impl<'a> Verifier<'a> {
                     .into_iter()
                     .filter(|(_, _, ids, _)| {
                         ids.len() == 2
-                            && ((is(&ids[0], &a) && is(&ids[1], &b))
-                                || (is(&ids[1], &a) && is(&ids[0], &b)))
+                            && ((self.matches(&ids[0], &a) && self.matches(&ids[1], &b))
+                                || (self.matches(&ids[1], &a) && self.matches(&ids[0], &b)))
                     })
                     .map(|(i, t, _, _)| (t, i))
                     .collect()
@@ -420,7 +481,7 @@ impl<'a> Verifier<'a> {
                 let b = arg(0)?;
                 self.events(&["ball_exit"])
                     .into_iter()
-                    .filter(|(_, _, ids, _)| ids.iter().any(|x| is(x, &b)))
+                    .filter(|(_, _, ids, _)| ids.iter().any(|x| self.matches(x, &b)))
                     .map(|(i, t, _, _)| (t, i))
                     .collect()
             }
@@ -558,5 +619,210 @@ impl<'a> Verifier<'a> {
             }
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod goal_rule_tests {
+    //! The verification rules of the PHYRE and I-PHYRE goal files on hand-made traces: for each goal,
+    //! one event log where the goal holds and one where it does not.
+
+    use serde_json::json;
+
+    use super::Rule;
+    use crate::reward::goals::GoalSet;
+    use crate::testutil::synthetic_trace;
+    use crate::trace::{Body, Env, Event, JsonMap, Trace};
+
+    /// (contacts or exits as (kind, t, agents), success).
+    type Log = (
+        &'static [(&'static str, f64, &'static [&'static str])],
+        bool,
+    );
+
+    fn trace(env: Env, log: &Log) -> Trace {
+        let mut t = synthetic_trace(env, 0, 4, 5);
+        for ts in &mut t.timesteps {
+            for (k, o) in ts.objects.iter_mut().enumerate() {
+                match &mut o.body {
+                    // 0 black bar (static), 1 green ball, 2 blue bar, 3 black wall, 4 the red user ball.
+                    Body::Phyre(p) => {
+                        let (color, shape) = [
+                            ("black", "bar"),
+                            ("green", "ball"),
+                            ("blue", "bar"),
+                            ("black", "undefined"),
+                            ("red", "ball"),
+                        ][k];
+                        p.object_index = k as i64;
+                        p.color = color.into();
+                        p.shape = shape.into();
+                        p.is_user_input = k == 4;
+                    }
+                    // 0 eliminable (gray), 1 dynamic (blue), 2 fixed (black), 3 and 4 balls.
+                    Body::Iphyre(b) => {
+                        b.index = k as i64;
+                        let ball = k >= 3;
+                        (b.x1, b.y1) = (100.0 * k as f64, 300.0);
+                        (b.x2, b.y2) = if ball {
+                            (b.x1, b.y1)
+                        } else {
+                            (b.x1 + 50.0, 300.0)
+                        };
+                        b.eliminable = if k == 0 { 1.0 } else { 0.0 };
+                        b.dynamic = if k == 1 || ball { 1.0 } else { 0.0 };
+                    }
+                    _ => unreachable!(),
+                }
+            }
+        }
+        t.events = log
+            .0
+            .iter()
+            .map(|(kind, at, agents)| Event {
+                kind: kind.to_string(),
+                t: Some(*at),
+                payload: Some(json!({ "agents": agents })),
+                extra: JsonMap::new(),
+            })
+            .collect();
+        t.outcome.success = log.1;
+        t
+    }
+
+    fn check(env: Env, cases: &[(&str, Log, Log)]) {
+        let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let set = GoalSet::load(&repo.join(format!("data/goals/{env}.toml")), repo).unwrap();
+        assert_eq!(set.goals.len(), 10, "{env}: ten goals");
+        for g in &set.goals {
+            let (_, yes, no) = cases
+                .iter()
+                .find(|c| c.0 == g.id)
+                .unwrap_or_else(|| panic!("{env}: no hand-made traces for goal {}", g.id));
+            let rule = Rule::parse(&g.verify).unwrap();
+            assert!(
+                rule.holds(&trace(env, yes)).unwrap(),
+                "{}: should hold",
+                g.id
+            );
+            assert!(
+                !rule.holds(&trace(env, no)).unwrap(),
+                "{}: should not hold",
+                g.id
+            );
+        }
+    }
+
+    const C: &str = "contact_begin";
+
+    #[test]
+    fn phyre_goal_rules_hold_exactly_on_their_traces() {
+        check(
+            Env::Phyre,
+            &[
+                (
+                    "red-touches-green",
+                    (&[(C, 0.1, &["4", "1"])], false),
+                    (&[(C, 0.1, &["4", "2"])], false),
+                ),
+                (
+                    "bounce-then-solve",
+                    (&[(C, 0.1, &["4", "0"]), (C, 0.2, &["1", "2"])], true),
+                    (&[(C, 0.1, &["4", "0"])], true),
+                ),
+                ("tip-over", (&[(C, 0.1, &["4", "2"])], false), (&[], false)),
+                (
+                    "green-touches-blue",
+                    (&[(C, 0.1, &["1", "2"])], false),
+                    (&[(C, 0.1, &["1", "0"])], false),
+                ),
+                (
+                    "bounce-off-then-green",
+                    (&[(C, 0.1, &["4", "3"]), (C, 0.2, &["4", "1"])], false),
+                    (&[(C, 0.1, &["4", "1"]), (C, 0.2, &["4", "3"])], false),
+                ),
+                (
+                    "roll-then-hit",
+                    (&[(C, 0.1, &["4", "0"]), (C, 0.2, &["4", "2"])], false),
+                    (&[(C, 0.1, &["4", "0"])], false),
+                ),
+                (
+                    "solve-without-red-on-green",
+                    (&[(C, 0.1, &["4", "2"]), (C, 0.2, &["1", "2"])], true),
+                    (&[(C, 0.1, &["4", "1"]), (C, 0.2, &["1", "2"])], true),
+                ),
+                (
+                    "hit-blue",
+                    (&[(C, 0.1, &["2", "4"])], false),
+                    (&[(C, 0.1, &["1", "4"])], false),
+                ),
+                (
+                    "knock-green-down",
+                    (&[(C, 0.1, &["4", "1"]), (C, 0.2, &["1", "0"])], false),
+                    (&[(C, 0.1, &["1", "0"]), (C, 0.2, &["4", "1"])], false),
+                ),
+                (
+                    "single-touch-solve",
+                    (&[(C, 0.1, &["4", "2"]), (C, 0.2, &["1", "2"])], true),
+                    (&[(C, 0.1, &["4", "2"]), (C, 0.2, &["4", "0"])], true),
+                ),
+            ],
+        );
+    }
+
+    #[test]
+    fn iphyre_goal_rules_hold_exactly_on_their_traces() {
+        const X: &str = "ball_exit";
+        check(
+            Env::Iphyre,
+            &[
+                (
+                    "remove-then-fall",
+                    (&[(X, 1.0, &["3"])], false),
+                    (&[], false),
+                ),
+                ("fall-without-swing", (&[], true), (&[], false)),
+                (
+                    "slide-then-exit",
+                    (&[(C, 0.5, &["3", "2"]), (X, 1.0, &["3"])], false),
+                    (&[(X, 0.5, &["3"]), (C, 1.0, &["4", "2"])], false),
+                ),
+                (
+                    "ball-hits-blue",
+                    (&[(C, 0.5, &["1", "3"])], false),
+                    (&[(C, 0.5, &["2", "3"])], false),
+                ),
+                (
+                    "keep-balls-on-screen",
+                    (&[(C, 0.5, &["3", "2"])], false),
+                    (&[(C, 0.5, &["3", "2"]), (X, 1.0, &["4"])], false),
+                ),
+                (
+                    "two-balls-collide",
+                    (&[(C, 0.5, &["3", "4"])], false),
+                    (&[(C, 0.5, &["3", "1"])], false),
+                ),
+                (
+                    "blue-then-exit",
+                    (&[(C, 0.5, &["3", "1"]), (X, 1.0, &["3"])], false),
+                    (&[(C, 0.5, &["3", "2"]), (X, 1.0, &["3"])], false),
+                ),
+                (
+                    "fall-onto-black",
+                    (&[(C, 0.5, &["3", "2"])], false),
+                    (&[(C, 0.5, &["3", "0"])], false),
+                ),
+                (
+                    "swing-then-exit",
+                    (&[(C, 0.5, &["3", "1"]), (X, 1.0, &["3"])], false),
+                    (&[(X, 1.0, &["3"])], false),
+                ),
+                (
+                    "exit-alone",
+                    (&[(X, 1.0, &["3"])], false),
+                    (&[(C, 0.5, &["3", "4"]), (X, 1.0, &["3"])], false),
+                ),
+            ],
+        );
     }
 }

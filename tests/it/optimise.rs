@@ -5,7 +5,7 @@ use annotrace::detect::{Library, SandboxLimits, WorkerPool};
 use annotrace::envs::Environment;
 use annotrace::envs::pool::PoolEnv;
 use annotrace::optimise::{
-    Chain, GoalTask, RewardKind, Schedule, Settings, ShotBounds, run_chains,
+    Chain, GoalTask, PoolProblem, RewardKind, Schedule, Settings, ShotBounds, run_chains,
 };
 use annotrace::reward::annotate::detectors_for;
 use annotrace::reward::verify::Rule;
@@ -13,17 +13,13 @@ use annotrace::reward::{Schema, compile, labels_used};
 
 use crate::common::{TestRun, repo};
 
-fn settings(budget: usize) -> Settings {
+fn settings() -> Settings<PoolProblem> {
     let mut env = PoolEnv::default();
     env.trace.dt = 0.05;
     Settings {
-        env,
-        bounds: ShotBounds::default(),
-        schedule: Schedule {
-            budget,
-            ..Schedule::default()
-        },
-        checkpoint: 10,
+        problem: PoolProblem::new(env, ShotBounds::default()).unwrap(),
+        schedule: Schedule::default(),
+        checkpoint: Some(10),
     }
 }
 
@@ -46,13 +42,14 @@ fn annealing_improves_a_dense_reward_and_is_seeded() {
     assert_eq!(task.detectors.len(), 1);
     let env = PoolEnv::default();
     let scene = env.scenes(1, 5).unwrap().remove(0);
-    let chains: Vec<Chain> = [11, 12]
+    let chains: Vec<Chain<_>> = [11, 12]
         .iter()
         .map(|&seed| Chain {
             goal: 0,
             scene: scene.clone(),
             seed,
             kind: RewardKind::Dense,
+            budget: 80,
         })
         .collect();
     let limits = SandboxLimits {
@@ -60,7 +57,7 @@ fn annealing_improves_a_dense_reward_and_is_seeded() {
         ..SandboxLimits::default()
     };
     let pool = WorkerPool::new(limits).unwrap();
-    let s = settings(80);
+    let s = settings();
     let mut steps = 0;
     let (rows, timings) = run_chains(&s, std::slice::from_ref(&task), &chains, Some(&pool), |k| {
         steps = k
@@ -117,8 +114,9 @@ fn sparse_chains_need_no_detectors() {
         scene,
         seed: 3,
         kind: RewardKind::Sparse,
+        budget: 30,
     };
-    let (rows, t) = run_chains(&settings(30), &[task], &[chain], None, |_| {}).unwrap();
+    let (rows, t) = run_chains(&settings(), &[task], &[chain], None, |_| {}).unwrap();
     assert_eq!(t.dense_samples, 0);
     // A cue-ball cushion contact is easy: the sparse chain finds one, and its success is verified.
     let last = rows.last().unwrap();
@@ -130,11 +128,10 @@ fn sparse_chains_need_no_detectors() {
 fn optimise_pipeline_writes_table_figure_and_summary() {
     let t = TestRun::new();
     let text =
-        std::fs::read_to_string(repo().join("pipelines/pooltool-optimisation.toml")).unwrap();
+        std::fs::read_to_string(repo().join("pipelines/optimisation-pooltool.toml")).unwrap();
     let text = text
-        .replace("scenes = 10 ", "scenes = 1 ")
         .replace("seeds = 2 ", "seeds = 1 ")
-        .replace("budget = 200 ", "budget = 10 ")
+        .replace("budget = 100 ", "budget = 10 ")
         .replace(
             "checkpoint = 50",
             "checkpoint = 5\ngoal_ids = [\"two-cushions-pot-8\", \"touch-2-cushion\"]\nworkers = 2",
@@ -188,5 +185,188 @@ fn optimise_rejects_bad_parameters() {
     );
     t.run(&["run", "q.toml", "--run-dir", "out"])
         .code(2)
-        .stderr_has("q.toml:6: stage \"o\": `rewards[1]`: unknown variant `medium`, expected `dense` or `sparse`");
+        .stderr_has(
+            "q.toml:6: stage \"o\": `rewards[1]` must be one of \"dense\", \"sparse\", found \"medium\"",
+        );
+}
+
+/// Synthesis → optimise for one goal per environment through the scripted chat server: the first
+/// answer names a label the library lacks and is repaired, the second is accepted, recorded in
+/// reward_programs and optimised.
+#[test]
+fn synthesised_programs_are_repaired_and_optimised_in_every_environment() {
+    use crate::common::chat_server::{ChatServer, Reply};
+    let dsl = |p: &str| format!("<think>Plan the steps.</think>\n```dsl\n{p}\n```");
+    for (env, goal, good) in [
+        (
+            "pooltool",
+            "touch-2-cushion",
+            r#"AND(PATTERN("cushion rebound", ball="cue"), CUE_HIT("2"))"#,
+        ),
+        (
+            "phyre",
+            "red-touches-green",
+            r#"AND(PATTERN("falling object"), PATTERN("moving object hits stationary object"))"#,
+        ),
+        (
+            "iphyre",
+            "ball-hits-blue",
+            r#"AND(PATTERN("object removal"), PATTERN("collision"))"#,
+        ),
+    ] {
+        let server = ChatServer::start(vec![
+            Reply::chat(&dsl(r#"AND(PATTERN("teleporting ball"))"#)),
+            Reply::chat(&dsl(good)),
+        ]);
+        let t = TestRun::new();
+        t.write(
+            "p.toml",
+            &format!(
+                "[pipeline]\nname = \"s\"\nseed = 3\n\
+                 [[stage]]\nid = \"synth\"\nkind = \"synthesise\"\nenv = \"{env}\"\ngoal_ids = [\"{goal}\"]\n\
+                 workers = 2\nllm = {{ base_url = \"{}\", model = \"m\" }}\n\
+                 [[stage]]\nid = \"optimise\"\nkind = \"optimise\"\ninputs = [\"synth\"]\nenv = \"{env}\"\n\
+                 scenes = 1\nseeds = 1\nbudget = 4\ncheckpoint = 2\nworkers = 2\nframes = 2\n",
+                server.url()
+            ),
+        );
+        t.run_env(
+            &["run", "p.toml", "--run-dir", "out"],
+            &[("ANNOTRACE_LLM_BASE_URL", ""), ("ANNOTRACE_LLM_MODEL", "m")],
+        )
+        .ok();
+        let programs = t.csv(
+            "out",
+            "SELECT goal, origin, accepted, attempts, errors, program FROM reward_programs",
+        );
+        assert!(
+            programs.contains(&format!("{goal},llm,true,2,")),
+            "{env}: {programs}"
+        );
+        assert!(programs.contains("teleporting ball"), "{env}: {programs}");
+        let rows = t.csv(
+            "out",
+            "SELECT reward_type, budget, count(*) AS n FROM optimisation GROUP BY 1, 2 ORDER BY 1, 2",
+        );
+        assert_eq!(
+            rows.lines().skip(1).collect::<Vec<_>>(),
+            ["dense,2,1", "dense,4,1", "sparse,2,1", "sparse,4,1"],
+            "{env}"
+        );
+        assert_eq!(server.seen().len(), 2, "{env}: one synthesis, one repair");
+        let svg =
+            std::fs::read_to_string(t.path(&format!("out/exports/optimise/action_{goal}.svg")))
+                .unwrap();
+        assert!(
+            svg.contains("data:image/png;base64,") && svg.contains("PATTERN(&quot;"),
+            "{env}"
+        );
+    }
+}
+
+/// Annealing the PHYRE red ball and the I-PHYRE removal times improves a dense reward on a fixed seed.
+#[test]
+fn annealing_improves_a_dense_reward_in_phyre_and_iphyre() {
+    use annotrace::envs::iphyre::IphyreEnv;
+    use annotrace::envs::phyre::{PhyreEnv, TaskSet};
+    use annotrace::optimise::{IphyreProblem, PhyreProblem, Problem};
+    let pool = WorkerPool::new(SandboxLimits {
+        workers: 2,
+        ..SandboxLimits::default()
+    })
+    .unwrap();
+    fn run<P: Problem>(
+        problem: P,
+        scene: P::Scene,
+        lib: &str,
+        program: &str,
+        pool: &WorkerPool,
+    ) -> Vec<f64> {
+        let lib = Library::load(&repo().join(lib)).unwrap();
+        let program = compile(program, &Schema::from_library(&lib)).unwrap();
+        let task = GoalTask {
+            id: "toy".into(),
+            detectors: detectors_for(&lib, &labels_used(&program)),
+            program,
+            rule: Rule::parse("SUCCESS()").unwrap(),
+        };
+        let chain = Chain {
+            goal: 0,
+            scene,
+            seed: 7,
+            kind: RewardKind::Dense,
+            budget: 30,
+        };
+        let s = Settings {
+            problem,
+            schedule: Schedule::default(),
+            checkpoint: Some(1),
+        };
+        let (rows, _) = run_chains(&s, &[task], &[chain], Some(pool), |_| {}).unwrap();
+        rows.iter().map(|r| r.best_reward).collect()
+    }
+    // PHYRE: the red ball placed near a spot of the scene.
+    let task = TaskSet::default_tasks().unwrap().get("00001:000").unwrap();
+    let curve = run(
+        PhyreProblem {
+            env: PhyreEnv::default(),
+        },
+        task,
+        "data/libraries/phyre",
+        r#"NEARBY_AT(OBJECT_ID("red", "ball"), 60.0, 220.0, 0.0, threshold_strength=0.02)"#,
+        &pool,
+    );
+    assert!(curve.windows(2).all(|w| w[1] >= w[0]), "{curve:?}");
+    assert!(curve[29] > curve[0] + 0.05, "phyre: {curve:?}");
+    // I-PHYRE: a ball where it ends up after the removals, with a detector clause.
+    let env = IphyreEnv::new().unwrap();
+    let game = env.games.get("support").unwrap().clone();
+    let curve = run(
+        IphyreProblem {
+            env,
+            horizon: 5.0,
+            never: 0.25,
+        },
+        game,
+        "data/libraries/iphyre",
+        r#"AND(PATTERN("falling object"), NEARBY_AT(OBJECT_ID("red", "ball"), 250.0, 470.0, 0.2, threshold_strength=0.02))"#,
+        &pool,
+    );
+    assert!(curve.windows(2).all(|w| w[1] >= w[0]), "{curve:?}");
+    assert!(curve[29] > curve[0], "iphyre: {curve:?}");
+}
+
+/// A sentence file has no hand-written programs: offline it is a clear input error; asking for the
+/// reward_programs table without a synthesise input is refused when the pipeline is checked.
+#[test]
+fn synthesise_and_optimise_refuse_what_they_cannot_do_offline() {
+    let t = TestRun::new();
+    t.write(
+        "goals.txt",
+        "# my goals\nMake the red ball hit the blue object.\n\n",
+    );
+    t.write(
+        "p.toml",
+        "[pipeline]\nname = \"x\"\n[[stage]]\nid = \"s\"\nkind = \"synthesise\"\nenv = \"phyre\"\nsentences = \"goals.txt\"\n",
+    );
+    t.run_env(
+        &["run", "p.toml", "--run-dir", "out"],
+        &[("ANNOTRACE_LLM_BASE_URL", "")],
+    )
+    .code(2)
+    .stderr_has("goal \"s1\" has no hand-written program");
+    t.write(
+        "q.toml",
+        "[pipeline]\nname = \"x\"\n[[stage]]\nid = \"o\"\nkind = \"optimise\"\nenv = \"iphyre\"\nprograms = \"reward_programs\"\n",
+    );
+    t.run(&["run", "q.toml", "--run-dir", "out"])
+        .code(2)
+        .stderr_has("reward_programs needs a synthesise stage among the stage's `inputs`");
+    t.write(
+        "r.toml",
+        "[pipeline]\nname = \"x\"\n[[stage]]\nid = \"o\"\nkind = \"optimise\"\nenv = \"phyre\"\ngoals = \"data/goals/iphyre.toml\"\n",
+    );
+    t.run(&["run", "r.toml", "--run-dir", "out"])
+        .code(2)
+        .stderr_has("is for iphyre, but this stage optimises phyre");
 }

@@ -921,6 +921,7 @@ mod synthesis {
         let (tr, anns) = basic();
         let sch = schema();
         let req = SynthRequest {
+            examples: Vec::new(),
             goal: "Hit the eight ball first.",
             schema: &sch,
             scene_summary: "nine balls".into(),
@@ -971,6 +972,7 @@ mod synthesis {
         let client = LlmClient::new(LlmConfig::new(server.url(), "m"), None).unwrap();
         let sch = schema();
         let req = SynthRequest {
+            examples: Vec::new(),
             goal: "g",
             schema: &sch,
             scene_summary: String::new(),

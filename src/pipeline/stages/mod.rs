@@ -2,7 +2,8 @@
 //! (paper-format JSON into the trace tables), `simulate` (an environment's simulator into the trace
 //! tables; `simulate.rs` with `simulate_phyre.rs` and `simulate_iphyre.rs` for the other environments),
 //! `annotate` (a detector library run over the traces), `accuracy` (its event-grounded labels scored
-//! against simulator events), `optimise` (annealing actions for reward programs), `evolve` (the
+//! against simulator events), `synthesise` (goal sentences to reward programs through an LLM),
+//! `optimise` (annealing actions for reward programs), `evolve` (the
 //! evolutionary search for detectors), `sql` (a query over the run stored as a table) and `export` (a
 //! table or query written to `exports/`).
 //!
@@ -20,6 +21,7 @@ pub mod import;
 pub mod optimise;
 pub mod simulate;
 pub mod sql;
+pub mod synthesise;
 mod trace_files;
 
 use std::path::{Path, PathBuf};

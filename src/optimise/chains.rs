@@ -1,20 +1,23 @@
-//! The billiards optimisation experiment: many annealing chains (goal × scene × seed × reward type)
-//! advanced in lockstep, so that each step simulates every chain's proposal in parallel, annotates the
-//! dense chains' traces in one call to the detector runtime per goal (only the detectors the goal's
-//! program uses), scores them, and verifies every sample with the goal's hand-written rule.
+//! A batch of annealing chains (goal × scene × seed × reward type × budget) advanced in lockstep over
+//! any [`Problem`]: each step simulates every live chain's proposal in parallel, annotates the dense
+//! chains' traces in one call to the detector runtime per goal (only the detectors the goal's program
+//! uses), scores them, and verifies every sample with the goal's hand-written rule.
 //!
-//! The best-so-far sample of each chain is recorded at every checkpoint (50, 100, …), with whether its
-//! shot verifies: one run of budget N gives the whole success-versus-budget curve.
+//! Each chain has its own budget (its schedule cools over exactly that many samples) and stops when it
+//! is spent. Its best-so-far sample is recorded when it ends and, with `checkpoint`, every `checkpoint`
+//! samples on the way, with whether that sample verifies. The paper's budget axis is independent chains
+//! of budgets 50, 100, …, 1000 (one row each); the checkpoints of one long chain are the cheaper
+//! approximation (its early checkpoints come from a chain still running hot).
 
 use std::time::Instant;
 
 use rayon::prelude::*;
+use serde_json::Value;
 
 use super::OptimiseError;
-use super::anneal::{Annealer, Dim, Schedule};
+use super::anneal::{Annealer, Schedule};
+use super::problem::Problem;
 use crate::detect::{Annotation, Detector, WorkerPool};
-use crate::envs::Environment;
-use crate::envs::pool::{PoolEnv, Scene, Shot};
 use crate::reward::annotate::annotate;
 use crate::reward::verify::Rule;
 use crate::reward::{AnnotatedTrace, Program, evaluate};
@@ -65,129 +68,30 @@ pub struct GoalTask {
     pub detectors: Vec<Detector>,
 }
 
-/// One chain: which goal, scene, seed and reward.
+/// One chain: which goal, scene, seed, reward and budget.
 #[derive(Debug, Clone)]
-pub struct Chain {
+pub struct Chain<S> {
     /// Index into the goals.
     pub goal: usize,
     /// The scene.
-    pub scene: Scene,
+    pub scene: S,
     /// The chain's seed.
     pub seed: u64,
     /// The reward.
     pub kind: RewardKind,
-}
-
-/// Bounds of the shot parameters searched (inside `PoolEnv::action_space()`'s legal ranges).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ShotBounds {
-    /// Cue speed (m/s).
-    pub v0: (f64, f64),
-    /// Elevation (degrees).
-    pub theta: (f64, f64),
-    /// Largest tip offset radius √(a² + b²) (× R); offsets outside are scaled onto it.
-    pub max_offset: f64,
-}
-
-impl Default for ShotBounds {
-    /// V0 in [0.2, 6] m/s, θ in [0°, 45°], offsets within 0.9 R (φ always spans [0°, 360°)).
-    fn default() -> Self {
-        ShotBounds {
-            v0: (0.2, 6.0),
-            theta: (0.0, 45.0),
-            max_offset: 0.9,
-        }
-    }
-}
-
-impl ShotBounds {
-    /// The search box, checked against the environment's legal ranges.
-    pub fn dims(&self, env: &PoolEnv) -> Result<Vec<Dim>, OptimiseError> {
-        let space = env.action_space();
-        let legal = |name: &str| {
-            space
-                .iter()
-                .find(|d| d.name == name)
-                .map(|d| (d.low, d.high))
-                .unwrap_or((f64::NEG_INFINITY, f64::INFINITY))
-        };
-        let inside = |name: &str, (lo, hi): (f64, f64)| {
-            let (l, h) = legal(name);
-            if lo >= l && hi <= h && lo < hi {
-                Ok(())
-            } else {
-                Err(OptimiseError::Bounds(format!(
-                    "{name} range [{lo}, {hi}] must be non-empty and inside the legal [{l}, {h}]"
-                )))
-            }
-        };
-        inside("V0", self.v0)?;
-        inside("theta", self.theta)?;
-        if !(self.max_offset > 0.0 && self.max_offset < 1.0) {
-            return Err(OptimiseError::Bounds(format!(
-                "max_offset must be in (0, 1) (a² + b² < 1), found {}",
-                self.max_offset
-            )));
-        }
-        let (plo, phi) = legal("phi");
-        Ok(vec![
-            Dim {
-                low: self.v0.0,
-                high: self.v0.1,
-                periodic: false,
-            },
-            Dim {
-                low: plo.max(0.0),
-                high: phi.min(360.0),
-                periodic: true,
-            },
-            Dim {
-                low: self.theta.0,
-                high: self.theta.1,
-                periodic: false,
-            },
-            Dim {
-                low: -self.max_offset,
-                high: self.max_offset,
-                periodic: false,
-            },
-            Dim {
-                low: -self.max_offset,
-                high: self.max_offset,
-                periodic: false,
-            },
-        ])
-    }
-
-    /// The shot of a point of the box (tip offsets scaled into the allowed disc).
-    pub fn shot(&self, x: &[f64]) -> Shot {
-        let (mut a, mut b) = (x[3], x[4]);
-        let r = a.hypot(b);
-        if r > self.max_offset {
-            a *= self.max_offset / r;
-            b *= self.max_offset / r;
-        }
-        Shot {
-            v0: x[0],
-            phi: x[1],
-            theta: x[2],
-            a,
-            b,
-        }
-    }
+    /// Samples of this chain (its schedule cools over exactly these).
+    pub budget: usize,
 }
 
 /// Settings of a batch of chains.
 #[derive(Debug, Clone)]
-pub struct Settings {
-    /// The environment (its `trace.dt` sets the trace resolution the detectors see).
-    pub env: PoolEnv,
-    /// The shot box.
-    pub bounds: ShotBounds,
-    /// The annealing schedule (its budget is the number of samples per chain).
+pub struct Settings<P> {
+    /// What is searched.
+    pub problem: P,
+    /// The annealing schedule (its `budget` is replaced by each chain's).
     pub schedule: Schedule,
-    /// Record the best-so-far every this many samples.
-    pub checkpoint: usize,
+    /// Also record the best-so-far every this many samples (besides at each chain's end).
+    pub checkpoint: Option<usize>,
 }
 
 /// The best-so-far of one chain at one checkpoint.
@@ -203,14 +107,18 @@ pub struct CheckpointRow {
     pub kind: RewardKind,
     /// Samples spent.
     pub budget: usize,
+    /// The chain's whole budget (equal to `budget` for its last row).
+    pub chain_budget: usize,
     /// Reward of the best sample so far.
     pub best_reward: f64,
     /// Whether the best sample's shot meets the verification rule.
     pub success: bool,
     /// Which sample (1-based) it was.
     pub best_sample: usize,
-    /// Its shot.
-    pub shot: Shot,
+    /// Its action (the environment's action JSON).
+    pub action: Value,
+    /// Its point of the search box.
+    pub point: Vec<f64>,
 }
 
 /// Where the time of a batch went (seconds, summed over steps).
@@ -237,19 +145,18 @@ pub struct Timings {
 struct State {
     annealer: Annealer,
     best_success: bool,
-    best_shot: Shot,
+    best_x: Vec<f64>,
 }
 
-/// Runs every chain for the schedule's budget; `on_step` is called after each step with the number
-/// of steps done. Needs `pool` when any chain is dense.
-pub fn run_chains(
-    settings: &Settings,
+/// Runs every chain for its budget; `on_step` is called after each step with the number of steps
+/// done (the largest budget in all). Needs `pool` when any chain is dense.
+pub fn run_chains<P: Problem>(
+    settings: &Settings<P>,
     goals: &[GoalTask],
-    chains: &[Chain],
+    chains: &[Chain<P::Scene>],
     pool: Option<&WorkerPool>,
     mut on_step: impl FnMut(usize),
 ) -> Result<(Vec<CheckpointRow>, Timings), OptimiseError> {
-    let dims = settings.bounds.dims(&settings.env)?;
     if chains.iter().any(|c| c.goal >= goals.len()) {
         return Err(OptimiseError::Internal(
             "a chain names a goal that does not exist",
@@ -260,25 +167,37 @@ pub fn run_chains(
             "dense chains need a detector worker pool",
         ));
     }
+    let problem = &settings.problem;
     let mut states: Vec<State> = chains
         .iter()
         .map(|c| State {
-            annealer: Annealer::new(dims.clone(), settings.schedule, c.seed),
+            annealer: Annealer::new(
+                problem.dims(&c.scene),
+                Schedule {
+                    budget: c.budget,
+                    ..settings.schedule
+                },
+                c.seed,
+            ),
             best_success: false,
-            best_shot: Shot::default(),
+            best_x: Vec::new(),
         })
         .collect();
     let mut rows = Vec::new();
     let mut timings = Timings::default();
-    let budget = settings.schedule.budget;
-    let every = settings.checkpoint.max(1);
-    for step in 0..budget {
-        let xs: Vec<Vec<f64>> = states.iter_mut().map(|s| s.annealer.propose()).collect();
-        let shots: Vec<Shot> = xs.iter().map(|x| settings.bounds.shot(x)).collect();
+    let steps = chains.iter().map(|c| c.budget).max().unwrap_or(0);
+    for step in 0..steps {
+        let live: Vec<bool> = chains.iter().map(|c| step < c.budget).collect();
+        let xs: Vec<Option<Vec<f64>>> = states
+            .iter_mut()
+            .zip(&live)
+            .map(|(s, &l)| l.then(|| s.annealer.propose()))
+            .collect();
         let t0 = Instant::now();
-        let traces = simulate_all(settings, chains, &shots, step);
+        let traces = simulate_all(problem, chains, &xs, step);
         timings.simulate_s += t0.elapsed().as_secs_f64();
-        timings.failed_simulations += traces.iter().filter(|t| t.is_none()).count() as u64;
+        let n_live = live.iter().filter(|&&l| l).count() as u64;
+        timings.failed_simulations += n_live - traces.iter().flatten().count() as u64;
 
         // Annotate the dense chains' traces, one pool call per goal.
         let t1 = Instant::now();
@@ -292,45 +211,45 @@ pub fn run_chains(
         let scored = score_all(goals, chains, &traces, &anns);
         timings.score_s += t2.elapsed().as_secs_f64();
         timings.program_errors += scored.iter().filter(|s| s.2).count() as u64;
-        timings.samples += chains.len() as u64;
+        timings.samples += n_live;
 
-        for (i, ((x, (score, verified, _)), shot)) in
-            xs.into_iter().zip(scored).zip(shots).enumerate()
-        {
+        let done = step + 1;
+        for (i, (x, (score, verified, _))) in xs.into_iter().zip(scored).enumerate() {
+            let Some(x) = x else { continue };
             let st = &mut states[i];
-            st.annealer.observe(x, score);
+            st.annealer.observe(x.clone(), score);
             if st
                 .annealer
                 .best()
                 .is_some_and(|b| b.2 == st.annealer.samples())
             {
                 st.best_success = verified;
-                st.best_shot = shot;
+                st.best_x = x;
             }
-        }
-        let done = step + 1;
-        if done % every == 0 || done == budget {
-            rows.extend(checkpoint(goals, chains, &states, done));
+            let at_checkpoint = settings.checkpoint.is_some_and(|k| done % k.max(1) == 0);
+            if done == chains[i].budget || at_checkpoint {
+                rows.push(row(problem, goals, &chains[i], st, done));
+            }
         }
         on_step(done);
     }
     Ok((rows, timings))
 }
 
-/// Step `step`'s shot of every chain, simulated in parallel (`None` where the simulation failed);
-/// trace `i` is named `opt-<i>-<step>`.
-fn simulate_all(
-    settings: &Settings,
-    chains: &[Chain],
-    shots: &[Shot],
+/// Step `step`'s point of every live chain, simulated in parallel (`None` where the chain is done or
+/// the simulation failed); trace `i` is named `opt-<i>-<step>`.
+fn simulate_all<P: Problem>(
+    problem: &P,
+    chains: &[Chain<P::Scene>],
+    xs: &[Option<Vec<f64>>],
     step: usize,
 ) -> Vec<Option<Trace>> {
     chains
         .par_iter()
-        .zip(shots.par_iter())
+        .zip(xs.par_iter())
         .enumerate()
-        .map(|(i, (c, shot))| {
-            let mut t = settings.env.simulate(&c.scene, shot).ok()?;
+        .map(|(i, (c, x))| {
+            let mut t = problem.simulate(&c.scene, x.as_deref()?).ok()?;
             t.trace_id = format!("opt-{i}-{step}");
             Some(t)
         })
@@ -339,10 +258,10 @@ fn simulate_all(
 
 /// The annotations of the dense chains' traces (one pool call per goal, with that goal's
 /// detectors), by chain; sparse chains and failed simulations get none.
-fn annotate_dense(
+fn annotate_dense<S>(
     pool: &WorkerPool,
     goals: &[GoalTask],
-    chains: &[Chain],
+    chains: &[Chain<S>],
     traces: &[Option<Trace>],
     timings: &mut Timings,
 ) -> Vec<Vec<Annotation>> {
@@ -374,9 +293,9 @@ fn annotate_dense(
 
 /// Every chain's (reward, verified success, program error) for its trace: sparse chains score
 /// the goal's rule, dense chains its reward program over the annotations.
-fn score_all(
+fn score_all<S: Sync>(
     goals: &[GoalTask],
-    chains: &[Chain],
+    chains: &[Chain<S>],
     traces: &[Option<Trace>],
     anns: &[Vec<Annotation>],
 ) -> Vec<(f64, bool, bool)> {
@@ -403,29 +322,26 @@ fn score_all(
         .collect()
 }
 
-/// Every chain's best shot so far, as the checkpoint rows after `done` steps.
-fn checkpoint(
+/// A chain's best sample so far, as its row after `done` samples.
+fn row<P: Problem>(
+    problem: &P,
     goals: &[GoalTask],
-    chains: &[Chain],
-    states: &[State],
+    c: &Chain<P::Scene>,
+    st: &State,
     done: usize,
-) -> Vec<CheckpointRow> {
-    chains
-        .iter()
-        .zip(states)
-        .map(|(c, st)| {
-            let (_, best, k) = st.annealer.best().unwrap_or((&[], 0.0, 0));
-            CheckpointRow {
-                goal: goals[c.goal].id.clone(),
-                scene: c.scene.scene_id.clone(),
-                seed: c.seed,
-                kind: c.kind,
-                budget: done,
-                best_reward: best,
-                success: st.best_success,
-                best_sample: k,
-                shot: st.best_shot,
-            }
-        })
-        .collect()
+) -> CheckpointRow {
+    let (_, best, k) = st.annealer.best().unwrap_or((&[], 0.0, 0));
+    CheckpointRow {
+        goal: goals[c.goal].id.clone(),
+        scene: problem.scene_id(&c.scene),
+        seed: c.seed,
+        kind: c.kind,
+        budget: done,
+        chain_budget: c.budget,
+        best_reward: best,
+        success: st.best_success,
+        best_sample: k,
+        action: problem.action_json(&c.scene, &st.best_x),
+        point: st.best_x.clone(),
+    }
 }
