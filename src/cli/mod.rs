@@ -35,6 +35,7 @@ mod simulate;
 mod stages;
 mod suggest_labels;
 mod tables;
+mod verify;
 
 use std::process::ExitCode;
 
@@ -164,6 +165,8 @@ enum Command {
     Query(query::Args),
     /// List a run's tables with row counts and schemas.
     Tables(tables::Args),
+    /// Check a run's files against the sizes and SHA-256 sums in its manifest; list foreign files.
+    Verify(verify::Args),
 }
 
 /// Parses arguments, runs the command, prints errors and returns the exit code.
@@ -186,6 +189,7 @@ pub fn main() -> ExitCode {
         Command::Export(a) => export::run(a),
         Command::Query(a) => query::run(a),
         Command::Tables(a) => tables::run(a),
+        Command::Verify(a) => verify::run(a),
     };
     match result {
         Ok(code) => ExitCode::from(code),
