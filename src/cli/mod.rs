@@ -6,7 +6,7 @@
 //! | code | category | meaning |
 //! |---|---|---|
 //! | 0 | | success (a broken pipe on the output also exits quietly with 0) |
-//! | 1 | `Failed` | the command finished but some items failed (invalid traces skipped, a stage failed at run time, an unusable answer) |
+//! | 1 | `Failed` | the command finished but some items failed (invalid traces skipped, a stage failed at run time, an unusable answer, damaged or foreign files found by `verify`) |
 //! | 2 | `Input` | bad input or configuration (a malformed file, an unknown option value, an invalid pipeline, a missing file) |
 //! | 3 | `Service` | an external service is unavailable (the LLM endpoint unreachable or failing after retries, the Python detector workers cannot start) |
 //! | 4 | `Io` | reading or writing the run folder or an output failed (disk full, permission denied) |

@@ -19,8 +19,8 @@ mod toml_doc;
 
 use std::path::PathBuf;
 
-pub use category::{Categorize, ErrorCategory};
 pub use crate::store::manifest::{Manifest, OutputFile, PipelineInfo, StageRecord, StageStatus};
+pub use category::{Categorize, ErrorCategory};
 pub use params::{ParamDoc, ParamDocs, ParamError, ParamType, ParamsOf, StageParams};
 pub use progress::Progress;
 pub use registry::{BuildError, STAGE_KINDS, StageKind, find_kind, kind_names, params_markdown};

@@ -45,7 +45,6 @@ use crate::store::manifest::{
 use crate::store::verify::{Problem, check_file, check_size, sha256_file};
 use crate::store::{RunDir, Staging, StoreError, remove_files};
 
-
 /// Options of one `annotrace run`.
 #[derive(Clone, Debug, Default)]
 pub struct RunOptions {
@@ -429,7 +428,8 @@ fn record_missing_checksums(run: &RunDir, manifest: &mut Manifest) -> Result<usi
             if check_size(&path, o).is_err() {
                 continue;
             }
-            let (bytes, sha) = sha256_file(&path).map_err(|e| StoreError::Io { path, source: e })?;
+            let (bytes, sha) =
+                sha256_file(&path).map_err(|e| StoreError::Io { path, source: e })?;
             (o.bytes, o.sha256) = (Some(bytes), Some(sha));
             n += 1;
         }
@@ -557,6 +557,8 @@ fn run_locked(
         match planned.action {
             Action::Skipped => continue,
             Action::Cached => {
+                // A run killed after the commit point, before the staging area was removed.
+                run.staging(&def.id).remove()?;
                 progress.stage_cached(&def.id);
                 let r = &manifest.stages[&def.id];
                 reports.push(StageReport {
@@ -618,11 +620,11 @@ impl Session<'_> {
             done: 0,
         };
         staging.move_into_place(|| steps.step())?;
-        if let Some((path, problem)) = prev
-            .outputs
-            .iter()
-            .find_map(|o| check_size(&output_path(run, o), o).err().map(|p| (&o.path, p)))
-        {
+        if let Some((path, problem)) = prev.outputs.iter().find_map(|o| {
+            check_size(&output_path(run, o), o)
+                .err()
+                .map(|p| (&o.path, p))
+        }) {
             progress.note(
                 id,
                 &format!("interrupted commit cannot be finished: {path} {problem}; running the stage again"),
@@ -656,7 +658,11 @@ impl Session<'_> {
         resuming: bool,
     ) -> Result<(), RunError> {
         let (run, progress) = (self.run, self.progress);
-        if let Some(prev) = manifest.stages.get_mut(id).filter(|p| !p.outputs.is_empty()) {
+        if let Some(prev) = manifest
+            .stages
+            .get_mut(id)
+            .filter(|p| !p.outputs.is_empty())
+        {
             if prev.status != StageStatus::Running {
                 prev.status = StageStatus::Running;
                 manifest.save(run)?;

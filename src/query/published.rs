@@ -48,9 +48,11 @@ impl PublishedFiles {
             let key = ListingTableUrl::parse(&url)?.prefix().clone();
             let mut files = Vec::with_capacity(table.files.len());
             for f in &table.files {
-                let abs =
-                    std::path::absolute(&f.path).map_err(|e| DataFusionError::External(Box::new(e)))?;
-                let location = ListingTableUrl::parse(abs.to_string_lossy())?.prefix().clone();
+                let abs = std::path::absolute(&f.path)
+                    .map_err(|e| DataFusionError::External(Box::new(e)))?;
+                let location = ListingTableUrl::parse(abs.to_string_lossy())?
+                    .prefix()
+                    .clone();
                 files.push(ObjectMeta {
                     location,
                     last_modified: f.modified.into(),
@@ -116,7 +118,9 @@ impl Cache<TableScopedPath, CachedFileList> for PublishedFiles {
         Ok(())
     }
 
-    fn list_entries(&self) -> datafusion::common::HashMap<TableScopedPath, CacheEntryInfo<CachedFileList>> {
+    fn list_entries(
+        &self,
+    ) -> datafusion::common::HashMap<TableScopedPath, CacheEntryInfo<CachedFileList>> {
         self.folders
             .iter()
             .map(|(path, files)| {
@@ -138,6 +142,8 @@ impl Cache<TableScopedPath, CachedFileList> for PublishedFiles {
 }
 
 /// Shares the cache with DataFusion's runtime.
-pub(crate) fn shared(files: PublishedFiles) -> Arc<datafusion::execution::cache::cache_manager::ListFilesCache> {
+pub(crate) fn shared(
+    files: PublishedFiles,
+) -> Arc<datafusion::execution::cache::cache_manager::ListFilesCache> {
     Arc::new(files)
 }

@@ -42,9 +42,9 @@ use std::time::SystemTime;
 
 pub use self::atomic::{AtomicFile, is_temp_name, sync_dir, write_atomic};
 pub use self::manifest::{Manifest, OutputFile, StageStatus};
-pub use self::verify::Problem;
 pub use self::parquet::{ParquetSink, ROW_GROUP_ROWS, read_batches, read_file};
 pub use self::traces::{ReadTraceError, read_trace, trace_ids};
+pub use self::verify::Problem;
 use crate::trace::Env;
 
 /// A failure to read or write a run's files.
@@ -248,10 +248,14 @@ impl RunDir {
             for path in parquet_files_or_none(&self.root.join(name))? {
                 let meta = fs::metadata(&path).map_err(|e| StoreError::io(&path, e))?;
                 if meta.len() == 0 {
-                    return Err(self.damaged(&path, "-", Problem::Size {
-                        expected: None,
-                        found: 0,
-                    }));
+                    return Err(self.damaged(
+                        &path,
+                        "-",
+                        Problem::Size {
+                            expected: None,
+                            found: 0,
+                        },
+                    ));
                 }
                 files.push(TableFile {
                     env: None,

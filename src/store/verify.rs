@@ -284,3 +284,158 @@ fn table_folder_files(run: &RunDir) -> Result<Vec<PathBuf>, StoreError> {
     out.sort();
     Ok(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use arrow::array::{Int64Array, RecordBatch};
+    use arrow::datatypes::{DataType, Field, Schema};
+
+    use super::*;
+    use crate::store::ParquetSink;
+    use crate::store::manifest::StageRecord;
+
+    fn parquet(path: &Path, n: i64) {
+        let schema = Arc::new(Schema::new(vec![Field::new("x", DataType::Int64, false)]));
+        let batch = RecordBatch::try_new(
+            schema.clone(),
+            vec![Arc::new(Int64Array::from_iter_values(0..n))],
+        )
+        .unwrap();
+        let mut sink = ParquetSink::create(path, schema).unwrap();
+        sink.write(&batch).unwrap();
+        sink.commit().unwrap();
+    }
+
+    fn record(status: StageStatus, outputs: Vec<OutputFile>) -> StageRecord {
+        StageRecord {
+            kind: "import".into(),
+            status,
+            fingerprint: "f".into(),
+            params: serde_json::Value::Null,
+            inputs: Vec::new(),
+            seed: 0,
+            annotrace_version: crate::VERSION.into(),
+            started: None,
+            finished: None,
+            seconds: None,
+            rows: Default::default(),
+            outputs,
+            summary: serde_json::Value::Null,
+            error: None,
+        }
+    }
+
+    fn output(run: &RunDir, rel: &str) -> OutputFile {
+        let (bytes, sha) = sha256_file(&run.root().join(rel)).unwrap();
+        OutputFile::new(rel.into(), bytes, sha)
+    }
+
+    /// Only the outputs of finished stages are listed: a committing stage's files and a foreign file
+    /// in the same folder are not, and become visible only with the manifest that says finished.
+    #[test]
+    fn readers_see_finished_stages_only() {
+        let dir = tempfile::tempdir().unwrap();
+        let run = RunDir::new(dir.path());
+        parquet(&dir.path().join("traces/env=pooltool/a.0.parquet"), 10);
+        parquet(&dir.path().join("traces/env=pooltool/foreign.parquet"), 3);
+        let out = output(&run, "traces/env=pooltool/a.0.parquet");
+        let mut m = Manifest::new();
+        m.stages.insert(
+            "a".into(),
+            record(StageStatus::Committing, vec![out.clone()]),
+        );
+        m.save(&run).unwrap();
+        assert!(run.tables().unwrap().is_empty());
+        assert!(run.table("traces").unwrap().files.is_empty());
+        let report = verify_run(&run).unwrap();
+        assert_eq!(report.foreign, ["traces/env=pooltool/foreign.parquet"]);
+        assert_eq!(report.unpublished.len(), 1);
+
+        m.stages.get_mut("a").unwrap().status = StageStatus::Finished;
+        m.save(&run).unwrap();
+        let t = run.table("traces").unwrap();
+        assert!(t.partitioned);
+        assert_eq!(t.files.len(), 1);
+        assert!(t.files[0].path.ends_with("a.0.parquet"));
+        assert_eq!(Some(t.files[0].bytes), out.bytes);
+        let report = verify_run(&run).unwrap();
+        assert_eq!((report.checked, report.damaged.len()), (1, 0));
+        assert!(!report.is_clean(), "the foreign file is reported");
+    }
+
+    /// Sizes are checked as files are listed; checksums by `verify_run`.
+    #[test]
+    fn damaged_files_are_named_with_what_is_wrong() {
+        let dir = tempfile::tempdir().unwrap();
+        let run = RunDir::new(dir.path());
+        let rel = ["t/a.parquet", "t/b.parquet", "t/c.parquet"];
+        for r in rel {
+            parquet(&dir.path().join(r), 100);
+        }
+        let mut m = Manifest::new();
+        m.stages.insert(
+            "s".into(),
+            record(
+                StageStatus::Finished,
+                rel.iter().map(|r| output(&run, r)).collect(),
+            ),
+        );
+        m.save(&run).unwrap();
+        assert_eq!(run.table("t").unwrap().files.len(), 3);
+
+        // c: same size, one byte changed: listed (sizes match), caught by the checksum.
+        let c = dir.path().join(rel[2]);
+        let mut bytes = fs::read(&c).unwrap();
+        bytes[10] ^= 1;
+        fs::write(&c, &bytes).unwrap();
+        assert_eq!(run.table("t").unwrap().files.len(), 3);
+        // b: truncated; a: missing.
+        let b = dir.path().join(rel[1]);
+        let len = fs::metadata(&b).unwrap().len();
+        File::options()
+            .write(true)
+            .open(&b)
+            .unwrap()
+            .set_len(len / 2)
+            .unwrap();
+        let err = run.table("t").unwrap_err();
+        let msg = err.to_string();
+        assert!(
+            msg.contains("t/b.parquet") && msg.contains("is truncated"),
+            "{msg}"
+        );
+        assert!(matches!(err, StoreError::Damaged { .. }));
+        fs::remove_file(dir.path().join(rel[0])).unwrap();
+
+        let report = verify_run(&run).unwrap();
+        let problems: Vec<(&str, &Problem)> = report
+            .damaged
+            .iter()
+            .map(|d| (d.path.as_str(), &d.problem))
+            .collect();
+        assert_eq!(problems.len(), 3);
+        assert_eq!(problems[0], ("t/a.parquet", &Problem::Missing));
+        assert!(matches!(problems[1].1, Problem::Size { found, .. } if *found == len / 2));
+        assert!(matches!(problems[2].1, Problem::Checksum { .. }));
+        assert!(problems[2].1.to_string().contains("differs from the"));
+    }
+
+    /// Format 1 listed outputs as bare paths; they are read with no size or checksum.
+    #[test]
+    fn format_1_outputs_are_bare_paths() {
+        let o: OutputFile = serde_json::from_str("\"traces/x.parquet\"").unwrap();
+        assert_eq!(
+            (o.path.as_str(), o.bytes, o.sha256),
+            ("traces/x.parquet", None, None)
+        );
+        let o: OutputFile =
+            serde_json::from_str(r#"{"path": "t/x.parquet", "bytes": 4, "sha256": "ab"}"#).unwrap();
+        assert_eq!(o, OutputFile::new("t/x.parquet".into(), 4, "ab".into()));
+        assert_eq!(
+            serde_json::to_string(&o).unwrap(),
+            r#"{"path":"t/x.parquet","bytes":4,"sha256":"ab"}"#
+        );
+    }
+}
