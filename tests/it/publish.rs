@@ -99,6 +99,15 @@ fn a_kill_at_any_commit_step_shows_the_old_or_the_new_state_and_resumes() {
     let old = "traces,framed,stepped,orphans\n3,3,3,0\n";
     let new = "traces,framed,stepped,orphans\n13,13,13,0\n";
     assert_eq!(seen(&t, "fresh"), new);
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(t.path("fresh/manifest.json")).unwrap())
+            .unwrap();
+    // 3 shards × 5 trace tables.
+    let files = manifest["stages"]["ingest"]["outputs"]
+        .as_array()
+        .unwrap()
+        .len();
+    assert_eq!(files, 15);
 
     let mut states = Vec::new();
     for k in 0.. {
@@ -108,11 +117,8 @@ fn a_kill_at_any_commit_step_shows_the_old_or_the_new_state_and_resumes() {
             &[("ANNOTRACE_FAULT", &format!("ingest:commit-step={k}"))],
         );
         if r.code == Some(0) {
-            // Past the last step: the fault never fired.
-            assert!(
-                k >= 3 * 4 + 3,
-                "the commit has a step per file: stopped at {k}"
-            );
+            // Past the last step: the fault never fired. The commit of n files has n + 3 steps.
+            assert_eq!(k, files + 4, "a step per file and three more");
             break;
         }
         assert!(
