@@ -747,9 +747,9 @@ impl Session<'_> {
             }
         };
 
-        // The commit (steps in the module doc). NOTE: the file list, with sizes and checksums, is recorded before the
-        // move, so that a crash during the move can finish it; the stage is published only by the
-        // manifest that says `finished`.
+        // The commit (its steps are listed in the module doc). NOTE: the file list, with sizes and
+        // checksums, is recorded before the move, so that a crash during the move can finish it; the
+        // stage is published only by the manifest that says `finished`.
         let mut steps = CommitSteps {
             fault: opts.fault.as_ref(),
             stage: &def.id,
