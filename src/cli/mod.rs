@@ -6,7 +6,7 @@
 //! | code | category | meaning |
 //! |---|---|---|
 //! | 0 | | success (a broken pipe on the output also exits quietly with 0) |
-//! | 1 | `Failed` | the command finished but some items failed (invalid traces skipped, a stage failed at run time, an unusable answer) |
+//! | 1 | `Failed` | the command finished but some items failed (invalid traces skipped, a stage failed at run time, an unusable answer, damaged or foreign files found by `verify`) |
 //! | 2 | `Input` | bad input or configuration (a malformed file, an unknown option value, an invalid pipeline, a missing file) |
 //! | 3 | `Service` | an external service is unavailable (the LLM endpoint unreachable or failing after retries, the Python detector workers cannot start) |
 //! | 4 | `Io` | reading or writing the run folder or an output failed (disk full, permission denied) |
@@ -35,6 +35,7 @@ mod simulate;
 mod stages;
 mod suggest_labels;
 mod tables;
+mod verify;
 
 use std::process::ExitCode;
 
@@ -164,6 +165,8 @@ enum Command {
     Query(query::Args),
     /// List a run's tables with row counts and schemas.
     Tables(tables::Args),
+    /// Check a run's files against the sizes and SHA-256 sums in its manifest; list foreign files.
+    Verify(verify::Args),
 }
 
 /// Parses arguments, runs the command, prints errors and returns the exit code.
@@ -186,6 +189,7 @@ pub fn main() -> ExitCode {
         Command::Export(a) => export::run(a),
         Command::Query(a) => query::run(a),
         Command::Tables(a) => tables::run(a),
+        Command::Verify(a) => verify::run(a),
     };
     match result {
         Ok(code) => ExitCode::from(code),

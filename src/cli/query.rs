@@ -63,7 +63,9 @@ pub fn run(args: Args) -> CliResult {
         QuerySettings::resolve(args.memory_limit, args.timeout, &|k| std::env::var(k).ok())
             .map_err(CliError::input)?;
     settings.partitions = usize::from(args.threads);
-    let q = RunQuery::open_with(&RunDir::new(&args.run), settings).map_err(CliError::failed)?;
+    // Opening reads the manifest and checks every listed file: a damaged run folder is bad input (2),
+    // a failing disk an I/O error (4), as the error's category says.
+    let q = RunQuery::open_with(&RunDir::new(&args.run), settings)?;
     // The query's own faults (bad or refused SQL, over its limits) are the user's: exit code 2.
     let result = q.sql(&args.sql).map_err(|e| {
         if e.is_users() {

@@ -140,6 +140,8 @@ impl Categorize for StoreError {
                 _ => ErrorCategory::Input,
             },
             StoreError::Schema { .. } | StoreError::Json { .. } => ErrorCategory::Input,
+            // A published file missing, resized or changed: the run folder's data is wrong.
+            StoreError::Damaged { .. } | StoreError::ManifestFormat { .. } => ErrorCategory::Input,
         }
     }
 }

@@ -8,7 +8,6 @@
 //! Entry point: `PipelineSpec::from_file(path)` then `run(&spec, &RunOptions::default(), &())`.
 
 mod category;
-mod manifest;
 mod params;
 mod progress;
 mod registry;
@@ -20,8 +19,8 @@ mod toml_doc;
 
 use std::path::PathBuf;
 
+pub use crate::store::manifest::{Manifest, OutputFile, PipelineInfo, StageRecord, StageStatus};
 pub use category::{Categorize, ErrorCategory};
-pub use manifest::{Manifest, PipelineInfo, StageRecord, StageStatus};
 pub use params::{ParamDoc, ParamDocs, ParamError, ParamType, ParamsOf, StageParams};
 pub use progress::Progress;
 pub use registry::{BuildError, STAGE_KINDS, StageKind, find_kind, kind_names, params_markdown};

@@ -4,12 +4,23 @@
 //! For each stage, in dependency order:
 //! 1. its fingerprint is the SHA-256 of its kind, parameters (defaults filled, keys sorted), its inputs'
 //!    fingerprints, the annotrace version and what the stage adds ([`Stage::fingerprint_extra`]);
-//! 2. a stage whose manifest record is `finished` with the same fingerprint and whose outputs all exist is
-//!    skipped (unless `--force` names it or a stage upstream of it);
+//! 2. a stage whose manifest record is `finished` with the same fingerprint and whose outputs all exist
+//!    with their recorded sizes and SHA-256 sums is skipped (unless `--force` names it or a stage
+//!    upstream of it); one whose outputs are missing or damaged runs again, and says why;
 //! 3. a stage recorded as `running` with the same fingerprint was interrupted: its finished shards are
-//!    kept and the rest is redone; any other earlier output of the stage is deleted first;
-//! 4. the stage runs, writing into its staging area; then the manifest says `committing` with the list of
-//!    files, the files are moved into place, and the manifest says `finished`.
+//!    kept and the rest is redone; any other earlier output of the stage is first unpublished (the
+//!    manifest stops calling it finished), then deleted;
+//! 4. the stage runs, writing into its staging area; then it is committed, one durable step at a time
+//!    (listed below): the manifest says `committing` with every file's path, size and SHA-256, the
+//!    files are renamed into place, the manifest says `finished` — the commit point: readers list files
+//!    from the finished stages of the manifest, so they see the whole stage from here on and nothing of
+//!    it before — and the staging area is removed. A run killed after any step finishes the commit.
+//!
+//! The commit steps, as `ANNOTRACE_FAULT=STAGE:commit-step=K` counts them (the fault stops the process
+//! after K durable steps), for a stage with `n` staged files: step 1 writes the manifest with status
+//! `committing` and every file's size and SHA-256; steps 2 to n + 1 rename one file each into its table
+//! folder; step n + 2 writes the manifest with status `finished` (the commit point); step n + 3 removes
+//! the staging area.
 //!
 //! NOTE: the manifest is written before and after every state change, so a run killed at any moment
 //! resumes with the same command and never reads a partial file.
@@ -24,11 +35,14 @@ use serde_json::{Map, Value};
 use sha2::{Digest, Sha256};
 
 use super::SpecError;
-use super::manifest::{Manifest, PipelineInfo, StageRecord, StageStatus, now};
 use super::progress::Progress;
 use super::spec::PipelineSpec;
-use super::stage::{FaultPlan, Stage, StageContext, StageError};
+use super::stage::{FaultPlan, FaultPoint, Stage, StageContext, StageError};
 use crate::digest::hex;
+use crate::store::manifest::{
+    Manifest, OutputFile, PipelineInfo, StageRecord, StageStatus, now, output_path,
+};
+use crate::store::verify::{Problem, check_file, check_size, sha256_file};
 use crate::store::{RunDir, Staging, StoreError, remove_files};
 
 /// Options of one `annotrace run`.
@@ -109,6 +123,8 @@ pub enum RunReason {
     Changed,
     /// It finished, but its outputs are not all there.
     OutputsMissing,
+    /// It finished, but an output's size or checksum differs from the manifest's record.
+    OutputsDamaged,
     /// It was interrupted while running or committing: finished shards are kept.
     Resume,
     /// It failed the last time.
@@ -123,6 +139,7 @@ impl RunReason {
             RunReason::New => "new",
             RunReason::Changed => "changed",
             RunReason::OutputsMissing => "outputs missing",
+            RunReason::OutputsDamaged => "outputs damaged",
             RunReason::Resume => "resume",
             RunReason::FailedBefore => "failed before",
         }
@@ -142,6 +159,8 @@ pub struct PlannedStage {
     pub inputs: Vec<String>,
     /// What will happen.
     pub action: Action,
+    /// The first missing or damaged output, when that is why it runs again.
+    pub damage: Option<String>,
 }
 
 impl std::fmt::Display for PlannedStage {
@@ -304,6 +323,7 @@ fn plan_with(
         .map(|&i| {
             let def = &spec.stages[i];
             let fp = built.fingerprints[&def.id].clone();
+            let mut damage = None;
             let action = if selected.as_ref().is_some_and(|s| !s.contains(&def.id)) {
                 Action::Skipped
             } else if forced.contains(&def.id) {
@@ -313,10 +333,18 @@ fn plan_with(
                     None => Action::Run(RunReason::New),
                     Some(r) if r.fingerprint != fp => Action::Run(RunReason::Changed),
                     Some(r) => match r.status {
-                        StageStatus::Finished if manifest.outputs_present(run, &def.id) => {
-                            Action::Cached
-                        }
-                        StageStatus::Finished => Action::Run(RunReason::OutputsMissing),
+                        StageStatus::Finished => match first_damaged(run, r) {
+                            None => Action::Cached,
+                            Some((path, problem)) => {
+                                let why = if problem == Problem::Missing {
+                                    RunReason::OutputsMissing
+                                } else {
+                                    RunReason::OutputsDamaged
+                                };
+                                damage = Some(format!("{path} {problem}"));
+                                Action::Run(why)
+                            }
+                        },
                         StageStatus::Running | StageStatus::Committing => {
                             Action::Run(RunReason::Resume)
                         }
@@ -330,9 +358,83 @@ fn plan_with(
                 fingerprint: fp,
                 inputs: def.inputs.clone(),
                 action,
+                damage,
             }
         })
         .collect()
+}
+
+/// The first output of a finished stage that is missing or whose size or SHA-256 differs from the
+/// record: a stage is skipped as cached only when every output checks.
+fn first_damaged(run: &RunDir, record: &StageRecord) -> Option<(String, Problem)> {
+    record.outputs.iter().find_map(|o| {
+        check_file(&output_path(run, o), o, true)
+            .err()
+            .map(|p| (o.path.clone(), p))
+    })
+}
+
+/// The manifest entry of a file about to be published: its run-relative path, size and SHA-256.
+fn output_record(run: &RunDir, read_from: &Path, target: &Path) -> Result<OutputFile, StoreError> {
+    let (bytes, sha) = sha256_file(read_from).map_err(|e| StoreError::Io {
+        path: read_from.to_path_buf(),
+        source: e,
+    })?;
+    Ok(OutputFile::new(relative(run, target), bytes, sha))
+}
+
+/// Counts the durable steps of a commit and stops the process where a `commit-step` fault says.
+struct CommitSteps<'a> {
+    fault: Option<&'a FaultPlan>,
+    stage: &'a str,
+    done: usize,
+}
+
+impl CommitSteps<'_> {
+    /// Fires when the fault asks to stop after `done` steps.
+    fn check(&self) -> Result<(), RunError> {
+        match self.fault {
+            Some(f) if f.stage == self.stage && f.point == FaultPoint::CommitStep(self.done) => {
+                Err(RunError::Stage {
+                    id: self.stage.to_string(),
+                    source: f.trigger(format!(
+                        "stage {} stopped after commit step {}",
+                        self.stage, self.done
+                    )),
+                })
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// One more step is durable.
+    fn step(&mut self) -> Result<(), RunError> {
+        self.done += 1;
+        self.check()
+    }
+}
+
+/// Records checksums for the outputs of finished stages in a format 1 manifest (written before
+/// checksums existed), trusting the files as they are, as format 1 did. Returns how many were recorded.
+fn record_missing_checksums(run: &RunDir, manifest: &mut Manifest) -> Result<usize, StoreError> {
+    let mut n = 0;
+    for r in manifest.stages.values_mut() {
+        if r.status != StageStatus::Finished {
+            continue;
+        }
+        for o in r.outputs.iter_mut().filter(|o| o.sha256.is_none()) {
+            let path = output_path(run, o);
+            // A missing or empty file stays unrecorded: the stage is rerun as damaged.
+            if check_size(&path, o).is_err() {
+                continue;
+            }
+            let (bytes, sha) =
+                sha256_file(&path).map_err(|e| StoreError::Io { path, source: e })?;
+            (o.bytes, o.sha256) = (Some(bytes), Some(sha));
+            n += 1;
+        }
+    }
+    Ok(n)
 }
 
 /// Checks the options, builds every stage with its fingerprint, and finds the run folder.
@@ -421,6 +523,18 @@ fn run_locked(
     run: &RunDir,
 ) -> Result<RunReport, RunError> {
     let mut manifest = Manifest::load(run)?.unwrap_or_default();
+    let format = manifest.format;
+    if format < crate::store::manifest::FORMAT && !manifest.stages.is_empty() {
+        let n = record_missing_checksums(run, &mut manifest)?;
+        manifest.save(run)?;
+        progress.note(
+            "manifest",
+            &format!(
+                "format {format} upgraded to {}: sizes and SHA-256 of {n} existing file(s) recorded",
+                crate::store::manifest::FORMAT
+            ),
+        );
+    }
     if opts.record_pipeline {
         manifest.pipeline = Some(PipelineInfo {
             name: spec.name.clone(),
@@ -443,6 +557,8 @@ fn run_locked(
         match planned.action {
             Action::Skipped => continue,
             Action::Cached => {
+                // A run killed after the commit point, before the staging area was removed.
+                run.staging(&def.id).remove()?;
                 progress.stage_cached(&def.id);
                 let r = &manifest.stages[&def.id];
                 reports.push(StageReport {
@@ -456,19 +572,28 @@ fn run_locked(
             }
             Action::Run(_) => {}
         }
+        if let Some(damage) = &planned.damage {
+            progress.note(&def.id, &format!("{damage}: running the stage again"));
+        }
         let staging = run.staging(&def.id);
         let previous = manifest.stages.get(&def.id).cloned();
-        let resuming = previous.as_ref().is_some_and(|p| {
+        let mut resuming = previous.as_ref().is_some_and(|p| {
             p.fingerprint == planned.fingerprint && planned.action == Action::Run(RunReason::Resume)
         });
         if let Some(prev) = previous
             .as_ref()
             .filter(|p| resuming && p.status == StageStatus::Committing)
         {
-            reports.push(session.finish_commit(&mut manifest, &staging, &def.id, prev)?);
-            continue;
+            match session.finish_commit(&mut manifest, &staging, &def.id, prev)? {
+                Some(report) => {
+                    reports.push(report);
+                    continue;
+                }
+                // Its files are not all there: the stage runs again from the start.
+                None => resuming = false,
+            }
         }
-        session.reset_staging(&staging, &def.id, previous.as_ref(), resuming)?;
+        session.reset_staging(&mut manifest, &staging, &def.id, resuming)?;
         reports.push(session.execute(&mut manifest, planned, i, staging)?);
     }
     Ok(RunReport {
@@ -478,42 +603,74 @@ fn run_locked(
 }
 
 impl Session<'_> {
-    /// A stage killed while moving its files into place: finishes the move and records it finished.
+    /// A stage killed during its commit: finishes moving its files into place, checks that every
+    /// output has its recorded size, and records it finished. `None` when an output is missing or
+    /// damaged (the stage must run again).
     fn finish_commit(
         &self,
         manifest: &mut Manifest,
         staging: &Staging,
         id: &str,
         prev: &StageRecord,
-    ) -> Result<StageReport, RunError> {
+    ) -> Result<Option<StageReport>, RunError> {
         let (run, progress) = (self.run, self.progress);
-        // Killed while moving files into place: finish the move.
-        staging.commit()?;
+        let mut steps = CommitSteps {
+            fault: None,
+            stage: id,
+            done: 0,
+        };
+        staging.move_into_place(|| steps.step())?;
+        if let Some((path, problem)) = prev.outputs.iter().find_map(|o| {
+            check_size(&output_path(run, o), o)
+                .err()
+                .map(|p| (&o.path, p))
+        }) {
+            progress.note(
+                id,
+                &format!("interrupted commit cannot be finished: {path} {problem}; running the stage again"),
+            );
+            return Ok(None);
+        }
         let mut rec = prev.clone();
         rec.status = StageStatus::Finished;
         rec.finished = Some(now());
         manifest.stages.insert(id.to_string(), rec.clone());
         manifest.save(run)?;
+        staging.remove()?;
         progress.stage_finished(id, "resumed commit");
-        Ok(StageReport {
+        Ok(Some(StageReport {
             id: id.to_string(),
             cached: false,
             rows: rec.rows,
             summary: rec.summary,
             seconds: 0.0,
-        })
+        }))
     }
 
-    /// Prepares the staging folder: a resumed stage keeps its finished shards, any other starts empty
-    /// (its previous outputs removed).
+    /// Prepares the staging folder: a resumed stage keeps its finished shards, any other starts empty.
+    /// Outputs of an earlier attempt are unpublished first (the manifest records the stage `running`,
+    /// still listing them), then deleted, so a reader never sees a finished stage with files missing.
     fn reset_staging(
         &self,
+        manifest: &mut Manifest,
         staging: &Staging,
         id: &str,
-        previous: Option<&StageRecord>,
         resuming: bool,
     ) -> Result<(), RunError> {
         let (run, progress) = (self.run, self.progress);
+        if let Some(prev) = manifest
+            .stages
+            .get_mut(id)
+            .filter(|p| !p.outputs.is_empty())
+        {
+            if prev.status != StageStatus::Running {
+                prev.status = StageStatus::Running;
+                manifest.save(run)?;
+            }
+            let prev = &manifest.stages[id];
+            let files: Vec<PathBuf> = prev.outputs.iter().map(|o| output_path(run, o)).collect();
+            remove_files(&files)?;
+        }
         if resuming {
             let dropped = staging.discard_unfinished()?;
             progress.note(
@@ -521,10 +678,6 @@ impl Session<'_> {
                 &format!("resuming: finished shards kept, {dropped} partial file(s) dropped"),
             );
         } else {
-            if let Some(prev) = previous {
-                let files: Vec<PathBuf> = prev.outputs.iter().map(|o| run.root().join(o)).collect();
-                remove_files(&files)?;
-            }
             staging.remove()?;
         }
         Ok(())
@@ -594,26 +747,44 @@ impl Session<'_> {
             }
         };
 
-        // NOTE: the file list is recorded before the move, so that a crash during the move can finish it.
-        let mut outputs: Vec<String> = staging
-            .pending()?
-            .iter()
-            .map(|p| relative(run, p))
-            .collect();
-        outputs.extend(output.files.iter().map(|p| relative(run, p)));
+        // The commit (its steps are listed in the module doc). NOTE: the file list, with sizes and
+        // checksums, is recorded before the move, so that a crash during the move can finish it; the
+        // stage is published only by the manifest that says `finished`.
+        let mut steps = CommitSteps {
+            fault: opts.fault.as_ref(),
+            stage: &def.id,
+            done: 0,
+        };
+        steps.check()?;
+        let mut outputs = Vec::new();
+        for (staged, target) in staging.pending()? {
+            outputs.push(output_record(run, &staged, &target)?);
+        }
+        for f in &output.files {
+            let f = if f.is_absolute() || f.starts_with(run.root()) {
+                f.clone()
+            } else {
+                run.root().join(f)
+            };
+            outputs.push(output_record(run, &f, &f)?);
+        }
         record.status = StageStatus::Committing;
         record.outputs = outputs;
         record.rows = output.rows.clone();
         record.summary = output.summary.clone();
         manifest.stages.insert(def.id.clone(), record.clone());
         manifest.save(run)?;
-        staging.commit()?;
+        steps.step()?;
+        staging.move_into_place(|| steps.step())?;
         let seconds = started.elapsed().as_secs_f64();
         record.status = StageStatus::Finished;
         record.finished = Some(now());
         record.seconds = Some(seconds);
         manifest.stages.insert(def.id.clone(), record);
         manifest.save(run)?;
+        steps.step()?;
+        staging.remove()?;
+        steps.step()?;
         progress.stage_finished(&def.id, &output.line);
         Ok(StageReport {
             id: def.id.clone(),

@@ -188,7 +188,7 @@ impl From<arrow::error::ArrowError> for StageError {
 }
 
 /// Where to stop a run on purpose, to test resumption: after a stage has finished `n` shards (in this
-/// process), or in the middle of writing its shard number `n`.
+/// process), in the middle of writing its shard number `n`, or after step `n` of its commit.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FaultPlan {
     /// The stage to stop in.
@@ -206,6 +206,9 @@ pub enum FaultPoint {
     AfterShards(usize),
     /// Half-way through writing the shard with this index (0-based, counting shards this process starts).
     MidShard(usize),
+    /// After this many durable steps of the stage's commit (0: before the first; the steps are listed
+    /// in the runner's module documentation and `docs/pipelines.md`).
+    CommitStep(usize),
 }
 
 /// What a [`FaultPlan`] does when it fires.
@@ -220,11 +223,12 @@ pub enum FaultAction {
 impl std::str::FromStr for FaultPlan {
     type Err = String;
 
-    /// `STAGE:after-shards=N`, `STAGE:mid-shard=N`, optionally followed by `:fail` (default: abort).
+    /// `STAGE:after-shards=N`, `STAGE:mid-shard=N` or `STAGE:commit-step=N`, optionally followed by
+    /// `:fail` (default: abort).
     fn from_str(s: &str) -> Result<Self, String> {
         let usage = || {
             format!(
-                "bad fault plan {s:?}: expected STAGE:after-shards=N or STAGE:mid-shard=N, optionally :fail"
+                "bad fault plan {s:?}: expected STAGE:after-shards=N, STAGE:mid-shard=N or STAGE:commit-step=N, optionally :fail"
             )
         };
         let mut parts = s.split(':');
@@ -241,6 +245,7 @@ impl std::str::FromStr for FaultPlan {
         let point = match key {
             "after-shards" => FaultPoint::AfterShards(n),
             "mid-shard" => FaultPoint::MidShard(n),
+            "commit-step" => FaultPoint::CommitStep(n),
             _ => return Err(usage()),
         };
         let action = match parts.next() {
@@ -253,6 +258,20 @@ impl std::str::FromStr for FaultPlan {
             point,
             action,
         })
+    }
+}
+
+impl FaultPlan {
+    /// Fires the fault: aborts the process (as `kill -9` would stop it: no destructor runs) or returns
+    /// the error to fail with.
+    pub(crate) fn trigger(&self, what: String) -> StageError {
+        match self.action {
+            FaultAction::Abort => {
+                eprintln!("annotrace: injected fault: {what}; aborting");
+                std::process::abort();
+            }
+            FaultAction::Fail => StageError::Injected(what),
+        }
     }
 }
 
@@ -321,12 +340,9 @@ impl<'a> StageContext<'a> {
     }
 
     fn fire(&self, what: String) -> Result<(), StageError> {
-        match self.fault.map(|f| f.action) {
-            Some(FaultAction::Abort) => {
-                eprintln!("annotrace: injected fault: {what}; aborting");
-                std::process::abort();
-            }
-            _ => Err(StageError::Injected(what)),
+        match self.fault {
+            Some(f) => Err(f.trigger(what)),
+            None => Err(StageError::Injected(what)),
         }
     }
 

@@ -10,8 +10,10 @@
 //!
 //! The trace tables (`scenes`, `traces`, `timesteps`, `frames`, `events`) are always registered with
 //! their documented schemas, empty if the run has none yet, and expose the `env` partition as a column.
-//! Every other folder of Parquet files in the run (tables written by SQL stages and later stage kinds)
-//! is registered under its folder name with the schema its files carry.
+//! Every other table of the run (tables written by SQL stages and later stage kinds) is registered
+//! under its folder name with the schema its files carry. A table's files are the **published** ones,
+//! from the manifest (`store::RunDir::tables`, sizes checked), never a listing of its folder
+//! (`published`): a query sees whole stages only, and never a foreign file.
 //!
 //! ```no_run
 //! use annotrace::query::RunQuery;
@@ -22,6 +24,7 @@
 //! ```
 
 pub mod format;
+mod published;
 pub mod read_only;
 pub mod settings;
 
@@ -36,6 +39,7 @@ use datafusion::datasource::MemTable;
 use datafusion::datasource::file_format::parquet::ParquetFormat;
 use datafusion::datasource::listing::ListingOptions;
 use datafusion::error::DataFusionError;
+use datafusion::execution::cache::cache_manager::CacheManagerConfig;
 use datafusion::execution::memory_pool::{FairSpillPool, TrackConsumersPool};
 use datafusion::execution::runtime_env::RuntimeEnvBuilder;
 use datafusion::prelude::{SessionConfig, SessionContext};
@@ -235,13 +239,22 @@ impl RunQuery {
             FairSpillPool::new(usize::try_from(limit).unwrap_or(usize::MAX)),
             NonZeroUsize::new(3).expect("non-zero"),
         );
+        let found = run.tables()?;
+        let folders: Vec<_> = found
+            .iter()
+            .map(|t| (run.partition_dir(&t.name, None), t))
+            .collect();
+        let listing = published::PublishedFiles::new(&folders)?;
         let env = RuntimeEnvBuilder::new()
+            .with_cache_manager(
+                CacheManagerConfig::default()
+                    .with_list_files_cache(Some(published::shared(listing))),
+            )
             .with_memory_pool(Arc::new(pool))
             .with_max_temp_directory_size(limit.saturating_mul(settings::SPILL_FACTOR))
             .build_arc()?;
         let ctx = SessionContext::new_with_config_rt(config, env);
         let mut tables = Vec::new();
-        let found = run.tables()?;
         for name in TRACE_TABLES {
             let dir = found.iter().find(|t| t.name == name);
             let schema = table_schema(name).expect("trace tables have schemas");
@@ -347,14 +360,10 @@ async fn register_dir(
     schema: Option<SchemaRef>,
 ) -> Result<(), QueryError> {
     let dir = run.partition_dir(name, None);
-    let abs = std::path::absolute(&dir).map_err(|e| StoreError::Io {
+    let url = published::folder_url(&dir).map_err(|e| StoreError::Io {
         path: dir.clone(),
         source: e,
     })?;
-    let mut url = abs.to_string_lossy().into_owned();
-    if !url.ends_with('/') {
-        url.push('/');
-    }
     let mut options =
         ListingOptions::new(Arc::new(ParquetFormat::default())).with_file_extension(".parquet");
     if partitioned {

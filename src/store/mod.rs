@@ -1,9 +1,10 @@
 //! The run directory on disk: where every table, export and the manifest of a run live.
 //!
-//! **Owns:** the layout of a run folder, atomic files ([`AtomicFile`]), Parquet files
-//! ([`ParquetSink`]), and the staging area through which a stage publishes its tables all at once
-//! ([`Staging`]). **Does not:** decide what a stage computes or when it runs (`pipeline/`), or query
-//! tables (`query/`).
+//! **Owns:** the layout of a run folder, the manifest format ([`manifest`]), atomic files
+//! ([`AtomicFile`]), Parquet files ([`ParquetSink`]), the staging area through which a stage publishes
+//! its tables all at once ([`Staging`]), which files readers see ([`RunDir::tables`]: the published
+//! files of the manifest) and verified reading ([`verify`]). **Does not:** decide what a stage computes
+//! or when it runs and commits (`pipeline/`), or query tables (`query/`).
 //!
 //! ```text
 //! runs/quickstart/
@@ -16,21 +17,34 @@
 //! ```
 //!
 //! A stage writes each shard's files under `.staging/<stage>/` (each file atomically) and marks the
-//! shard done; when every shard is done the files are renamed into the table folders. A killed run
-//! therefore leaves finished shards to reuse and never a partial file where readers look, and a stage's
-//! tables become visible together.
+//! shard done; when every shard is done the runner records the files (with sizes and checksums) in the
+//! manifest as `committing`, renames them into the table folders, and then records the stage
+//! `finished`. **Readers list a table's files from the manifest** — the outputs of finished stages —
+//! never from the folder, so that last manifest write is the one atomic step that publishes a stage: a
+//! reader sees all of a stage's tables or none of them, whenever the process was killed, and a file no
+//! finished stage lists (a foreign file, one of an interrupted commit) is invisible. Every listed file's
+//! size is checked as it is listed (a stat); [`verify`] also checks checksums.
+//!
+//! One exception: [`JOURNAL_TABLES`] (`llm_calls`) are appended to file by file outside any stage (so
+//! that calls recorded before a kill survive it) and are listed from their folder; each of their files
+//! is written atomically, so none is ever partial.
 
 mod atomic;
+pub mod manifest;
 mod parquet;
 mod traces;
+pub mod verify;
 
 use std::fs;
 use std::io;
 use std::path::{Path, PathBuf};
+use std::time::SystemTime;
 
 pub use self::atomic::{AtomicFile, is_temp_name, sync_dir, write_atomic};
+pub use self::manifest::{Manifest, OutputFile, StageStatus};
 pub use self::parquet::{ParquetSink, ROW_GROUP_ROWS, read_batches, read_file};
 pub use self::traces::{ReadTraceError, read_trace, trace_ids};
+pub use self::verify::Problem;
 use crate::trace::Env;
 
 /// A failure to read or write a run's files.
@@ -72,6 +86,32 @@ pub enum StoreError {
         #[source]
         source: serde_json::Error,
     },
+    /// A published file is missing or not what the manifest recorded (size or checksum).
+    #[error(
+        "{}: {problem} (an output of stage {stage}); the run folder is damaged: `annotrace verify --run {}` lists every damaged file, `annotrace run` redoes the stages",
+        path.display(), run.display()
+    )]
+    Damaged {
+        /// The file.
+        path: PathBuf,
+        /// The stage that wrote it (`-` for a journal table's file).
+        stage: String,
+        /// The run folder.
+        run: PathBuf,
+        /// What is wrong.
+        problem: Problem,
+    },
+    /// The manifest was written by a newer annotrace.
+    #[error(
+        "{}: manifest format {found} is newer than this annotrace reads (format {}); use a newer annotrace",
+        path.display(), manifest::FORMAT
+    )]
+    ManifestFormat {
+        /// The manifest.
+        path: PathBuf,
+        /// Its format.
+        found: u32,
+    },
 }
 
 impl StoreError {
@@ -92,6 +132,10 @@ impl StoreError {
 /// Folder names in a run that are not tables.
 const RESERVED: &[&str] = &["exports"];
 
+/// Tables appended to file by file outside any stage, each file written atomically, and listed from
+/// their folder rather than from the manifest: `llm_calls` (calls recorded before a kill survive it).
+pub const JOURNAL_TABLES: &[&str] = &["llm_calls"];
+
 /// The file name of a stage's shard: `<stage>.<shard>.parquet`. Stage ids contain no `.`.
 pub fn shard_file_name(stage_id: &str, shard: &str) -> String {
     format!("{stage_id}.{shard}.parquet")
@@ -104,6 +148,10 @@ pub struct TableFile {
     pub env: Option<Env>,
     /// Its path.
     pub path: PathBuf,
+    /// Its size in bytes (checked against the manifest when listed).
+    pub bytes: u64,
+    /// When it was last modified.
+    pub modified: SystemTime,
 }
 
 /// A table found in a run folder.
@@ -162,68 +210,84 @@ impl RunDir {
         }
     }
 
-    /// Every table in the run: folders (other than `exports` and hidden ones) that hold Parquet files
-    /// directly or in `env=` folders.
+    /// Every table in the run with its published files: the Parquet outputs of the manifest's finished
+    /// stages (outside `exports/`), grouped by their first folder, plus the [`JOURNAL_TABLES`] listed
+    /// from their folders. Each file's size is checked: a missing, empty or truncated file is a
+    /// [`StoreError::Damaged`] naming it. Files no finished stage lists are not seen.
     pub fn tables(&self) -> Result<Vec<TableDir>, StoreError> {
-        let mut out = Vec::new();
-        let entries = match fs::read_dir(&self.root) {
-            Ok(e) => e,
-            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(out),
-            Err(e) => return Err(StoreError::io(&self.root, e)),
-        };
-        for entry in entries {
-            let entry = entry.map_err(|e| StoreError::io(&self.root, e))?;
-            let name = entry.file_name().to_string_lossy().into_owned();
-            if name.starts_with('.')
-                || name.starts_with('_')
-                || RESERVED.contains(&name.as_str())
-                || !entry.path().is_dir()
-            {
-                continue;
-            }
-            let table = self.table(&name)?;
-            if !table.files.is_empty() || table.partitioned {
-                out.push(table);
+        let manifest = Manifest::load(self)?;
+        let mut out: Vec<TableDir> = Vec::new();
+        let mut names: Vec<String> = manifest
+            .iter()
+            .flat_map(|m| m.published())
+            .filter_map(|(_, o)| table_of(&o.path).map(|(t, _)| t.to_string()))
+            .collect();
+        names.extend(JOURNAL_TABLES.iter().map(|t| t.to_string()));
+        names.sort();
+        names.dedup();
+        for name in names {
+            let t = self.table_in(manifest.as_ref(), &name)?;
+            if !t.files.is_empty() {
+                out.push(t);
             }
         }
-        out.sort_by(|a, b| a.name.cmp(&b.name));
         Ok(out)
     }
 
-    /// The files of one table (empty when the table has none).
+    /// The published files of one table (empty when the table has none), checked as in
+    /// [`RunDir::tables`].
     pub fn table(&self, name: &str) -> Result<TableDir, StoreError> {
-        let dir = self.root.join(name);
+        let manifest = Manifest::load(self)?;
+        self.table_in(manifest.as_ref(), name)
+    }
+
+    fn table_in(&self, manifest: Option<&Manifest>, name: &str) -> Result<TableDir, StoreError> {
         let mut files = Vec::new();
         let mut partitioned = false;
-        let entries = match fs::read_dir(&dir) {
-            Ok(e) => e,
-            Err(e) if e.kind() == io::ErrorKind::NotFound => {
-                return Ok(TableDir {
-                    name: name.to_string(),
-                    partitioned: false,
-                    files,
+        if JOURNAL_TABLES.contains(&name) {
+            for path in parquet_files_or_none(&self.root.join(name))? {
+                let meta = fs::metadata(&path).map_err(|e| StoreError::io(&path, e))?;
+                if meta.len() == 0 {
+                    return Err(self.damaged(
+                        &path,
+                        "-",
+                        Problem::Size {
+                            expected: None,
+                            found: 0,
+                        },
+                    ));
+                }
+                files.push(TableFile {
+                    env: None,
+                    modified: meta.modified().unwrap_or(SystemTime::UNIX_EPOCH),
+                    bytes: meta.len(),
+                    path,
                 });
             }
-            Err(e) => return Err(StoreError::io(&dir, e)),
-        };
-        for entry in entries {
-            let entry = entry.map_err(|e| StoreError::io(&dir, e))?;
-            let path = entry.path();
-            let fname = entry.file_name().to_string_lossy().into_owned();
-            if let Some(env) = fname.strip_prefix("env=") {
-                let Ok(env) = env.parse::<Env>() else {
-                    continue;
-                };
-                partitioned = true;
-                for f in parquet_files(&path)? {
-                    files.push(TableFile {
-                        env: Some(env),
-                        path: f,
-                    });
-                }
-            } else if is_parquet(&fname) {
-                files.push(TableFile { env: None, path });
+        }
+        for (stage, o) in manifest.iter().flat_map(|m| m.published()) {
+            let Some((table, rest)) = table_of(&o.path) else {
+                continue;
+            };
+            if table != name {
+                continue;
             }
+            let env = match rest.split_once('/') {
+                Some((part, _)) => match part.strip_prefix("env=").map(str::parse::<Env>) {
+                    Some(Ok(env)) => Some(env),
+                    _ => continue,
+                },
+                None => None,
+            };
+            partitioned |= env.is_some();
+            let path = self.root.join(Path::new(&o.path));
+            let meta = verify::check_size(&path, o).map_err(|p| self.damaged(&path, stage, p))?;
+            files.push(TableFile {
+                env,
+                path,
+                bytes: meta.len(),
+                modified: meta.modified().unwrap_or(SystemTime::UNIX_EPOCH),
+            });
         }
         files.sort_by(|a, b| a.path.cmp(&b.path));
         Ok(TableDir {
@@ -231,6 +295,39 @@ impl RunDir {
             partitioned,
             files,
         })
+    }
+
+    /// A [`StoreError::Damaged`] for a file of this run.
+    pub fn damaged(&self, path: &Path, stage: &str, problem: Problem) -> StoreError {
+        StoreError::Damaged {
+            path: path.to_path_buf(),
+            stage: stage.to_string(),
+            run: self.root.clone(),
+            problem,
+        }
+    }
+}
+
+/// The table of a published output path (`traces/env=pool/x.parquet` → `traces`, the rest), or `None`
+/// for files that are not table files (exports, non-Parquet files, files at the top of the run).
+fn table_of(path: &str) -> Option<(&str, &str)> {
+    let (table, rest) = path.split_once('/')?;
+    let file = rest.rsplit('/').next().unwrap_or(rest);
+    (!table.starts_with('.')
+        && !table.starts_with('_')
+        && !RESERVED.contains(&table)
+        && !JOURNAL_TABLES.contains(&table)
+        && is_parquet(file)
+        && rest.split('/').count() <= 2)
+        .then_some((table, rest))
+}
+
+fn parquet_files_or_none(dir: &Path) -> Result<Vec<PathBuf>, StoreError> {
+    match fs::metadata(dir) {
+        Ok(m) if m.is_dir() => parquet_files(dir),
+        Ok(_) => Ok(Vec::new()),
+        Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(Vec::new()),
+        Err(e) => Err(StoreError::io(dir, e)),
     }
 }
 
@@ -320,13 +417,9 @@ impl Staging {
             .map_err(|e| StoreError::io(&path, e))
     }
 
-    /// The run paths the staged files will have once committed.
-    pub fn pending(&self) -> Result<Vec<PathBuf>, StoreError> {
-        Ok(self
-            .staged_files()?
-            .into_iter()
-            .map(|(_, target)| target)
-            .collect())
+    /// The staged files, as (path inside the staging area, path it will have in the run), sorted.
+    pub fn pending(&self) -> Result<Vec<(PathBuf, PathBuf)>, StoreError> {
+        self.staged_files()
     }
 
     /// Every staged Parquet file, as (path inside the staging area, path inside the run).
@@ -396,9 +489,14 @@ impl Staging {
         Ok(removed)
     }
 
-    /// Moves every staged file into the run's table folders and removes the staging area. Returns the
-    /// final paths. Safe to call again after a crash in the middle: files already moved are skipped.
-    pub fn commit(&self) -> Result<Vec<PathBuf>, StoreError> {
+    /// Moves every staged file into the run's table folders, one rename (and folder sync) at a time,
+    /// calling `step` after each; returns the final paths. The files stay invisible to readers until
+    /// the manifest records the stage finished. Safe to call again after a crash in the middle: files
+    /// already moved are no longer staged. The staging area itself is left for [`Staging::remove`].
+    pub fn move_into_place<E: From<StoreError>>(
+        &self,
+        mut step: impl FnMut() -> Result<(), E>,
+    ) -> Result<Vec<PathBuf>, E> {
         let mut out = Vec::new();
         for (staged, target) in self.staged_files()? {
             let parent = target.parent().expect("a table file has a folder");
@@ -406,8 +504,8 @@ impl Staging {
             fs::rename(&staged, &target).map_err(|e| StoreError::io(&staged, e))?;
             sync_dir(Some(parent)).map_err(|e| StoreError::io(parent, e))?;
             out.push(target);
+            step()?;
         }
-        self.remove()?;
         Ok(out)
     }
 

@@ -14,6 +14,7 @@ mod llm;
 mod optimise;
 mod originals;
 mod phyre;
+mod publish;
 mod query;
 mod render;
 mod reward;

@@ -43,7 +43,7 @@ pub(crate) fn trace_file_sets(run: &RunDir, env: Env) -> Result<Vec<TraceFileSet
     Ok(out)
 }
 
-/// All rows of `table` in the set's file (an empty batch when the file does not exist), sorted by
+/// All rows of `table` in the set's file (an empty batch when no such file is published), sorted by
 /// `trace_id` then `sort_by`, with the trace ids as plain strings alongside.
 fn sorted_rows(
     run: &RunDir,
@@ -53,11 +53,13 @@ fn sorted_rows(
 ) -> Result<(RecordBatch, StringArray), StageError> {
     let schema = table_schema(table)
         .ok_or_else(|| StageError::Internal(format!("no schema for table {table}")))?;
-    let path = run.partition_dir(table, Some(set.env)).join(&set.name);
-    let batches = if path.exists() {
-        read_file(&path)?
-    } else {
-        Vec::new()
+    // The set's file of this table, if it is published (a stage writes no file for an empty table).
+    let published = run.table(table)?.files.into_iter().find(|f| {
+        f.env == Some(set.env) && f.path.file_name().is_some_and(|n| n == set.name.as_str())
+    });
+    let batches = match published {
+        Some(f) => read_file(&f.path)?,
+        None => Vec::new(),
     };
     let all = concat_batches(&schema, &batches)?;
     let ids = all
