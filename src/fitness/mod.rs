@@ -15,5 +15,8 @@ pub mod table;
 mod terms;
 
 pub use self::distance::{DistanceMatrix, scene_scale};
-pub use self::evaluate::{CandidateOutput, LibraryView, evaluate, length_penalty, time_penalty};
+pub use self::evaluate::{
+    CandidateOutput, LibraryView, correlation, evaluate, length_penalty, time_penalty,
+};
+pub use self::histogram::Dp;
 pub use self::terms::FitnessTerms;

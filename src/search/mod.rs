@@ -28,7 +28,7 @@ pub mod skeleton;
 pub mod tables;
 
 pub use self::candidate::{CandidateRecord, code_hash};
-pub use self::discover::{ConvergenceRow, Discovery, LabelResult};
+pub use self::discover::{Acceptance, ConvergenceRow, Discovery, LabelResult};
 pub use self::evaluator::{EvalSettings, Evaluation, Evaluator};
 pub use self::islands::{Database, Program, Strategy, Temperatures};
 pub use self::llm_proposer::LlmProposer;

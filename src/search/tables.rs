@@ -1,5 +1,6 @@
 //! The Arrow schemas and rows of the evolution tables besides `candidates`: `evolution_labels` (one row
-//! per label searched: seed and best fitness, acceptance, time inside and outside the proposer) and
+//! per label searched: seed and best fitness, the d_p used, held-out ρ and the acceptance decision, time
+//! inside and outside the proposer) and
 //! `evolution_convergence` (section 4.5's pairs).
 
 use std::sync::Arc;
@@ -12,6 +13,7 @@ use arrow::error::ArrowError;
 
 use super::discover::{ConvergenceRow, LabelResult};
 use super::run::SearchConfig;
+use crate::fitness::Dp;
 
 /// The schema of `evolution_labels`.
 pub fn labels_schema() -> SchemaRef {
@@ -37,6 +39,9 @@ pub fn labels_schema() -> SchemaRef {
         f("best_lines", DataType::Int64),
         f("delta", DataType::Float64),
         f("accepted", DataType::Boolean),
+        f("dp", DataType::Utf8),
+        fo("holdout_rho", DataType::Float64),
+        f("acceptance", DataType::Utf8),
         f("wall_s", DataType::Float64),
         f("propose_s", DataType::Float64),
         fo("outside_proposer_share", DataType::Float64),
@@ -47,6 +52,7 @@ pub fn labels_schema() -> SchemaRef {
 pub fn labels_batch(
     stage: &str,
     config: &SearchConfig,
+    dp: Dp,
     proposer: &str,
     index: u32,
     r: &LabelResult,
@@ -82,6 +88,9 @@ pub fn labels_batch(
             i(o.best.lines as i64),
             x(config.delta),
             Arc::new(BooleanArray::from(vec![r.accepted])),
+            s(dp.as_str()),
+            Arc::new(Float64Array::from(vec![r.holdout_rho])),
+            s(r.acceptance.as_str()),
             x(o.wall_s),
             x(o.propose_s),
             Arc::new(Float64Array::from(vec![share])),

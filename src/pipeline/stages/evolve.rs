@@ -17,7 +17,7 @@ use serde_json::{Value, json};
 
 use super::detector_setup::{DetectorSetup, SandboxParams};
 use super::trace_files::{read_traces, trace_file_sets};
-use crate::fitness::DistanceMatrix;
+use crate::fitness::{DistanceMatrix, Dp};
 use crate::fitness::table::{distances_batch, matrix_from_batches, set_id};
 use crate::llm::{LlmClient, LlmConfig, LlmSettings, Prompts};
 use crate::pipeline::params::ParamsOf;
@@ -41,7 +41,9 @@ pub static KIND: StageKind = StageKind {
     doc: "For each label in `labels` (default: every label of the library), searches for a detector program \
           maximising the paper's fitness ν = ρ + η − λ − ψ on the run's `env` traces (a training split; \
           `holdout` of them kept for the convergence statistics), starting from the library's detector \
-          for the label (or a skeleton), and adds the best to the library when ν > delta (Algorithm 2). \
+          for the label (or a skeleton), and adds the best to the library when ν > delta and its ρ on the \
+          held-out traces is positive (Algorithm 2; `allow_nonpositive_rho` drops the ρ test). `dp` chooses \
+          the annotation distance d_p (kl, js or the paper's literal cross-entropy). \
           Every candidate goes to the candidates table; the grown library is written as a folder \
           (default exports/<stage>/library) that `annotate` reads. See docs/evolution.md.",
     writes: "candidates, evolution_labels, evolution_convergence, trace_distances, exports/<stage>/library/",
@@ -109,13 +111,18 @@ pub struct EvolveParams {
     pub reset_period: u64,
     /// Acceptance threshold δ on ν.
     pub delta: f64,
+    /// Also accept a best detector whose ρ on the held-out traces is ≤ 0 (default: never; noise).
+    pub allow_nonpositive_rho: bool,
+    /// Annotation distance d_p of ρ and η: kl (symmetrised Kullback–Leibler, 0 for identical
+    /// annotations), js (Jensen–Shannon) or cross-entropy (the paper's wording; docs/evolution.md).
+    pub dp: Dp,
     /// Proposals requested at once.
     pub parallel: u64,
     /// Repair requests per failed child (proposers that repair).
     pub repair_attempts: u64,
     /// Training traces at most (and held-out traces at most).
     pub max_traces: u64,
-    /// Fraction of traces held out for the convergence statistics.
+    /// Fraction of traces held out (the acceptance test's ρ and the convergence statistics).
     pub holdout: f64,
     /// Training traces in the probe set (cheap checks).
     pub probe: u64,
@@ -164,6 +171,8 @@ impl EvolveParams {
             prompt_size: search.prompt_size as u64,
             reset_period: search.reset_period,
             delta: search.delta,
+            allow_nonpositive_rho: search.allow_nonpositive_rho,
+            dp: eval.dp,
             parallel: search.parallel as u64,
             repair_attempts: search.repair_attempts as u64,
             max_traces: 100,
@@ -215,6 +224,8 @@ pub struct EvolveSummary {
     pub proposer: String,
     /// Proposals per label.
     pub budget: u64,
+    /// The annotation distance d_p.
+    pub dp: Dp,
     /// Training traces.
     pub train: u64,
     /// Held-out traces.
@@ -259,8 +270,12 @@ pub struct LabelSummary {
     pub best_nu: f64,
     /// Every fitness term of the best candidate.
     pub best_terms: crate::fitness::FitnessTerms,
-    /// Whether the best candidate was added to the library (ν > δ).
+    /// Whether the best candidate was added to the library (ν > δ and held-out ρ > 0).
     pub accepted: bool,
+    /// `accepted`, `below_delta` or `nonpositive_rho`.
+    pub acceptance: crate::search::Acceptance,
+    /// ρ of the best candidate on the held-out traces (none without enough of them).
+    pub holdout_rho: Option<f64>,
     /// Candidates evaluated.
     pub candidates: u64,
     /// Best ν after each step.
@@ -337,6 +352,7 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
             reset_period: p.reset_period,
             budget: p.budget,
             delta: p.delta,
+            allow_nonpositive_rho: p.allow_nonpositive_rho,
             parallel: p.parallel.max(1) as usize,
             repair_attempts: p.repair_attempts.min(u64::from(u32::MAX)) as u32,
             temperatures: Temperatures::default(),
@@ -345,6 +361,7 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         seed: p.seed,
         eval: EvalSettings {
             bins: p.bins.max(1) as usize,
+            dp: p.dp,
             probe: p.probe.max(1) as usize,
             time_penalty: p.time_penalty,
         },
@@ -577,6 +594,7 @@ struct LabelTables<'a> {
     stage: &'a str,
     env: Env,
     config: &'a SearchConfig,
+    dp: Dp,
     proposer: &'a str,
 }
 
@@ -621,7 +639,7 @@ impl StagingCheckpoint<'_, '_> {
         )?;
         put(
             "evolution_labels",
-            labels_batch(t.stage, t.config, t.proposer, m, r),
+            labels_batch(t.stage, t.config, t.dp, t.proposer, m, r),
         )?;
         put(
             "evolution_convergence",
@@ -641,17 +659,24 @@ fn label_summary(r: &crate::search::LabelResult) -> (LabelSummary, String) {
         best_nu: o.best.terms.nu,
         best_terms: o.best.terms,
         accepted: r.accepted,
+        acceptance: r.acceptance,
+        holdout_rho: r.holdout_rho,
         candidates: o.records.len() as u64,
         best_by_step: o.best_by_step.clone(),
         wall_s: o.wall_s,
         propose_s: o.propose_s,
     };
+    let rho = r
+        .holdout_rho
+        .map_or(String::new(), |x| format!(", held-out ρ {x:.3}"));
+    let verdict = match r.acceptance {
+        crate::search::Acceptance::Accepted => "",
+        crate::search::Acceptance::BelowDelta => " (rejected: ν ≤ δ)",
+        crate::search::Acceptance::NonpositiveRho => " (rejected: ρ ≤ 0)",
+    };
     let line = format!(
-        "{}: ν {:.4} → {:.4}{}",
-        o.label,
-        o.seed_nu,
-        o.best.terms.nu,
-        if r.accepted { "" } else { " (rejected)" }
+        "{}: ν {:.4} → {:.4}{rho}{verdict}",
+        o.label, o.seed_nu, o.best.terms.nu,
     );
     (summary, line)
 }
@@ -677,6 +702,14 @@ impl Stage for EvolveStage {
             .set_total(ctx.stage_id(), config.budget * self.labels.len() as u64);
         let t_dx = std::time::Instant::now();
         let (dx, reused) = self.training_distances(ctx, env, &train)?;
+        let holdout_dx = if holdout.len() >= crate::search::discover::MIN_HOLDOUT {
+            DistanceMatrix::compute(&holdout, self.samples)
+        } else {
+            DistanceMatrix {
+                ids: Vec::new(),
+                upper: Vec::new(),
+            }
+        };
         let dx_s = t_dx.elapsed().as_secs_f64();
         let mut limits = self.setup.limits.clone();
         limits.trace_cache = limits.trace_cache.max(train.len() + holdout.len() + 4);
@@ -693,6 +726,7 @@ impl Stage for EvolveStage {
             train: &train,
             holdout: &holdout,
             dx: &dx,
+            holdout_dx: &holdout_dx,
             config: &config,
             eval: self.eval.clone(),
             proposer: proposer.as_ref(),
@@ -711,6 +745,7 @@ impl Stage for EvolveStage {
                 stage: &stage,
                 env,
                 config: &config,
+                dp: self.eval.dp,
                 proposer: proposer.name(),
             };
             checkpoint.write_label(&tables, m, r, &mut rows)
@@ -754,6 +789,7 @@ impl Stage for EvolveStage {
                 strategy: config.strategy,
                 proposer: proposer.name().to_string(),
                 budget: config.budget,
+                dp: self.eval.dp,
                 train: train.len() as u64,
                 holdout: holdout.len() as u64,
                 dx: DxSummary {
