@@ -192,7 +192,10 @@ mod tests {
         let ce = Dp::CrossEntropy;
         assert!(close(ce.pattern(&p, &q), 0.5 * (h + rev)));
         // Hand-computed: H(p,q) = 0.5·ln 4 + 0.5·ln(4/3) = 0.836988…, H(q,p) = ln 2 = 0.693147…
-        assert!(close(ce.pattern(&p, &q), 0.5 * (0.8369882167858358 + 0.6931471805599453)));
+        assert!(close(
+            ce.pattern(&p, &q),
+            0.5 * (0.8369882167858358 + 0.6931471805599453)
+        ));
         // Identical uniform histograms over b bins: ln b, not 0.
         assert!(close(ce.pattern(&p, &p), 2f64.ln()));
         assert!(close(similarity(&q, &q), 1.0));
@@ -216,7 +219,10 @@ mod tests {
         ));
         // The cross entropy minus the mean entropy.
         let ent = 0.5 * (entropy(&p) + entropy(&q));
-        assert!(close(Dp::Kl.pattern(&p, &q), Dp::CrossEntropy.pattern(&p, &q) - ent));
+        assert!(close(
+            Dp::Kl.pattern(&p, &q),
+            Dp::CrossEntropy.pattern(&p, &q) - ent
+        ));
         // d_p(A, A) = 0 for every annotation, silent (uniform) or concentrated, one or several patterns.
         let a = [
             histogram(&[true, true, false, false, false], 3),

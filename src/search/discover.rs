@@ -39,8 +39,9 @@ pub struct ConvergenceRow {
     pub traces: u64,
 }
 
-/// Fewest held-out traces for a held-out ρ (3 traces make 3 pairs).
-pub const MIN_HOLDOUT: usize = 3;
+/// Fewest held-out traces for a held-out ρ: 8 traces make 28 pairs; a correlation over fewer pairs is
+/// mostly noise (3 traces, 3 pairs, gave ρ from −0.9 to 0.9 for the same detector).
+pub const MIN_HOLDOUT: usize = 8;
 
 /// Why a label's best program did or did not join the library.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -88,6 +89,11 @@ pub struct LabelResult {
     pub acceptance: Acceptance,
     /// ρ of the best program on the held-out traces (`None` with fewer than [`MIN_HOLDOUT`]).
     pub holdout_rho: Option<f64>,
+    /// The best program's activation histograms on the training traces (training order), as ρ and η
+    /// saw them: the `evolution_histograms` rows, from which SQL recomputes ρ.
+    pub train_hists: Vec<Vec<f64>>,
+    /// Its histograms on the held-out traces (empty with fewer than [`MIN_HOLDOUT`]).
+    pub holdout_hists: Vec<Vec<f64>>,
     /// Convergence pairs on the held-out traces (empty without held-out traces).
     pub convergence: Vec<ConvergenceRow>,
 }
@@ -164,7 +170,16 @@ impl Discovery<'_> {
                 checkpoint: self.checkpoint,
             };
             let outcome = search.run()?;
-            let holdout_rho = self.holdout_rho(&det_label, &outcome.best.code);
+            let train_hists = self.histograms(&det_label, &outcome.best.code, self.train);
+            let holdout_hists = if self.holdout.len() >= MIN_HOLDOUT
+                && self.holdout_dx.len() == self.holdout.len()
+            {
+                self.histograms(&det_label, &outcome.best.code, self.holdout)
+            } else {
+                Vec::new()
+            };
+            let holdout_rho = (!holdout_hists.is_empty())
+                .then(|| correlation(self.holdout_dx, &holdout_hists, self.eval.dp));
             let acceptance = Acceptance::decide(
                 outcome.best.terms.nu,
                 self.config.delta,
@@ -191,6 +206,8 @@ impl Discovery<'_> {
                 accepted,
                 acceptance,
                 holdout_rho,
+                train_hists,
+                holdout_hists,
                 convergence,
             };
             after_label(m as u32, &result)?;
@@ -199,30 +216,23 @@ impl Discovery<'_> {
         Ok((library, results))
     }
 
-    /// Held-out ρ of `code` (see the module docs); `None` without enough held-out traces.
-    pub fn holdout_rho(&self, label: &str, code: &str) -> Option<f64> {
-        if self.holdout.len() < MIN_HOLDOUT || self.holdout_dx.len() != self.holdout.len() {
-            return None;
-        }
-        let det = Detector::new(self.env, label, code, "holdout");
-        let batch = self.pool.run(std::slice::from_ref(&det), self.holdout);
-        let mut hists = vec![histogram(&[], self.eval.bins); self.holdout.len()];
+    /// The activation histograms of `code` on `traces` (a trace it fails on counts as no activation).
+    pub fn histograms(&self, label: &str, code: &str, traces: &[Trace]) -> Vec<Vec<f64>> {
+        let det = Detector::new(self.env, label, code, "best");
+        let batch = self.pool.run(std::slice::from_ref(&det), traces);
+        let mut hists = vec![histogram(&[], self.eval.bins); traces.len()];
         for r in &batch.results {
             if r.status != CandidateStatus::Ok {
                 continue;
             }
-            let steps: Vec<i64> = self.holdout[r.trace]
-                .timesteps
-                .iter()
-                .map(|t| t.index)
-                .collect();
+            let steps: Vec<i64> = traces[r.trace].timesteps.iter().map(|t| t.index).collect();
             let a = activation(
                 &steps,
                 r.patterns.iter().map(|p| (p.start_step, p.end_step)),
             );
             hists[r.trace] = histogram(&a, self.eval.bins);
         }
-        Some(correlation(self.holdout_dx, &hists, self.eval.dp))
+        hists
     }
 
     /// Section 4.5: detectors from each 10 % bin of the search compared with those of the final bin.

@@ -1,6 +1,7 @@
 //! `evolve`: learns detectors for labels by evolutionary search over a run's traces (the paper's
 //! Algorithms 1–3), starting from a library, and writes the `candidates`, `evolution_labels`,
-//! `evolution_convergence` and `trace_distances` tables and the grown library as a folder.
+//! `evolution_histograms`, `evolution_convergence` and `trace_distances` (training and held-out D_x)
+//! tables and the grown library as a folder.
 //!
 //! Resumable: each round of a label's search is a shard whose record holds the round's candidates, so a
 //! killed stage replays its finished rounds and continues; each label's tables are written by a last
@@ -17,8 +18,8 @@ use serde_json::{Value, json};
 
 use super::detector_setup::{DetectorSetup, SandboxParams};
 use super::trace_files::{read_traces, trace_file_sets};
-use crate::fitness::{DistanceMatrix, Dp};
 use crate::fitness::table::{distances_batch, matrix_from_batches, set_id};
+use crate::fitness::{DistanceMatrix, Dp};
 use crate::llm::{LlmClient, LlmConfig, LlmSettings, Prompts};
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
@@ -27,7 +28,7 @@ use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
 use crate::search::candidate::candidates_batch;
 use crate::search::library_out::write_library;
 use crate::search::run::Checkpoint;
-use crate::search::tables::{convergence_batch, labels_batch};
+use crate::search::tables::{SetIds, convergence_batch, histograms_batch, labels_batch};
 use crate::search::{
     CandidateRecord, Discovery, EvalSettings, LlmProposer, MutateProposer, Proposer, SearchConfig,
     SearchError, Strategy, Temperatures,
@@ -46,7 +47,7 @@ pub static KIND: StageKind = StageKind {
           the annotation distance d_p (kl, js or the paper's literal cross-entropy). \
           Every candidate goes to the candidates table; the grown library is written as a folder \
           (default exports/<stage>/library) that `annotate` reads. See docs/evolution.md.",
-    writes: "candidates, evolution_labels, evolution_convergence, trace_distances, exports/<stage>/library/",
+    writes: "candidates, evolution_labels, evolution_histograms, evolution_convergence, trace_distances, exports/<stage>/library/",
     params: ParamsOf::of::<EvolveParams>(),
     build,
 };
@@ -558,12 +559,15 @@ impl EvolveStage {
         Ok(out_dir)
     }
 
+    /// The D_x matrix of `train` (the training or held-out traces) and its set id: read from the run's
+    /// `trace_distances` when an earlier stage stored it, else computed and written as shard `shard`.
     fn training_distances(
         &self,
         ctx: &StageContext<'_>,
         env: Env,
         train: &[Trace],
-    ) -> Result<(DistanceMatrix, bool), StageError> {
+        shard: &str,
+    ) -> Result<(DistanceMatrix, String, bool), StageError> {
         let ids: Vec<String> = train.iter().map(|t| t.trace_id.clone()).collect();
         let sid = set_id(&ids, self.samples);
         let mut files: Vec<PathBuf> = ctx
@@ -578,14 +582,14 @@ impl EvolveStage {
         for f in files {
             let batches = crate::store::read_file(&f)?;
             if let Some(m) = matrix_from_batches(&sid, &ids, &batches) {
-                return Ok((m, true));
+                return Ok((m, sid, true));
             }
         }
         let m = DistanceMatrix::compute(train, self.samples);
         let b = distances_batch(&sid, &m)?;
-        ctx.write_batch("trace_distances", env, "dx", &b)?;
-        ctx.finish_shard("dx", &json!({"set_id": sid, "pairs": m.upper.len()}))?;
-        Ok((m, false))
+        ctx.write_batch("trace_distances", env, shard, &b)?;
+        ctx.finish_shard(shard, &json!({"set_id": sid, "pairs": m.upper.len()}))?;
+        Ok((m, sid, false))
     }
 }
 
@@ -594,7 +598,7 @@ struct LabelTables<'a> {
     stage: &'a str,
     env: Env,
     config: &'a SearchConfig,
-    dp: Dp,
+    sets: &'a SetIds,
     proposer: &'a str,
 }
 
@@ -639,8 +643,9 @@ impl StagingCheckpoint<'_, '_> {
         )?;
         put(
             "evolution_labels",
-            labels_batch(t.stage, t.config, t.dp, t.proposer, m, r),
+            labels_batch(t.stage, t.config, t.sets, t.proposer, m, r),
         )?;
+        put("evolution_histograms", histograms_batch(t.stage, t.sets, r))?;
         put(
             "evolution_convergence",
             convergence_batch(t.stage, &r.convergence),
@@ -701,14 +706,24 @@ impl Stage for EvolveStage {
         ctx.progress()
             .set_total(ctx.stage_id(), config.budget * self.labels.len() as u64);
         let t_dx = std::time::Instant::now();
-        let (dx, reused) = self.training_distances(ctx, env, &train)?;
-        let holdout_dx = if holdout.len() >= crate::search::discover::MIN_HOLDOUT {
-            DistanceMatrix::compute(&holdout, self.samples)
-        } else {
-            DistanceMatrix {
-                ids: Vec::new(),
-                upper: Vec::new(),
-            }
+        let (dx, train_set, reused) = self.training_distances(ctx, env, &train, "dx")?;
+        let (holdout_dx, holdout_set, holdout_reused) =
+            if holdout.len() >= crate::search::discover::MIN_HOLDOUT {
+                let (m, sid, r) = self.training_distances(ctx, env, &holdout, "dx_holdout")?;
+                (m, Some(sid), r)
+            } else {
+                let empty = DistanceMatrix {
+                    ids: Vec::new(),
+                    upper: Vec::new(),
+                };
+                (empty, None, true)
+            };
+        let sets = SetIds {
+            dp: self.eval.dp,
+            train: train_set,
+            train_ids: dx.ids.clone(),
+            holdout: holdout_set,
+            holdout_ids: holdout_dx.ids.clone(),
         };
         let dx_s = t_dx.elapsed().as_secs_f64();
         let mut limits = self.setup.limits.clone();
@@ -745,7 +760,7 @@ impl Stage for EvolveStage {
                 stage: &stage,
                 env,
                 config: &config,
-                dp: self.eval.dp,
+                sets: &sets,
                 proposer: proposer.name(),
             };
             checkpoint.write_label(&tables, m, r, &mut rows)
@@ -767,6 +782,9 @@ impl Stage for EvolveStage {
         };
         if !reused {
             *rows.entry("trace_distances".into()).or_default() += dx.upper.len() as u64;
+        }
+        if !holdout_reused {
+            *rows.entry("trace_distances".into()).or_default() += holdout_dx.upper.len() as u64;
         }
         let out_dir = self.write_evolved(ctx, &config, proposer.name(), &library)?;
         let wall: f64 = results.iter().map(|r| r.outcome.wall_s).sum();
