@@ -143,14 +143,14 @@ pub fn histograms_batch(
     r: &LabelResult,
 ) -> Result<RecordBatch, ArrowError> {
     let o = &r.outcome;
-    let mut cols: (
-        Vec<&str>,
-        Vec<&str>,
-        Vec<i64>,
-        Vec<&str>,
-        Vec<i64>,
-        Vec<f64>,
-    ) = Default::default();
+    let (mut split_col, mut set_col, mut index_col, mut id_col, mut bin_col, mut value_col) = (
+        Vec::<&str>::new(),
+        Vec::<&str>::new(),
+        Vec::<i64>::new(),
+        Vec::<&str>::new(),
+        Vec::<i64>::new(),
+        Vec::<f64>::new(),
+    );
     let parts = [
         (
             "train",
@@ -169,28 +169,28 @@ pub fn histograms_batch(
         let Some(set) = set else { continue };
         for (t, (id, h)) in ids.iter().zip(hists).enumerate() {
             for (b, v) in h.iter().enumerate() {
-                cols.0.push(split);
-                cols.1.push(set);
-                cols.2.push(t as i64);
-                cols.3.push(id);
-                cols.4.push(b as i64);
-                cols.5.push(*v);
+                split_col.push(split);
+                set_col.push(set);
+                index_col.push(t as i64);
+                id_col.push(id.as_str());
+                bin_col.push(b as i64);
+                value_col.push(*v);
             }
         }
     }
-    let n = cols.0.len();
+    let n = split_col.len();
     RecordBatch::try_new(
         histograms_schema(),
         vec![
             Arc::new(StringArray::from(vec![stage; n])),
             Arc::new(StringArray::from(vec![o.label.as_str(); n])),
             Arc::new(StringArray::from(vec![o.best.hash.as_str(); n])),
-            Arc::new(StringArray::from(cols.0)),
-            Arc::new(StringArray::from(cols.1)),
-            Arc::new(Int64Array::from(cols.2)),
-            Arc::new(StringArray::from(cols.3)),
-            Arc::new(Int64Array::from(cols.4)),
-            Arc::new(Float64Array::from(cols.5)),
+            Arc::new(StringArray::from(split_col)),
+            Arc::new(StringArray::from(set_col)),
+            Arc::new(Int64Array::from(index_col)),
+            Arc::new(StringArray::from(id_col)),
+            Arc::new(Int64Array::from(bin_col)),
+            Arc::new(Float64Array::from(value_col)),
         ],
     )
 }
