@@ -382,3 +382,46 @@ fn the_llm_proposer_drives_a_search_with_repairs_through_a_chat_server() {
     let calls = t.csv("r", "SELECT count(*) AS n FROM llm_calls");
     assert_eq!(calls.lines().nth(1), Some("4"), "{calls}");
 }
+
+/// With enough held-out traces the acceptance uses the held-out ρ: the held-out D_x is stored as its
+/// own set, the best program's held-out histograms are stored, and SQL recomputes that ρ to 1e-9.
+#[test]
+fn acceptance_uses_the_held_out_rho_and_sql_recomputes_it() {
+    let t = TestRun::new();
+    let p = pipeline("holdout = 0.5\nconvergence_per_bin = 0")
+        .replace("scenes = 14", "scenes = 24")
+        .replace(
+            "labels = [\"ball slowing\", \"cushion rebound\"]",
+            "labels = [\"ball slowing\"]",
+        )
+        .replace("budget = 8", "budget = 2");
+    t.write("p.toml", &p);
+    t.run(&["run", "p.toml"]).ok();
+    let row = t.csv(
+        "runs/evt",
+        "SELECT holdout_rho IS NOT NULL AS has, holdout_set_id IS NOT NULL AS set, \
+         accepted = (best_nu > delta AND holdout_rho > 0) AS rule FROM evolution_labels",
+    );
+    assert_eq!(row.lines().nth(1), Some("true,true,true"), "{row}");
+    let sets = t.csv(
+        "runs/evt",
+        "SELECT count(DISTINCT set_id) AS n FROM trace_distances",
+    );
+    assert_eq!(sets.lines().nth(1), Some("2"), "{sets}");
+    let sql =
+        std::fs::read_to_string(repo().join("sql/evolution_fitness_correlation.sql")).unwrap();
+    let body: Vec<&str> = sql
+        .lines()
+        .filter(|l| !l.trim_start().starts_with("--"))
+        .collect();
+    let check = t.csv(
+        "runs/evt",
+        &format!(
+            "WITH s AS ({}) SELECT abs(s.rho - l.holdout_rho) < 1e-9 AS same, s.pairs >= 28 AS enough \
+             FROM s JOIN evolution_labels AS l ON l.run_stage = s.run_stage AND l.label = s.label \
+             WHERE s.split = 'holdout'",
+            body.join("\n")
+        ),
+    );
+    assert_eq!(check.lines().nth(1), Some("true,true"), "{check}");
+}
