@@ -119,7 +119,13 @@ fn main() {
     let t0 = Instant::now();
     let reps = 200;
     for _ in 0..reps {
-        std::hint::black_box(annotrace::fitness::evaluate(&dx, &view, &out, true));
+        std::hint::black_box(annotrace::fitness::evaluate(
+            &dx,
+            &view,
+            &out,
+            true,
+            annotrace::fitness::Dp::default(),
+        ));
     }
     println!(
         "fitness: D_p + rho + eta + lambda + psi for 100 traces ({} pairs, {} library detectors): {:.3} ms",

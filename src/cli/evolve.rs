@@ -8,6 +8,7 @@
 
 use std::path::PathBuf;
 
+use annotrace::fitness::Dp;
 use annotrace::llm::LlmSettings;
 use annotrace::pipeline::ErrorCategory;
 use annotrace::pipeline::stages::evolve::{EvolveParams, EvolveSummary, KIND, ProposerChoice};
@@ -57,6 +58,13 @@ pub struct Args {
     /// Acceptance threshold δ on ν.
     #[arg(long, default_value_t = D.delta, allow_hyphen_values = true)]
     delta: f64,
+    /// Also accept a best detector whose ρ on the held-out traces is ≤ 0 (default: never).
+    #[arg(long)]
+    allow_nonpositive_rho: bool,
+    /// Annotation distance d_p: kl (symmetrised Kullback–Leibler), js (Jensen–Shannon) or
+    /// cross-entropy (the paper's wording).
+    #[arg(long, default_value_t = D.dp)]
+    dp: Dp,
     /// Proposals requested at once.
     #[arg(long, default_value_t = D.parallel)]
     parallel: u64,
@@ -66,7 +74,7 @@ pub struct Args {
     /// Training traces at most (and held-out traces at most).
     #[arg(long, default_value_t = D.max_traces)]
     max_traces: u64,
-    /// Fraction of traces held out for the convergence statistics.
+    /// Fraction of traces held out (the acceptance test's ρ and the convergence statistics).
     #[arg(long, default_value_t = D.holdout)]
     holdout: f64,
     /// Training traces in the probe set.
@@ -148,6 +156,8 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
         prompt_size: a.prompt_size,
         reset_period: a.reset_period,
         delta: a.delta,
+        allow_nonpositive_rho: a.allow_nonpositive_rho,
+        dp: a.dp,
         parallel: a.parallel,
         repair_attempts: a.repair_attempts,
         max_traces: a.max_traces,
@@ -179,10 +189,11 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
         )
     })?;
     println!(
-        "evolve {} ({} strategy, {} proposer, seed {}, budget {} per label){}: {} training / {} held-out trace(s)",
+        "evolve {} ({} strategy, {} proposer, d_p {}, seed {}, budget {} per label){}: {} training / {} held-out trace(s)",
         id,
         s.strategy.as_str(),
         s.proposer,
+        s.dp,
         s.seed,
         s.budget,
         if stage.cached {
@@ -195,8 +206,11 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
     );
     for l in &s.labels {
         let t = &l.best_terms;
+        let held = l
+            .holdout_rho
+            .map_or_else(|| "–".to_string(), |x| format!("{x:.4}"));
         println!(
-            "  {:<28} ν {:>8.4} → {:>8.4}  (ρ {:.4}, η {:.4}, λ {:.4}, ψ {:.4})  {} candidates  {}",
+            "  {:<28} ν {:>8.4} → {:>8.4}  (ρ {:.4}, η {:.4}, λ {:.4}, ψ {:.4}; held-out ρ {held})  {} candidates  {}",
             l.label,
             l.seed_nu,
             l.best_nu,
@@ -205,7 +219,7 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
             t.lambda,
             t.psi,
             l.candidates,
-            if l.accepted { "accepted" } else { "rejected" }
+            l.acceptance.as_str()
         );
     }
     println!(

@@ -9,7 +9,7 @@
 //! non-comment). ψ compares mean wall time per trace; with no library time (μ undefined or 0) ψ = 0.
 
 use super::distance::DistanceMatrix;
-use super::histogram::pattern_distance;
+use super::histogram::Dp;
 use super::terms::FitnessTerms;
 
 /// The current library seen from the training set: each training trace's histogram per library detector,
@@ -75,41 +75,46 @@ pub fn pearson(x: &[f64], y: &[f64]) -> f64 {
 }
 
 /// The pairwise annotation distances D_p of a candidate, in the order of [`DistanceMatrix::upper`].
-pub fn annotation_distances(hists: &[Vec<f64>]) -> Vec<f64> {
+pub fn annotation_distances(hists: &[Vec<f64>], dp: Dp) -> Vec<f64> {
     let n = hists.len();
     let mut out = Vec::with_capacity(n * n.saturating_sub(1) / 2);
     for i in 0..n {
         for j in i + 1..n {
-            out.push(pattern_distance(&hists[i], &hists[j]));
+            out.push(dp.pattern(&hists[i], &hists[j]));
         }
     }
     out
 }
 
+/// ρ of a candidate's histograms over a set of traces against that set's D_x (same order).
+pub fn correlation(dx: &DistanceMatrix, hists: &[Vec<f64>], dp: Dp) -> f64 {
+    pearson(&dx.upper, &annotation_distances(hists, dp))
+}
+
 /// η: mean d_p between the candidate's histogram and each library detector's, over traces (0 for an
 /// empty library).
-pub fn novelty(cand: &[Vec<f64>], library: &LibraryView) -> f64 {
+pub fn novelty(cand: &[Vec<f64>], library: &LibraryView, dp: Dp) -> f64 {
     let (mut sum, mut n) = (0.0, 0usize);
     for (t, h) in cand.iter().enumerate() {
         for lib in library.hists.get(t).into_iter().flatten() {
-            sum += pattern_distance(h, lib);
+            sum += dp.pattern(h, lib);
             n += 1;
         }
     }
     if n == 0 { 0.0 } else { sum / n as f64 }
 }
 
-/// Every fitness term of a candidate (Algorithm 3). `time_penalty` off makes ψ = 0 (for runs that must
-/// be bit-for-bit reproducible: wall time is not).
+/// Every fitness term of a candidate (Algorithm 3) with annotation distance `dp`. `time_penalty` off
+/// makes ψ = 0 (for runs that must be bit-for-bit reproducible: wall time is not).
 pub fn evaluate(
     dx: &DistanceMatrix,
     library: &LibraryView,
     cand: &CandidateOutput,
     use_time_penalty: bool,
+    dp: Dp,
 ) -> FitnessTerms {
-    let dp = annotation_distances(&cand.hists);
-    let rho = pearson(&dx.upper, &dp);
-    let eta = novelty(&cand.hists, library);
+    let rho = correlation(dx, &cand.hists, dp);
+    let eta = novelty(&cand.hists, library, dp);
     let lambda = length_penalty(cand.lines);
     let psi = if use_time_penalty {
         time_penalty(cand.mean_time, library.mean_time)
@@ -169,7 +174,9 @@ mod tests {
             histogram(&[true, true], 2),
             histogram(&[false, true], 2),
         ];
-        let dp = annotation_distances(&hists);
+        let ce = Dp::CrossEntropy;
+        let pattern_distance = |p: &[f64], q: &[f64]| ce.pattern(p, q);
+        let dp = annotation_distances(&hists, ce);
         assert!(close(dp[0], pattern_distance(&hists[0], &hists[1])));
         assert!(close(dp[2], pattern_distance(&hists[1], &hists[2])));
         let library = LibraryView {
@@ -185,7 +192,7 @@ mod tests {
             mean_time: 0.015,
             lines: 20,
         };
-        let f = evaluate(&dx, &library, &cand, true);
+        let f = evaluate(&dx, &library, &cand, true, ce);
         assert!(close(f.rho, pearson(&dx.upper, &dp)));
         let eta = (pattern_distance(&hists[0], &library.hists[0][0])
             + pattern_distance(&hists[1], &library.hists[1][0])
@@ -195,9 +202,39 @@ mod tests {
         assert!(close(f.lambda, 20f64.ln() / 5.0));
         assert!(close(f.psi, 0.5));
         assert!(close(f.nu, f.rho + f.eta - f.lambda - f.psi));
-        assert_eq!(evaluate(&dx, &library, &cand, false).psi, 0.0);
+        assert_eq!(evaluate(&dx, &library, &cand, false, ce).psi, 0.0);
         // Empty library: η = 0, ψ = 0.
-        let g = evaluate(&dx, &LibraryView::default(), &cand, true);
+        let g = evaluate(&dx, &LibraryView::default(), &cand, true, ce);
         assert_eq!((g.eta, g.psi), (0.0, 0.0));
+        // Under kl, η and ρ use the divergence; a candidate identical to the library has η = 0.
+        let k = evaluate(&dx, &library, &cand, false, Dp::Kl);
+        assert!(close(k.rho, correlation(&dx, &hists, Dp::Kl)));
+        let same = CandidateOutput {
+            hists: library.hists.iter().map(|h| h[0].clone()).collect(),
+            mean_time: 0.0,
+            lines: 1,
+        };
+        assert_eq!(evaluate(&dx, &library, &same, false, Dp::Kl).eta, 0.0);
+        assert!(evaluate(&dx, &library, &same, false, ce).eta > 0.6);
+    }
+
+    #[test]
+    fn eta_by_hand_for_both_variants() {
+        // One trace, a library pattern fully active in bin 0 of 2, the candidate in bin 1.
+        let hi = (1.0 + crate::fitness::histogram::SMOOTHING)
+            / (1.0 + 2.0 * crate::fitness::histogram::SMOOTHING);
+        let lo = 1.0 - hi;
+        let library = LibraryView {
+            hists: vec![vec![vec![hi, lo]]],
+            mean_time: None,
+        };
+        let cand = vec![histogram(&[false, true], 2)];
+        // kl: ½(KL + KL) = (hi − lo)·ln(hi/lo); cross entropy adds the entropy −hi ln hi − lo ln lo.
+        let kl = (hi - lo) * (hi / lo).ln();
+        let ent = -hi * hi.ln() - lo * lo.ln();
+        assert!(close(novelty(&cand, &library, Dp::Kl), kl));
+        assert!(close(novelty(&cand, &library, Dp::CrossEntropy), kl + ent));
+        // With 0.01 smoothing: hi = 1.01/1.02, lo = 0.01/1.02; kl = 0.98039… · ln 101 = 4.52456…
+        assert!(close(kl, 0.9803921568627451 * 101f64.ln()));
     }
 }

@@ -5,7 +5,8 @@
 //! the current library's (η), minus a length penalty (λ) and a time penalty (ψ): ν = ρ + η − λ − ψ.
 //!
 //! **Owns:** trace distance d_x and the pairwise D_x matrix ([`distance`]), annotation histograms and
-//! d_p ([`histogram`]), Evaluate ([`evaluate()`]) and the `trace_distances` table ([`table`]).
+//! d_p with its variants ([`histogram`], [`Dp`]), Evaluate ([`evaluate()`]) and the `trace_distances`
+//! table ([`table`]).
 //! **Does not:** run detectors (`detect/`) or choose them (`search/`).
 
 pub mod distance;
@@ -15,5 +16,8 @@ pub mod table;
 mod terms;
 
 pub use self::distance::{DistanceMatrix, scene_scale};
-pub use self::evaluate::{CandidateOutput, LibraryView, evaluate, length_penalty, time_penalty};
+pub use self::evaluate::{
+    CandidateOutput, LibraryView, correlation, evaluate, length_penalty, time_penalty,
+};
+pub use self::histogram::Dp;
 pub use self::terms::FitnessTerms;

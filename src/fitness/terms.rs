@@ -9,7 +9,7 @@ pub struct FitnessTerms {
     /// distances D_p of the candidate, over all pairs of training traces (0 when undefined).
     pub rho: f64,
     /// η: mean novelty (annotation distance) between the candidate's annotations and each library
-    /// detector's annotations, averaged over traces and library detectors (1 for an empty library).
+    /// detector's annotations, averaged over traces and library detectors (0 for an empty library).
     pub eta: f64,
     /// λ: length penalty `ln(min(lines, 1000)) / 5`.
     pub lambda: f64,

@@ -1,6 +1,11 @@
 //! Algorithm 2 of the paper (DiscoverPatternDetectors): one search per label, in order; the best
-//! program joins the library when its ν exceeds δ, and later labels are scored for novelty against the
-//! grown library. Also the convergence measurement of section 4.5 on held-out traces.
+//! program joins the library when its ν exceeds δ **and** its ρ on the held-out traces is positive
+//! (unless `allow_nonpositive_rho`), and later labels are scored for novelty against the grown
+//! library. Also the convergence measurement of section 4.5 on held-out traces.
+//!
+//! **Held-out ρ.** The best program is run on the held-out traces and ρ is recomputed there against
+//! their own D_x ([`Discovery::holdout_dx`]); a held-out trace it fails on counts as no activation.
+//! With fewer than [`MIN_HOLDOUT`] held-out traces there is no held-out ρ and the training ρ decides.
 //!
 //! The seed programs of a label are the library's detectors for that label (when it has some), which
 //! are left out of the library the label's candidates are compared with (a detector is not novel with
@@ -13,8 +18,8 @@ use super::proposer::Proposer;
 use super::run::{Checkpoint, LabelOutcome, LabelSearch, SearchConfig, SearchError};
 use super::skeleton::skeleton;
 use crate::detect::{CandidateStatus, Detector, WorkerPool};
-use crate::fitness::DistanceMatrix;
 use crate::fitness::histogram::{activation, histogram, similarity};
+use crate::fitness::{DistanceMatrix, correlation};
 use crate::trace::{Env, Trace};
 
 /// One pair of the convergence measurement: a detector of bin `bin` against one of the final bin.
@@ -34,13 +39,61 @@ pub struct ConvergenceRow {
     pub traces: u64,
 }
 
+/// Fewest held-out traces for a held-out ρ: 8 traces make 28 pairs; a correlation over fewer pairs is
+/// mostly noise (3 traces, 3 pairs, gave ρ from −0.9 to 0.9 for the same detector).
+pub const MIN_HOLDOUT: usize = 8;
+
+/// Why a label's best program did or did not join the library.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Acceptance {
+    /// ν > δ and ρ > 0 (or ρ ≤ 0 allowed by `allow_nonpositive_rho`).
+    Accepted,
+    /// ν ≤ δ.
+    BelowDelta,
+    /// ν > δ but ρ ≤ 0 (held-out ρ, or the training ρ without a held-out set).
+    NonpositiveRho,
+}
+
+impl Acceptance {
+    /// `accepted`, `below_delta` or `nonpositive_rho`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Acceptance::Accepted => "accepted",
+            Acceptance::BelowDelta => "below_delta",
+            Acceptance::NonpositiveRho => "nonpositive_rho",
+        }
+    }
+
+    /// Algorithm 2's test with the ρ guard: `rho` is the held-out ρ when there is one, else the
+    /// training ρ.
+    pub fn decide(nu: f64, delta: f64, rho: f64, allow_nonpositive_rho: bool) -> Acceptance {
+        if nu.is_nan() || nu <= delta {
+            Acceptance::BelowDelta
+        } else if !allow_nonpositive_rho && (rho.is_nan() || rho <= 0.0) {
+            Acceptance::NonpositiveRho
+        } else {
+            Acceptance::Accepted
+        }
+    }
+}
+
 /// The result of one label.
 #[derive(Clone, Debug)]
 pub struct LabelResult {
     /// The search's outcome.
     pub outcome: LabelOutcome,
-    /// Whether the best program joined the library (ν > δ).
+    /// Whether the best program joined the library (see [`Acceptance`]).
     pub accepted: bool,
+    /// The acceptance decision and its reason.
+    pub acceptance: Acceptance,
+    /// ρ of the best program on the held-out traces (`None` with fewer than [`MIN_HOLDOUT`]).
+    pub holdout_rho: Option<f64>,
+    /// The best program's activation histograms on the training traces (training order), as ρ and η
+    /// saw them: the `evolution_histograms` rows, from which SQL recomputes ρ.
+    pub train_hists: Vec<Vec<f64>>,
+    /// Its histograms on the held-out traces (empty with fewer than [`MIN_HOLDOUT`]).
+    pub holdout_hists: Vec<Vec<f64>>,
     /// Convergence pairs on the held-out traces (empty without held-out traces).
     pub convergence: Vec<ConvergenceRow>,
 }
@@ -53,10 +106,12 @@ pub struct Discovery<'a> {
     pub env: Env,
     /// Training traces (D_x order).
     pub train: &'a [Trace],
-    /// Held-out traces (convergence only).
+    /// Held-out traces (the acceptance ρ and the convergence statistics).
     pub holdout: &'a [Trace],
     /// D_x of the training traces.
     pub dx: &'a DistanceMatrix,
+    /// D_x of the held-out traces (empty when there are fewer than [`MIN_HOLDOUT`]).
+    pub holdout_dx: &'a DistanceMatrix,
     /// Search knobs.
     pub config: &'a SearchConfig,
     /// Evaluation settings.
@@ -115,7 +170,23 @@ impl Discovery<'_> {
                 checkpoint: self.checkpoint,
             };
             let outcome = search.run()?;
-            let accepted = outcome.best.terms.nu > self.config.delta;
+            let train_hists = self.histograms(&det_label, &outcome.best.code, self.train);
+            let holdout_hists = if self.holdout.len() >= MIN_HOLDOUT
+                && self.holdout_dx.len() == self.holdout.len()
+            {
+                self.histograms(&det_label, &outcome.best.code, self.holdout)
+            } else {
+                Vec::new()
+            };
+            let holdout_rho = (!holdout_hists.is_empty())
+                .then(|| correlation(self.holdout_dx, &holdout_hists, self.eval.dp));
+            let acceptance = Acceptance::decide(
+                outcome.best.terms.nu,
+                self.config.delta,
+                holdout_rho.unwrap_or(outcome.best.terms.rho),
+                self.config.allow_nonpositive_rho,
+            );
+            let accepted = acceptance == Acceptance::Accepted;
             if accepted {
                 let aliases = own.first().map(|d| d.aliases.clone()).unwrap_or_default();
                 let weight = own.first().map_or(1.0, |d| d.weight);
@@ -133,12 +204,35 @@ impl Discovery<'_> {
             let result = LabelResult {
                 outcome,
                 accepted,
+                acceptance,
+                holdout_rho,
+                train_hists,
+                holdout_hists,
                 convergence,
             };
             after_label(m as u32, &result)?;
             results.push(result);
         }
         Ok((library, results))
+    }
+
+    /// The activation histograms of `code` on `traces` (a trace it fails on counts as no activation).
+    pub fn histograms(&self, label: &str, code: &str, traces: &[Trace]) -> Vec<Vec<f64>> {
+        let det = Detector::new(self.env, label, code, "best");
+        let batch = self.pool.run(std::slice::from_ref(&det), traces);
+        let mut hists = vec![histogram(&[], self.eval.bins); traces.len()];
+        for r in &batch.results {
+            if r.status != CandidateStatus::Ok {
+                continue;
+            }
+            let steps: Vec<i64> = traces[r.trace].timesteps.iter().map(|t| t.index).collect();
+            let a = activation(
+                &steps,
+                r.patterns.iter().map(|p| (p.start_step, p.end_step)),
+            );
+            hists[r.trace] = histogram(&a, self.eval.bins);
+        }
+        hists
     }
 
     /// Section 4.5: detectors from each 10 % bin of the search compared with those of the final bin.
@@ -210,5 +304,24 @@ impl Discovery<'_> {
             }
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Acceptance;
+
+    #[test]
+    fn acceptance_needs_nu_above_delta_and_positive_rho_unless_allowed() {
+        let d = Acceptance::decide;
+        assert_eq!(d(0.5, 0.0, 0.2, false), Acceptance::Accepted);
+        assert_eq!(d(0.0, 0.0, 0.2, false), Acceptance::BelowDelta);
+        assert_eq!(d(f64::NAN, 0.0, 0.2, false), Acceptance::BelowDelta);
+        // The quickstart's old case: ν high from η alone, ρ = −0.06.
+        assert_eq!(d(2.5, 0.0, -0.06, false), Acceptance::NonpositiveRho);
+        assert_eq!(d(2.5, 0.0, 0.0, false), Acceptance::NonpositiveRho);
+        assert_eq!(d(2.5, 0.0, f64::NAN, false), Acceptance::NonpositiveRho);
+        assert_eq!(d(2.5, 0.0, -0.06, true), Acceptance::Accepted);
+        assert_eq!(d(-1.0, 0.0, 0.9, true), Acceptance::BelowDelta);
     }
 }

@@ -15,7 +15,7 @@ use sha2::{Digest, Sha256};
 
 use crate::detect::{BatchResult, CandidateStatus, Detector, DetectorError, WorkerPool};
 use crate::fitness::histogram::{activation, histogram};
-use crate::fitness::{CandidateOutput, DistanceMatrix, FitnessTerms, LibraryView, evaluate};
+use crate::fitness::{CandidateOutput, DistanceMatrix, Dp, FitnessTerms, LibraryView, evaluate};
 use crate::trace::{Env, Trace};
 
 /// Settings of candidate evaluation.
@@ -23,6 +23,8 @@ use crate::trace::{Env, Trace};
 pub struct EvalSettings {
     /// Time bins b of the annotation histograms.
     pub bins: usize,
+    /// The annotation distance d_p of ρ and η.
+    pub dp: Dp,
     /// Training traces in the probe set.
     pub probe: usize,
     /// Whether ψ is computed (off makes scores independent of machine load).
@@ -33,6 +35,7 @@ impl EvalSettings {
     /// The defaults.
     pub const DEFAULT: EvalSettings = EvalSettings {
         bins: crate::fitness::histogram::DEFAULT_BINS,
+        dp: Dp::Kl,
         probe: 8,
         time_penalty: true,
     };
@@ -210,7 +213,13 @@ impl Evaluator<'_> {
             mean_time,
             lines,
         };
-        let terms = evaluate(self.dx, self.library, &out, self.settings.time_penalty);
+        let terms = evaluate(
+            self.dx,
+            self.library,
+            &out,
+            self.settings.time_penalty,
+            self.settings.dp,
+        );
         Evaluation::Scored {
             terms,
             mean_time: out.mean_time,

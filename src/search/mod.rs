@@ -1,6 +1,7 @@
 //! The evolutionary search for detector programs (section 3.2, Algorithms 1–2 and appendix F of the
 //! paper): for each label, evolve programs whose annotations vary with the traces as the traces vary
-//! and that add something the library does not already say; accept the best if ν > δ.
+//! and that add something the library does not already say; accept the best if ν > δ and its ρ on
+//! held-out traces is positive.
 //!
 //! - [`proposer`]: the interface proposers implement ([`Proposer`]); [`mutate`]: the offline proposer;
 //!   [`llm_proposer`]: the LLM proposer (prompts and answers through `llm/`);
@@ -28,7 +29,7 @@ pub mod skeleton;
 pub mod tables;
 
 pub use self::candidate::{CandidateRecord, code_hash};
-pub use self::discover::{ConvergenceRow, Discovery, LabelResult};
+pub use self::discover::{Acceptance, ConvergenceRow, Discovery, LabelResult};
 pub use self::evaluator::{EvalSettings, Evaluation, Evaluator};
 pub use self::islands::{Database, Program, Strategy, Temperatures};
 pub use self::llm_proposer::LlmProposer;

@@ -39,6 +39,9 @@ pub struct SearchConfig {
     pub budget: u64,
     /// Acceptance threshold δ on ν.
     pub delta: f64,
+    /// Accept a best program whose held-out ρ is ≤ 0 (when its ν > δ). Off by default: a detector whose
+    /// annotation distances do not grow with the trace distances on unseen traces is noise.
+    pub allow_nonpositive_rho: bool,
     /// Proposals requested at once (one round).
     pub parallel: usize,
     /// Repair attempts per child that fails with a repairable error.
@@ -59,6 +62,7 @@ impl SearchConfig {
         reset_period: 100,
         budget: 200,
         delta: 0.0,
+        allow_nonpositive_rho: false,
         parallel: 4,
         repair_attempts: 2,
         temperatures: Temperatures::DEFAULT,

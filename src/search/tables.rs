@@ -1,5 +1,6 @@
 //! The Arrow schemas and rows of the evolution tables besides `candidates`: `evolution_labels` (one row
-//! per label searched: seed and best fitness, acceptance, time inside and outside the proposer) and
+//! per label searched: seed and best fitness, the d_p used, held-out ρ and the acceptance decision, time
+//! inside and outside the proposer) and
 //! `evolution_convergence` (section 4.5's pairs).
 
 use std::sync::Arc;
@@ -12,6 +13,7 @@ use arrow::error::ArrowError;
 
 use super::discover::{ConvergenceRow, LabelResult};
 use super::run::SearchConfig;
+use crate::fitness::Dp;
 
 /// The schema of `evolution_labels`.
 pub fn labels_schema() -> SchemaRef {
@@ -37,6 +39,11 @@ pub fn labels_schema() -> SchemaRef {
         f("best_lines", DataType::Int64),
         f("delta", DataType::Float64),
         f("accepted", DataType::Boolean),
+        f("dp", DataType::Utf8),
+        fo("holdout_rho", DataType::Float64),
+        f("acceptance", DataType::Utf8),
+        f("train_set_id", DataType::Utf8),
+        fo("holdout_set_id", DataType::Utf8),
         f("wall_s", DataType::Float64),
         f("propose_s", DataType::Float64),
         fo("outside_proposer_share", DataType::Float64),
@@ -47,10 +54,12 @@ pub fn labels_schema() -> SchemaRef {
 pub fn labels_batch(
     stage: &str,
     config: &SearchConfig,
+    sets: &SetIds,
     proposer: &str,
     index: u32,
     r: &LabelResult,
 ) -> Result<RecordBatch, ArrowError> {
+    let dp = sets.dp;
     let o = &r.outcome;
     let t = &o.best.terms;
     let s = |v: &str| -> ArrayRef { Arc::new(StringArray::from(vec![v.to_string()])) };
@@ -82,9 +91,106 @@ pub fn labels_batch(
             i(o.best.lines as i64),
             x(config.delta),
             Arc::new(BooleanArray::from(vec![r.accepted])),
+            s(dp.as_str()),
+            Arc::new(Float64Array::from(vec![r.holdout_rho])),
+            s(r.acceptance.as_str()),
+            s(&sets.train),
+            Arc::new(StringArray::from(vec![sets.holdout.clone()])),
             x(o.wall_s),
             x(o.propose_s),
             Arc::new(Float64Array::from(vec![share])),
+        ],
+    )
+}
+
+/// What ties a label's rows to the distance tables: the d_p used and the `trace_distances` set ids of
+/// the training and held-out traces (in the order of their rows), with the traces' ids.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SetIds {
+    /// The annotation distance.
+    pub dp: Dp,
+    /// `set_id` of the training traces' D_x.
+    pub train: String,
+    /// Training trace ids, in D_x order.
+    pub train_ids: Vec<String>,
+    /// `set_id` of the held-out traces' D_x (none without a held-out ρ).
+    pub holdout: Option<String>,
+    /// Held-out trace ids, in D_x order.
+    pub holdout_ids: Vec<String>,
+}
+
+/// The schema of `evolution_histograms`: the best program of each label, its smoothed activation
+/// histogram per trace and bin, on the training (`split = 'train'`) and held-out traces.
+pub fn histograms_schema() -> SchemaRef {
+    let f = |n: &str, t: DataType| Field::new(n, t, false);
+    Arc::new(Schema::new(vec![
+        f("run_stage", DataType::Utf8),
+        f("label", DataType::Utf8),
+        f("code_hash", DataType::Utf8),
+        f("split", DataType::Utf8),
+        f("set_id", DataType::Utf8),
+        f("trace_index", DataType::Int64),
+        f("trace_id", DataType::Utf8),
+        f("bin", DataType::Int64),
+        f("value", DataType::Float64),
+    ]))
+}
+
+/// The `evolution_histograms` rows of one label.
+pub fn histograms_batch(
+    stage: &str,
+    sets: &SetIds,
+    r: &LabelResult,
+) -> Result<RecordBatch, ArrowError> {
+    let o = &r.outcome;
+    let (mut split_col, mut set_col, mut index_col, mut id_col, mut bin_col, mut value_col) = (
+        Vec::<&str>::new(),
+        Vec::<&str>::new(),
+        Vec::<i64>::new(),
+        Vec::<&str>::new(),
+        Vec::<i64>::new(),
+        Vec::<f64>::new(),
+    );
+    let parts = [
+        (
+            "train",
+            Some(sets.train.as_str()),
+            &sets.train_ids,
+            &r.train_hists,
+        ),
+        (
+            "holdout",
+            sets.holdout.as_deref(),
+            &sets.holdout_ids,
+            &r.holdout_hists,
+        ),
+    ];
+    for (split, set, ids, hists) in parts {
+        let Some(set) = set else { continue };
+        for (t, (id, h)) in ids.iter().zip(hists).enumerate() {
+            for (b, v) in h.iter().enumerate() {
+                split_col.push(split);
+                set_col.push(set);
+                index_col.push(t as i64);
+                id_col.push(id.as_str());
+                bin_col.push(b as i64);
+                value_col.push(*v);
+            }
+        }
+    }
+    let n = split_col.len();
+    RecordBatch::try_new(
+        histograms_schema(),
+        vec![
+            Arc::new(StringArray::from(vec![stage; n])),
+            Arc::new(StringArray::from(vec![o.label.as_str(); n])),
+            Arc::new(StringArray::from(vec![o.best.hash.as_str(); n])),
+            Arc::new(StringArray::from(split_col)),
+            Arc::new(StringArray::from(set_col)),
+            Arc::new(Int64Array::from(index_col)),
+            Arc::new(StringArray::from(id_col)),
+            Arc::new(Int64Array::from(bin_col)),
+            Arc::new(Float64Array::from(value_col)),
         ],
     )
 }

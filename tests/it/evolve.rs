@@ -94,6 +94,45 @@ fn a_seeded_search_raises_fitness_and_its_library_annotates() {
          abs(nu - (rho + eta - lambda - psi)) > 1e-9 OR activation_rate IS NULL OR mean_time_s IS NULL)",
     );
     assert_eq!(terms.lines().nth(1), Some("0"), "{terms}");
+    // Acceptance: ν > δ and a positive held-out ρ (the training ρ without held-out traces), recorded
+    // with the d_p used.
+    let bad = t.csv(
+        "runs/evt",
+        "SELECT count(*) AS n FROM evolution_labels WHERE dp <> 'kl' OR \
+         accepted <> (acceptance = 'accepted') OR \
+         (accepted AND (best_nu <= delta OR coalesce(holdout_rho, best_rho) <= 0)) OR \
+         (acceptance = 'nonpositive_rho' AND coalesce(holdout_rho, best_rho) > 0)",
+    );
+    assert_eq!(bad.lines().nth(1), Some("0"), "{bad}");
+    // ρ recomputed in SQL from the stored histograms and D_x equals the search's, to 1e-9.
+    let sql =
+        std::fs::read_to_string(repo().join("sql/evolution_fitness_correlation.sql")).unwrap();
+    let check = t.csv(
+        "runs/evt",
+        &format!(
+            "WITH s AS ({}) SELECT s.label, s.split, s.pairs, s.rho, \
+             CASE WHEN s.split = 'train' THEN l.best_rho ELSE l.holdout_rho END AS rust_rho \
+             FROM s JOIN evolution_labels AS l ON l.run_stage = s.run_stage AND l.label = s.label \
+             ORDER BY s.label, s.split",
+            sql.lines()
+                .filter(|l| !l.trim_start().starts_with("--"))
+                .collect::<Vec<_>>()
+                .join("\n")
+        ),
+    );
+    let rows: Vec<Vec<String>> = check
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    assert!(
+        rows.iter().filter(|r| r[1] == "train").count() == 2,
+        "{check}"
+    );
+    for r in &rows {
+        let (sql_rho, rust_rho): (f64, f64) = (r[3].parse().unwrap(), r[4].parse().unwrap());
+        assert!((sql_rho - rust_rho).abs() < 1e-9, "{check}");
+    }
     // The grown library loads, holds the improved detector, and annotate uses it directly.
     let dir = t.path("runs/evt/exports/evo/library");
     let lib = Library::load(&dir).unwrap();
@@ -241,7 +280,8 @@ query = "evolution_progress.sql"
     );
     assert_eq!(parents.lines().nth(1), Some("1"), "{parents}");
     // One D_x matrix for the three searches over the same training set (11 of the 14 traces after
-    // the held-out split): 11·10/2 pairs, written once.
+    // the held-out split): 11·10/2 pairs, written once. (3 held-out traces are too few for a
+    // held-out ρ, so no held-out D_x.)
     let dx = t.csv(
         "runs/evt",
         "SELECT count(*) AS n, count(DISTINCT set_id) AS sets FROM trace_distances",
@@ -276,6 +316,14 @@ fn bad_input_is_refused_with_exit_2() {
     t.run(&["evolve", "--run", "nowhere"]).code(2);
     t.write("p.toml", &pipeline("").replace("budget = 8", "budget = 0"));
     t.run(&["run", "p.toml"]).code(2).stderr_has("budget");
+    t.write("p.toml", &pipeline("dp = \"kld\""));
+    t.run(&["run", "p.toml"])
+        .code(2)
+        .stderr_has("dp")
+        .stderr_has("kl");
+    t.run(&["evolve", "--run", "empty", "--dp", "entropy"])
+        .code(2)
+        .stderr_has("cross-entropy");
 }
 
 #[test]
@@ -333,4 +381,47 @@ fn the_llm_proposer_drives_a_search_with_repairs_through_a_chat_server() {
     }
     let calls = t.csv("r", "SELECT count(*) AS n FROM llm_calls");
     assert_eq!(calls.lines().nth(1), Some("4"), "{calls}");
+}
+
+/// With enough held-out traces the acceptance uses the held-out ρ: the held-out D_x is stored as its
+/// own set, the best program's held-out histograms are stored, and SQL recomputes that ρ to 1e-9.
+#[test]
+fn acceptance_uses_the_held_out_rho_and_sql_recomputes_it() {
+    let t = TestRun::new();
+    let p = pipeline("holdout = 0.5\nconvergence_per_bin = 0")
+        .replace("scenes = 14", "scenes = 24")
+        .replace(
+            "labels = [\"ball slowing\", \"cushion rebound\"]",
+            "labels = [\"ball slowing\"]",
+        )
+        .replace("budget = 8", "budget = 2");
+    t.write("p.toml", &p);
+    t.run(&["run", "p.toml"]).ok();
+    let row = t.csv(
+        "runs/evt",
+        "SELECT holdout_rho IS NOT NULL AS has, holdout_set_id IS NOT NULL AS set, \
+         accepted = (best_nu > delta AND holdout_rho > 0) AS rule FROM evolution_labels",
+    );
+    assert_eq!(row.lines().nth(1), Some("true,true,true"), "{row}");
+    let sets = t.csv(
+        "runs/evt",
+        "SELECT count(DISTINCT set_id) AS n FROM trace_distances",
+    );
+    assert_eq!(sets.lines().nth(1), Some("2"), "{sets}");
+    let sql =
+        std::fs::read_to_string(repo().join("sql/evolution_fitness_correlation.sql")).unwrap();
+    let body: Vec<&str> = sql
+        .lines()
+        .filter(|l| !l.trim_start().starts_with("--"))
+        .collect();
+    let check = t.csv(
+        "runs/evt",
+        &format!(
+            "WITH s AS ({}) SELECT abs(s.rho - l.holdout_rho) < 1e-9 AS same, s.pairs >= 28 AS enough \
+             FROM s JOIN evolution_labels AS l ON l.run_stage = s.run_stage AND l.label = s.label \
+             WHERE s.split = 'holdout'",
+            body.join("\n")
+        ),
+    );
+    assert_eq!(check.lines().nth(1), Some("true,true"), "{check}");
 }

@@ -1,6 +1,7 @@
 //! `evolve`: learns detectors for labels by evolutionary search over a run's traces (the paper's
 //! Algorithms 1–3), starting from a library, and writes the `candidates`, `evolution_labels`,
-//! `evolution_convergence` and `trace_distances` tables and the grown library as a folder.
+//! `evolution_histograms`, `evolution_convergence` and `trace_distances` (training and held-out D_x)
+//! tables and the grown library as a folder.
 //!
 //! Resumable: each round of a label's search is a shard whose record holds the round's candidates, so a
 //! killed stage replays its finished rounds and continues; each label's tables are written by a last
@@ -17,8 +18,8 @@ use serde_json::{Value, json};
 
 use super::detector_setup::{DetectorSetup, SandboxParams};
 use super::trace_files::{read_traces, trace_file_sets};
-use crate::fitness::DistanceMatrix;
 use crate::fitness::table::{distances_batch, matrix_from_batches, set_id};
+use crate::fitness::{DistanceMatrix, Dp};
 use crate::llm::{LlmClient, LlmConfig, LlmSettings, Prompts};
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
@@ -27,7 +28,7 @@ use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
 use crate::search::candidate::candidates_batch;
 use crate::search::library_out::write_library;
 use crate::search::run::Checkpoint;
-use crate::search::tables::{convergence_batch, labels_batch};
+use crate::search::tables::{SetIds, convergence_batch, histograms_batch, labels_batch};
 use crate::search::{
     CandidateRecord, Discovery, EvalSettings, LlmProposer, MutateProposer, Proposer, SearchConfig,
     SearchError, Strategy, Temperatures,
@@ -41,10 +42,12 @@ pub static KIND: StageKind = StageKind {
     doc: "For each label in `labels` (default: every label of the library), searches for a detector program \
           maximising the paper's fitness ν = ρ + η − λ − ψ on the run's `env` traces (a training split; \
           `holdout` of them kept for the convergence statistics), starting from the library's detector \
-          for the label (or a skeleton), and adds the best to the library when ν > delta (Algorithm 2). \
+          for the label (or a skeleton), and adds the best to the library when ν > delta and its ρ on the \
+          held-out traces is positive (Algorithm 2; `allow_nonpositive_rho` drops the ρ test). `dp` chooses \
+          the annotation distance d_p (kl, js or the paper's literal cross-entropy). \
           Every candidate goes to the candidates table; the grown library is written as a folder \
           (default exports/<stage>/library) that `annotate` reads. See docs/evolution.md.",
-    writes: "candidates, evolution_labels, evolution_convergence, trace_distances, exports/<stage>/library/",
+    writes: "candidates, evolution_labels, evolution_histograms, evolution_convergence, trace_distances, exports/<stage>/library/",
     params: ParamsOf::of::<EvolveParams>(),
     build,
 };
@@ -109,13 +112,18 @@ pub struct EvolveParams {
     pub reset_period: u64,
     /// Acceptance threshold δ on ν.
     pub delta: f64,
+    /// Also accept a best detector whose ρ on the held-out traces is ≤ 0 (default: never; noise).
+    pub allow_nonpositive_rho: bool,
+    /// Annotation distance d_p of ρ and η: kl (symmetrised Kullback–Leibler, 0 for identical
+    /// annotations), js (Jensen–Shannon) or cross-entropy (the paper's wording; docs/evolution.md).
+    pub dp: Dp,
     /// Proposals requested at once.
     pub parallel: u64,
     /// Repair requests per failed child (proposers that repair).
     pub repair_attempts: u64,
     /// Training traces at most (and held-out traces at most).
     pub max_traces: u64,
-    /// Fraction of traces held out for the convergence statistics.
+    /// Fraction of traces held out (the acceptance test's ρ and the convergence statistics).
     pub holdout: f64,
     /// Training traces in the probe set (cheap checks).
     pub probe: u64,
@@ -164,6 +172,8 @@ impl EvolveParams {
             prompt_size: search.prompt_size as u64,
             reset_period: search.reset_period,
             delta: search.delta,
+            allow_nonpositive_rho: search.allow_nonpositive_rho,
+            dp: eval.dp,
             parallel: search.parallel as u64,
             repair_attempts: search.repair_attempts as u64,
             max_traces: 100,
@@ -215,6 +225,8 @@ pub struct EvolveSummary {
     pub proposer: String,
     /// Proposals per label.
     pub budget: u64,
+    /// The annotation distance d_p.
+    pub dp: Dp,
     /// Training traces.
     pub train: u64,
     /// Held-out traces.
@@ -259,8 +271,12 @@ pub struct LabelSummary {
     pub best_nu: f64,
     /// Every fitness term of the best candidate.
     pub best_terms: crate::fitness::FitnessTerms,
-    /// Whether the best candidate was added to the library (ν > δ).
+    /// Whether the best candidate was added to the library (ν > δ and held-out ρ > 0).
     pub accepted: bool,
+    /// `accepted`, `below_delta` or `nonpositive_rho`.
+    pub acceptance: crate::search::Acceptance,
+    /// ρ of the best candidate on the held-out traces (none without enough of them).
+    pub holdout_rho: Option<f64>,
     /// Candidates evaluated.
     pub candidates: u64,
     /// Best ν after each step.
@@ -337,6 +353,7 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
             reset_period: p.reset_period,
             budget: p.budget,
             delta: p.delta,
+            allow_nonpositive_rho: p.allow_nonpositive_rho,
             parallel: p.parallel.max(1) as usize,
             repair_attempts: p.repair_attempts.min(u64::from(u32::MAX)) as u32,
             temperatures: Temperatures::default(),
@@ -345,6 +362,7 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         seed: p.seed,
         eval: EvalSettings {
             bins: p.bins.max(1) as usize,
+            dp: p.dp,
             probe: p.probe.max(1) as usize,
             time_penalty: p.time_penalty,
         },
@@ -541,12 +559,15 @@ impl EvolveStage {
         Ok(out_dir)
     }
 
+    /// The D_x matrix of `train` (the training or held-out traces) and its set id: read from the run's
+    /// `trace_distances` when an earlier stage stored it, else computed and written as shard `shard`.
     fn training_distances(
         &self,
         ctx: &StageContext<'_>,
         env: Env,
         train: &[Trace],
-    ) -> Result<(DistanceMatrix, bool), StageError> {
+        shard: &str,
+    ) -> Result<(DistanceMatrix, String, bool), StageError> {
         let ids: Vec<String> = train.iter().map(|t| t.trace_id.clone()).collect();
         let sid = set_id(&ids, self.samples);
         let mut files: Vec<PathBuf> = ctx
@@ -561,14 +582,14 @@ impl EvolveStage {
         for f in files {
             let batches = crate::store::read_file(&f)?;
             if let Some(m) = matrix_from_batches(&sid, &ids, &batches) {
-                return Ok((m, true));
+                return Ok((m, sid, true));
             }
         }
         let m = DistanceMatrix::compute(train, self.samples);
         let b = distances_batch(&sid, &m)?;
-        ctx.write_batch("trace_distances", env, "dx", &b)?;
-        ctx.finish_shard("dx", &json!({"set_id": sid, "pairs": m.upper.len()}))?;
-        Ok((m, false))
+        ctx.write_batch("trace_distances", env, shard, &b)?;
+        ctx.finish_shard(shard, &json!({"set_id": sid, "pairs": m.upper.len()}))?;
+        Ok((m, sid, false))
     }
 }
 
@@ -577,6 +598,7 @@ struct LabelTables<'a> {
     stage: &'a str,
     env: Env,
     config: &'a SearchConfig,
+    sets: &'a SetIds,
     proposer: &'a str,
 }
 
@@ -621,8 +643,9 @@ impl StagingCheckpoint<'_, '_> {
         )?;
         put(
             "evolution_labels",
-            labels_batch(t.stage, t.config, t.proposer, m, r),
+            labels_batch(t.stage, t.config, t.sets, t.proposer, m, r),
         )?;
+        put("evolution_histograms", histograms_batch(t.stage, t.sets, r))?;
         put(
             "evolution_convergence",
             convergence_batch(t.stage, &r.convergence),
@@ -641,17 +664,24 @@ fn label_summary(r: &crate::search::LabelResult) -> (LabelSummary, String) {
         best_nu: o.best.terms.nu,
         best_terms: o.best.terms,
         accepted: r.accepted,
+        acceptance: r.acceptance,
+        holdout_rho: r.holdout_rho,
         candidates: o.records.len() as u64,
         best_by_step: o.best_by_step.clone(),
         wall_s: o.wall_s,
         propose_s: o.propose_s,
     };
+    let rho = r
+        .holdout_rho
+        .map_or(String::new(), |x| format!(", held-out ρ {x:.3}"));
+    let verdict = match r.acceptance {
+        crate::search::Acceptance::Accepted => "",
+        crate::search::Acceptance::BelowDelta => " (rejected: ν ≤ δ)",
+        crate::search::Acceptance::NonpositiveRho => " (rejected: ρ ≤ 0)",
+    };
     let line = format!(
-        "{}: ν {:.4} → {:.4}{}",
-        o.label,
-        o.seed_nu,
-        o.best.terms.nu,
-        if r.accepted { "" } else { " (rejected)" }
+        "{}: ν {:.4} → {:.4}{rho}{verdict}",
+        o.label, o.seed_nu, o.best.terms.nu,
     );
     (summary, line)
 }
@@ -676,7 +706,25 @@ impl Stage for EvolveStage {
         ctx.progress()
             .set_total(ctx.stage_id(), config.budget * self.labels.len() as u64);
         let t_dx = std::time::Instant::now();
-        let (dx, reused) = self.training_distances(ctx, env, &train)?;
+        let (dx, train_set, reused) = self.training_distances(ctx, env, &train, "dx")?;
+        let (holdout_dx, holdout_set, holdout_reused) =
+            if holdout.len() >= crate::search::discover::MIN_HOLDOUT {
+                let (m, sid, r) = self.training_distances(ctx, env, &holdout, "dx_holdout")?;
+                (m, Some(sid), r)
+            } else {
+                let empty = DistanceMatrix {
+                    ids: Vec::new(),
+                    upper: Vec::new(),
+                };
+                (empty, None, true)
+            };
+        let sets = SetIds {
+            dp: self.eval.dp,
+            train: train_set,
+            train_ids: dx.ids.clone(),
+            holdout: holdout_set,
+            holdout_ids: holdout_dx.ids.clone(),
+        };
         let dx_s = t_dx.elapsed().as_secs_f64();
         let mut limits = self.setup.limits.clone();
         limits.trace_cache = limits.trace_cache.max(train.len() + holdout.len() + 4);
@@ -693,6 +741,7 @@ impl Stage for EvolveStage {
             train: &train,
             holdout: &holdout,
             dx: &dx,
+            holdout_dx: &holdout_dx,
             config: &config,
             eval: self.eval.clone(),
             proposer: proposer.as_ref(),
@@ -711,6 +760,7 @@ impl Stage for EvolveStage {
                 stage: &stage,
                 env,
                 config: &config,
+                sets: &sets,
                 proposer: proposer.name(),
             };
             checkpoint.write_label(&tables, m, r, &mut rows)
@@ -733,6 +783,9 @@ impl Stage for EvolveStage {
         if !reused {
             *rows.entry("trace_distances".into()).or_default() += dx.upper.len() as u64;
         }
+        if !holdout_reused {
+            *rows.entry("trace_distances".into()).or_default() += holdout_dx.upper.len() as u64;
+        }
         let out_dir = self.write_evolved(ctx, &config, proposer.name(), &library)?;
         let wall: f64 = results.iter().map(|r| r.outcome.wall_s).sum();
         let prop: f64 = results.iter().map(|r| r.outcome.propose_s).sum();
@@ -754,6 +807,7 @@ impl Stage for EvolveStage {
                 strategy: config.strategy,
                 proposer: proposer.name().to_string(),
                 budget: config.budget,
+                dp: self.eval.dp,
                 train: train.len() as u64,
                 holdout: holdout.len() as u64,
                 dx: DxSummary {
