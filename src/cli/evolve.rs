@@ -208,6 +208,9 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
             if l.accepted { "accepted" } else { "rejected" }
         );
     }
+    if let Some(f) = s.proposals.failures() {
+        println!("proposals: {f}");
+    }
     println!(
         "wall time outside the proposer: {:.1} %",
         100.0 * s.outside_proposer_share

@@ -29,8 +29,8 @@ use crate::search::library_out::write_library;
 use crate::search::run::Checkpoint;
 use crate::search::tables::{convergence_batch, labels_batch};
 use crate::search::{
-    CandidateRecord, Discovery, EvalSettings, LlmProposer, MutateProposer, Proposer, SearchConfig,
-    SearchError, Strategy, Temperatures,
+    CandidateRecord, Discovery, EvalSettings, LlmProposer, MutateProposer, ProposalTally, Proposer,
+    SearchConfig, SearchError, Strategy, Temperatures,
 };
 use crate::trace::{Env, Trace};
 
@@ -225,6 +225,10 @@ pub struct EvolveSummary {
     pub labels: Vec<LabelSummary>,
     /// Labels whose best detector was added to the library.
     pub accepted: usize,
+    /// The proposals of every label by outcome (a stage whose every proposal failed is an error
+    /// instead; absent from summaries recorded before it was added).
+    #[serde(default)]
+    pub proposals: ProposalTally,
     /// The grown library's folder.
     pub library: String,
     /// Wall time of the stage (s).
@@ -730,6 +734,16 @@ impl Stage for EvolveStage {
                     .unwrap_or_else(|| e.into()));
             }
         };
+        // A search whose every proposal failed learned nothing: its "accepted" detectors would be
+        // the seed programs. Partial failures are reported in the summary.
+        let proposals = ProposalTally::of(results.iter().flat_map(|r| &r.outcome.records));
+        if proposals.all_failed() {
+            return Err(SearchError::AllProposalsFailed {
+                proposer: proposer.name().to_string(),
+                tally: proposals,
+            }
+            .into());
+        }
         if !reused {
             *rows.entry("trace_distances".into()).or_default() += dx.upper.len() as u64;
         }
@@ -737,8 +751,12 @@ impl Stage for EvolveStage {
         let wall: f64 = results.iter().map(|r| r.outcome.wall_s).sum();
         let prop: f64 = results.iter().map(|r| r.outcome.propose_s).sum();
         let accepted = results.iter().filter(|r| r.accepted).count();
+        let failures = proposals
+            .failures()
+            .map(|f| format!("; {f}"))
+            .unwrap_or_default();
         let line = format!(
-            "{} label(s) on {} training / {} held-out {env} trace(s), {accepted} accepted; {}; library: {}",
+            "{} label(s) on {} training / {} held-out {env} trace(s), {accepted} accepted; {}{failures}; library: {}",
             results.len(),
             train.len(),
             holdout.len(),
@@ -763,6 +781,7 @@ impl Stage for EvolveStage {
                 },
                 labels: labels_summary,
                 accepted,
+                proposals,
                 library: out_dir.to_string_lossy().into_owned(),
                 wall_s: wall,
                 propose_s: prop,
