@@ -235,7 +235,14 @@ impl LlmClient {
     /// the log (`WARN` lines). Notices come from the client's watch thread.
     pub fn set_wait_observer(&self, observer: WaitObserver) {
         if let Some(b) = &self.board {
-            b.set_observer(observer);
+            b.set_observer(Some(observer));
+        }
+    }
+
+    /// Sends the notices to the log again (and drops the observer set before).
+    pub fn clear_wait_observer(&self) {
+        if let Some(b) = &self.board {
+            b.set_observer(None);
         }
     }
 

@@ -141,8 +141,8 @@ impl Board {
         InFlight { board: self, key }
     }
 
-    pub fn set_observer(&self, observer: WaitObserver) {
-        *lock(&self.observer) = Some(observer);
+    pub fn set_observer(&self, observer: Option<WaitObserver>) {
+        *lock(&self.observer) = observer;
     }
 
     /// The notice due at `now`, if any (and marks it sent).

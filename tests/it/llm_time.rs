@@ -142,7 +142,7 @@ llm = {{ base_url = "{url}", model = "m", call_timeout_s = 3, wait_notice_s = 1 
         .stderr_has("gave up after 1 attempt(s)")
         .stderr_has("the call's time limit of 3 s (call_timeout_s) is used up")
         .stderr_has(&format!(
-            "waiting for {}/v1/chat/completions (attempt 1/5, ",
+            "[evo] waiting for {}/v1/chat/completions (attempt 1/5, ",
             server.url()
         ))
         .stderr_has("2 requests unanswered");

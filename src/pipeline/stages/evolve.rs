@@ -91,8 +91,8 @@ pub struct EvolveParams {
     /// Where children come from: syntax-tree edits (mutate) or an LLM; auto = llm when an endpoint
     /// (llm.base_url or ANNOTRACE_LLM_BASE_URL) or a replay run is configured, else mutate.
     pub proposer: ProposerChoice,
-    /// LLM settings (base_url, model, parallel, timeout_s, max_retries, max_calls, max_tokens,
-    /// temperature, replay, …; docs/llm.md), over the ANNOTRACE_LLM_* variables.
+    /// LLM settings (base_url, model, parallel, timeout_s, call_timeout_s, max_retries, max_calls,
+    /// max_tokens, temperature, replay, …; docs/llm.md), over the ANNOTRACE_LLM_* variables.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub llm: Option<LlmSettings>,
     /// Prompt template folder, relative to the project (default: `<project>/prompts` if present, else
@@ -660,6 +660,39 @@ fn label_summary(r: &crate::search::LabelResult) -> (LabelSummary, String) {
     (summary, line)
 }
 
+/// Runs `f` with the LLM client's "still waiting" notices shown as notes of the stage's progress (so
+/// the command line prints them with its other progress lines rather than as log lines).
+fn with_wait_notices<T>(
+    ctx: &StageContext<'_>,
+    client: Option<&LlmClient>,
+    f: impl FnOnce() -> T,
+) -> T {
+    let Some(client) = client else {
+        return f();
+    };
+    let (tx, rx) = std::sync::mpsc::channel::<String>();
+    client.set_wait_observer(Arc::new(move |n| {
+        let _ = tx.send(n.to_string());
+    }));
+    /// Drops the observer (the only sender) however `f` ends, which ends the printing thread.
+    struct Clear<'c>(&'c LlmClient);
+    impl Drop for Clear<'_> {
+        fn drop(&mut self) {
+            self.0.clear_wait_observer();
+        }
+    }
+    let (progress, stage) = (ctx.progress(), ctx.stage_id());
+    std::thread::scope(|s| {
+        s.spawn(move || {
+            for line in rx {
+                progress.note(stage, &line);
+            }
+        });
+        let _clear = Clear(client);
+        f()
+    })
+}
+
 impl Stage for EvolveStage {
     fn fingerprint_extra(&self) -> Result<Value, StageError> {
         let h = |s: &str| crate::search::code_hash(s);
@@ -720,7 +753,9 @@ impl Stage for EvolveStage {
             checkpoint.write_label(&tables, m, r, &mut rows)
         };
         let base = self.setup.library.detectors.clone();
-        let result = discovery.run(base, &self.labels, &mut after);
+        let result = with_wait_notices(ctx, llm_client.as_deref(), || {
+            discovery.run(base, &self.labels, &mut after)
+        });
         if let Some(c) = &llm_client {
             c.flush()?;
         }
