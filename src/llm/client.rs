@@ -416,18 +416,21 @@ impl LlmClient {
                     u64::from_str_radix(&call.request_hash[..16], 16).unwrap_or(0)
                 }),
         );
-        let call_started = Instant::now();
-        let deadline = call_started + self.config.call_timeout;
+        // The call's clock starts when its first attempt has a slot: waiting for a slot is the run's
+        // own queue (more proposals than the endpoint's parallel slots), not the endpoint's delay.
+        let mut clock: Option<(Instant, Instant)> = None;
         let mut attempt: u32 = 0;
         loop {
             attempt += 1;
             let started_at_ms = now_ms();
             let t0 = Instant::now();
-            let timeout;
+            let (timeout, call_started, deadline);
             let outcome = {
                 let _slot = self.slots.acquire();
-                // The time left is measured once the slot is ours: waiting for a slot is the run's own
-                // queue, not the endpoint's delay.
+                (call_started, deadline) = *clock.get_or_insert_with(|| {
+                    let now = Instant::now();
+                    (now, now + self.config.call_timeout)
+                });
                 timeout = self.config.timeout.min(
                     deadline
                         .saturating_duration_since(Instant::now())

@@ -188,3 +188,33 @@ fn attempts_recorded_before_a_kill_survive_it() {
         .collect();
     assert_eq!(got, [(1, "http_error", Some(503))]);
 }
+
+#[test]
+fn waiting_for_a_free_slot_does_not_count_against_a_calls_time_limit() {
+    // One slot, answers after 1.5 s, a 2 s limit per call: the second call waits 1.5 s for the slot
+    // (the run's own queue), then has its whole limit for the endpoint.
+    let server = ChatServer::start(vec![
+        Reply::slow(1500, Reply::chat("first")),
+        Reply::slow(1500, Reply::chat("second")),
+    ]);
+    let mut c = LlmConfig::new(server.url(), "m");
+    c.parallel = 1;
+    c.call_timeout = Duration::from_secs(2);
+    let client = LlmClient::new(c, None).unwrap();
+    let answers: Vec<String> = std::thread::scope(|s| {
+        let calls: Vec<_> = (0..2)
+            .map(|i| {
+                let client = &client;
+                s.spawn(move || {
+                    std::thread::sleep(Duration::from_millis(100 * i));
+                    ask(client).map(|r| r.content)
+                })
+            })
+            .collect();
+        calls
+            .into_iter()
+            .map(|h| h.join().unwrap().unwrap())
+            .collect()
+    });
+    assert_eq!(answers, ["first", "second"]);
+}
