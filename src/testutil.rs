@@ -1,5 +1,6 @@
 //! Deterministic synthetic traces for tests and benchmarks (not physics: smooth, plausible motion with
-//! known numbers, so that tests can compute expected aggregates by hand).
+//! known numbers, so that tests can compute expected aggregates by hand), and the importer's test oracle
+//! ([`import_round_trip`]) shared by the fuzz target `json_import` and the seeded sweep of the test suite.
 
 use serde_json::json;
 
@@ -109,4 +110,63 @@ fn object(env: Env, k: usize, s: usize) -> Object {
         body,
         extra: JsonMap::new(),
     }
+}
+
+/// The JSON importer's contract on any bytes, checked: reading `bytes` as `kind` ends in traces and
+/// typed errors (never a panic), and every trace it accepts is storable and exportable without loss —
+/// its Arrow rows decode to the same trace, and its export imports to the same trace. Returns the
+/// number of traces accepted, or what broke the contract.
+pub fn import_round_trip(
+    bytes: &[u8],
+    kind: crate::trace::json::SourceKind,
+    env: Env,
+) -> Result<usize, String> {
+    use crate::trace::{TraceBatchBuilder, TraceRows, decode_trace, json};
+    let mut accepted = 0;
+    for result in json::read_bytes("fuzz", bytes, kind, env) {
+        let trace = match result {
+            Ok(t) => t,
+            Err(e) => {
+                if e.to_string().is_empty() {
+                    return Err(format!("an error without a message: {e:?}"));
+                }
+                continue;
+            }
+        };
+        accepted += 1;
+        if let Some(what) = trace.first_non_finite() {
+            return Err(format!("accepted a non-finite value {what:?}"));
+        }
+        let b = TraceBatchBuilder::from_trace(&trace, "scene", "fuzz")
+            .map_err(|e| format!("the trace does not convert to Arrow rows: {e}"))?;
+        let rows = TraceRows {
+            env,
+            trace: &b.traces,
+            timesteps: &b.timesteps,
+            frames: &b.frames,
+            events: &b.events,
+        };
+        let back = decode_trace(&rows).map_err(|e| format!("its rows do not decode: {e}"))?;
+        if back != trace {
+            return Err(format!(
+                "its rows decode to another trace:\n{back:?}\ninstead of\n{trace:?}"
+            ));
+        }
+        let text = json::to_value(&trace).to_string();
+        let again = json::read_str("again", &text, env);
+        match again.as_slice() {
+            [Ok(t)] if *t == trace => {}
+            [Ok(t)] => {
+                return Err(format!(
+                    "its export imports to another trace:\n{t:?}\ninstead of\n{trace:?}"
+                ));
+            }
+            other => {
+                return Err(format!(
+                    "its export {text} does not import as one trace: {other:?}"
+                ));
+            }
+        }
+    }
+    Ok(accepted)
 }

@@ -222,6 +222,9 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
             l.acceptance.as_str()
         );
     }
+    if let Some(f) = s.proposals.failures() {
+        println!("proposals: {f}");
+    }
     println!(
         "wall time outside the proposer: {:.1} %",
         100.0 * s.outside_proposer_share

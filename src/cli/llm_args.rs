@@ -17,9 +17,13 @@ pub struct LlmArgs {
     /// Model name (overrides ANNOTRACE_LLM_MODEL).
     #[arg(long)]
     pub llm_model: Option<String>,
-    /// Whole-request timeout in seconds (default 300).
+    /// Timeout of one HTTP request in seconds (default 300).
     #[arg(long)]
     pub llm_timeout: Option<f64>,
+    /// The longest one LLM call may take in seconds, retries and waits included (default 300); an
+    /// endpoint that hangs or keeps refusing fails the command after this long (exit 3).
+    #[arg(long)]
+    pub llm_call_timeout: Option<f64>,
     /// Retries on 408/429/5xx, timeouts and connection errors (default 4).
     #[arg(long)]
     pub llm_retries: Option<u32>,
@@ -51,6 +55,7 @@ impl LlmArgs {
             base_url: self.llm_base_url.clone(),
             model: self.llm_model.clone(),
             timeout_s: self.llm_timeout,
+            call_timeout_s: self.llm_call_timeout,
             max_retries: self.llm_retries,
             parallel: self.llm_parallel,
             max_calls: self.llm_max_calls,

@@ -2,7 +2,8 @@
 //!
 //! The delay before retry `n` (1-based) is `min(max, base · 2^(n-1))` scaled by a jitter factor in
 //! [0.5, 1) drawn from the request's seed and `n` (so a rerun waits the same), and never less than a
-//! `Retry-After` the server sent (capped at `max`, so a server asking for an hour does not stall a run).
+//! `Retry-After` the server sent. Whether that wait fits in the call's time limit is the client's
+//! decision (a server asking for an hour ends the call at once rather than stalling a run).
 
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
@@ -23,7 +24,7 @@ pub(crate) fn delay(
     ));
     let jittered = capped.mul_f64(0.5 + 0.5 * u);
     match retry_after {
-        Some(ra) => jittered.max(ra.min(max)),
+        Some(ra) => jittered.max(ra),
         None => jittered,
     }
 }
@@ -101,14 +102,18 @@ mod tests {
     }
 
     #[test]
-    fn retry_after_is_a_floor_capped_at_the_maximum() {
+    fn retry_after_is_a_floor_left_for_the_client_to_judge() {
         let b = Duration::from_millis(10);
         let max = Duration::from_secs(5);
         assert_eq!(
             delay(b, max, 1, 0, Some(Duration::from_secs(2))),
             Duration::from_secs(2)
         );
-        assert_eq!(delay(b, max, 1, 0, Some(Duration::from_secs(3600))), max);
+        // Not silently shortened: the client compares it with the call's time left.
+        assert_eq!(
+            delay(b, max, 1, 0, Some(Duration::from_secs(3600))),
+            Duration::from_secs(3600)
+        );
     }
 
     #[test]

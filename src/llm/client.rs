@@ -5,13 +5,18 @@
 //! (seeded jitter, at least the server's `Retry-After`) and another request, up to `max_retries` →
 //! the answer, with token counts from `usage` or estimated. Every attempt becomes an `llm_calls` row.
 //!
+//! Time is bounded per call: no attempt outlives `call_timeout` (its request timeout is cut to the time
+//! left), and a retry whose wait — the backoff or the server's `Retry-After` — would not leave time for
+//! another attempt is not made: the call ends at once with [`LlmError::GaveUp`]. While requests are
+//! unanswered, the client's watch thread (`llm::waiting`) reports progress and writes recorded rows.
+//!
 //! It uses reqwest's **blocking** API: every caller in annotrace is synchronous (search threads, the
 //! CLI), and parallelism comes from calling one shared client from several threads. Do not call it
 //! from inside an async runtime.
 
 use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Condvar, Mutex};
+use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant, SystemTime};
 
 use super::backoff::{delay, parse_retry_after};
@@ -21,10 +26,15 @@ use super::error::LlmError;
 use super::message::{ChatReply, ChatRequest, excerpt, parse_answer};
 use super::record::{CallLog, CallRecord, now_ms, status};
 use super::replay::ReplayIndex;
+use super::waiting::{Board, WaitObserver, Watch};
 use crate::detect::count_tokens;
 use crate::digest::sha256_hex;
 use crate::rng::splitmix64;
 use crate::store::RunDir;
+
+/// The least time worth starting another attempt with: a retry that would leave less of the call's
+/// limit is not made.
+const MIN_ATTEMPT: Duration = Duration::from_secs(1);
 
 /// Keys shorter than this are not scrubbed from recorded text (replacing every `x` would mangle the
 /// record, and such a key is no secret).
@@ -55,7 +65,10 @@ pub struct LlmClient {
     http: Option<reqwest::blocking::Client>,
     slots: Slots,
     meter: Meter,
-    log: Option<CallLog>,
+    log: Option<Arc<CallLog>>,
+    board: Option<Arc<Board>>,
+    /// Declared after `log` and `board`'s owners above only by convention: it holds them weakly.
+    _watch: Option<Watch>,
     replay: Option<ReplayIndex>,
     record_replayed: bool,
     session: String,
@@ -166,10 +179,27 @@ impl LlmClient {
             std::process::id(),
             SESSIONS.fetch_add(1, Ordering::Relaxed)
         );
+        let log = record.map(|r| Arc::new(CallLog::new(r, &session)));
+        let board = endpoint.is_some().then(|| {
+            Arc::new(Board::new(
+                shown.clone(),
+                config.max_retries.saturating_add(1),
+                config.call_timeout,
+                config.wait_notice,
+            ))
+        });
+        let watch = (log.is_some() || board.is_some()).then(|| {
+            Watch::start(
+                board.as_ref().map(Arc::downgrade),
+                log.as_ref().map(Arc::downgrade),
+            )
+        });
         Ok(LlmClient {
             slots: Slots::new(config.parallel),
             meter: Meter::new(config.budget),
-            log: record.map(|r| CallLog::new(r, &session)),
+            log,
+            board,
+            _watch: watch,
             endpoint,
             shown,
             http,
@@ -201,7 +231,23 @@ impl LlmClient {
         self.meter.usage()
     }
 
-    /// Writes buffered `llm_calls` rows now (also done every few calls and on drop).
+    /// Sends the "still waiting" notices ([`WaitNotice`](super::WaitNotice)) to `observer` instead of
+    /// the log (`WARN` lines). Notices come from the client's watch thread.
+    pub fn set_wait_observer(&self, observer: WaitObserver) {
+        if let Some(b) = &self.board {
+            b.set_observer(Some(observer));
+        }
+    }
+
+    /// Sends the notices to the log again (and drops the observer set before).
+    pub fn clear_wait_observer(&self) {
+        if let Some(b) = &self.board {
+            b.set_observer(None);
+        }
+    }
+
+    /// Writes buffered `llm_calls` rows now (also done every few calls, within about a second of a
+    /// row's arrival, and on drop).
     pub fn flush(&self) -> Result<(), LlmError> {
         match &self.log {
             Some(log) => log.flush(),
@@ -370,15 +416,32 @@ impl LlmClient {
                     u64::from_str_radix(&call.request_hash[..16], 16).unwrap_or(0)
                 }),
         );
+        // The call's clock starts when its first attempt has a slot: waiting for a slot is the run's
+        // own queue (more proposals than the endpoint's parallel slots), not the endpoint's delay.
+        let mut clock: Option<(Instant, Instant)> = None;
         let mut attempt: u32 = 0;
         loop {
             attempt += 1;
             let started_at_ms = now_ms();
             let t0 = Instant::now();
+            let (timeout, call_started, deadline);
             let outcome = {
                 let _slot = self.slots.acquire();
+                (call_started, deadline) = *clock.get_or_insert_with(|| {
+                    let now = Instant::now();
+                    (now, now + self.config.call_timeout)
+                });
+                timeout = self.config.timeout.min(
+                    deadline
+                        .saturating_duration_since(Instant::now())
+                        .max(MIN_ATTEMPT),
+                );
+                let _waiting = self
+                    .board
+                    .as_ref()
+                    .map(|b| b.enter(&call.req.purpose, attempt, call_started));
                 self.meter.add_request();
-                self.send_once(http, endpoint, &call.body_text)
+                self.send_once(http, endpoint, &call.body_text, timeout)
             };
             let latency = t0.elapsed();
             let latency_ms = latency.as_secs_f64() * 1e3;
@@ -447,6 +510,16 @@ impl LlmClient {
                             jitter_seed,
                             retry_after,
                         );
+                        let left = deadline.saturating_duration_since(Instant::now());
+                        if wait.saturating_add(MIN_ATTEMPT) > left {
+                            return Err(self.gave_up(
+                                attempt,
+                                call_started,
+                                retry_after.filter(|ra| *ra >= wait),
+                                left,
+                                &message,
+                            ));
+                        }
                         tracing::warn!(
                             "{}: {}; retry {attempt} of {} in {:.1} s",
                             self.shown,
@@ -457,9 +530,38 @@ impl LlmClient {
                         std::thread::sleep(wait);
                         continue;
                     }
-                    return Err(self.final_error(st, http_status, body, message, attempt));
+                    return Err(self.final_error(st, http_status, body, message, attempt, timeout));
                 }
             }
+        }
+    }
+
+    /// The error of a call that stops retrying because the next attempt would not fit in its time limit
+    /// (`retry_after`: the server's wait, when that is what did not fit).
+    fn gave_up(
+        &self,
+        attempts: u32,
+        call_started: Instant,
+        retry_after: Option<Duration>,
+        left: Duration,
+        last: &str,
+    ) -> LlmError {
+        let limit = self.config.call_timeout.as_secs_f64();
+        let reason = match retry_after {
+            Some(ra) => format!(
+                "the endpoint asks to retry after {:.0} s, more than the {:.0} s left of the call's \
+                 {limit:.0} s limit (call_timeout_s)",
+                ra.as_secs_f64(),
+                left.as_secs_f64()
+            ),
+            None => format!("the call's time limit of {limit:.0} s (call_timeout_s) is used up"),
+        };
+        LlmError::GaveUp {
+            url: self.shown.clone(),
+            attempts,
+            elapsed_s: call_started.elapsed().as_secs_f64(),
+            reason,
+            last: self.scrub(last),
         }
     }
 
@@ -471,6 +573,7 @@ impl LlmClient {
         body: Option<String>,
         message: String,
         attempts: u32,
+        timeout: Duration,
     ) -> LlmError {
         let url = self.shown.clone();
         match (st, http_status) {
@@ -482,7 +585,7 @@ impl LlmClient {
             },
             (status::TIMEOUT, _) => LlmError::Timeout {
                 url,
-                seconds: self.config.timeout.as_secs_f64(),
+                seconds: timeout.as_secs_f64(),
                 attempts,
             },
             (status::BAD_RESPONSE, _) => LlmError::BadResponse {
@@ -497,16 +600,23 @@ impl LlmClient {
         }
     }
 
-    fn send_once(&self, http: &reqwest::blocking::Client, endpoint: &str, body: &str) -> Attempt {
+    fn send_once(
+        &self,
+        http: &reqwest::blocking::Client,
+        endpoint: &str,
+        body: &str,
+        timeout: Duration,
+    ) -> Attempt {
         let mut rb = http
             .post(endpoint)
+            .timeout(timeout)
             .header(reqwest::header::CONTENT_TYPE, "application/json")
             .body(body.to_string());
         if let Some(k) = &self.config.api_key {
             rb = rb.bearer_auth(k.expose());
         }
         let transport = |e: reqwest::Error| {
-            let timeout = e.is_timeout();
+            let timed_out = e.is_timeout();
             let e = e.without_url();
             let mut message = e.to_string();
             let mut src = std::error::Error::source(&e);
@@ -515,15 +625,12 @@ impl LlmClient {
                 message.push_str(&s.to_string());
                 src = s.source();
             }
-            if timeout {
+            if timed_out {
                 Attempt::Failed {
                     status: status::TIMEOUT,
                     http_status: None,
                     body: None,
-                    message: format!(
-                        "no answer within {:.1} s",
-                        self.config.timeout.as_secs_f64()
-                    ),
+                    message: format!("no answer within {:.1} s", timeout.as_secs_f64()),
                     retry_after: None,
                     retryable: true,
                 }

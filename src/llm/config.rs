@@ -23,6 +23,14 @@ pub const ENV_MODEL: &str = "ANNOTRACE_LLM_MODEL";
 /// Environment variable: the bearer token (optional; local servers need none).
 pub const ENV_API_KEY: &str = "ANNOTRACE_LLM_API_KEY";
 
+/// Default whole-request timeout of one attempt: local models writing a long answer are slow.
+pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(300);
+/// Default limit of one call, attempts and waits included: a hung or refusing endpoint ends a call
+/// after at most five minutes (exit code 3), instead of `max_retries + 1` full timeouts.
+pub const DEFAULT_CALL_TIMEOUT: Duration = Duration::from_secs(300);
+/// Default interval of the "still waiting" notices.
+pub const DEFAULT_WAIT_NOTICE: Duration = Duration::from_secs(15);
+
 /// A secret bearer token. Its `Debug` and `Display` print `[redacted]`; the only way to the text is
 /// [`ApiKey::expose`], used for the `Authorization` header and to scrub recorded text.
 #[derive(Clone, PartialEq, Eq)]
@@ -83,7 +91,8 @@ pub struct ReplayConfig {
 /// base_url = "http://localhost:8080"
 /// model = "qwen2.5-coder-7b-instruct"
 /// parallel = 4            # the server's parallel slots
-/// timeout_s = 300
+/// timeout_s = 300       # one request
+/// call_timeout_s = 300  # one call, retries and waits included
 /// max_retries = 4
 /// max_calls = 500
 /// temperature = 0.8
@@ -100,9 +109,17 @@ pub struct LlmSettings {
     /// Name of the environment variable holding the key (default `ANNOTRACE_LLM_API_KEY`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub api_key_env: Option<String>,
-    /// Whole-request timeout (s); default 300 (local models are slow).
+    /// Whole-request timeout (s) of one HTTP attempt; default 300 (local models are slow).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub timeout_s: Option<f64>,
+    /// The longest one call may take (s), every attempt and wait between attempts included; default
+    /// 300. A retry (or a server's `Retry-After`) that does not fit in what is left ends the call at
+    /// once instead.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub call_timeout_s: Option<f64>,
+    /// While a request is unanswered, a "still waiting" notice every this many seconds (s); default 15.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wait_notice_s: Option<f64>,
     /// Connection timeout (s); default 10.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub connect_timeout_s: Option<f64>,
@@ -112,7 +129,8 @@ pub struct LlmSettings {
     /// First backoff delay (s), doubled per retry; default 1.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub backoff_base_s: Option<f64>,
-    /// Longest backoff delay (s), also the cap on a server's `Retry-After`; default 60.
+    /// Longest backoff delay (s) of the client's own doubling; default 60. (A server's `Retry-After` is
+    /// honoured when it fits in the call's time left, see `call_timeout_s`.)
     #[serde(skip_serializing_if = "Option::is_none")]
     pub backoff_max_s: Option<f64>,
     /// Requests in flight at once (the endpoint's parallel slots); default 4.
@@ -150,15 +168,19 @@ pub struct LlmConfig {
     pub model: String,
     /// Bearer token, if any.
     pub api_key: Option<ApiKey>,
-    /// Whole-request timeout.
+    /// Whole-request timeout of one attempt.
     pub timeout: Duration,
+    /// The longest one call may take, attempts and waits included.
+    pub call_timeout: Duration,
+    /// Interval of the "still waiting" notices while a request is unanswered.
+    pub wait_notice: Duration,
     /// Connection timeout.
     pub connect_timeout: Duration,
     /// Retries after the first attempt.
     pub max_retries: u32,
     /// First backoff delay.
     pub backoff_base: Duration,
-    /// Longest backoff delay and cap on `Retry-After`.
+    /// Longest backoff delay of the client's own doubling.
     pub backoff_max: Duration,
     /// Requests in flight at once.
     pub parallel: usize,
@@ -180,7 +202,9 @@ impl Default for LlmConfig {
             base_url: None,
             model: String::new(),
             api_key: None,
-            timeout: Duration::from_secs(300),
+            timeout: DEFAULT_TIMEOUT,
+            call_timeout: DEFAULT_CALL_TIMEOUT,
+            wait_notice: DEFAULT_WAIT_NOTICE,
             connect_timeout: Duration::from_secs(10),
             max_retries: 4,
             backoff_base: Duration::from_secs(1),
@@ -255,6 +279,12 @@ impl LlmConfig {
         };
         if let Some(v) = settings.timeout_s {
             c.timeout = secs("timeout_s", v)?;
+        }
+        if let Some(v) = settings.call_timeout_s {
+            c.call_timeout = secs("call_timeout_s", v)?;
+        }
+        if let Some(v) = settings.wait_notice_s {
+            c.wait_notice = secs("wait_notice_s", v)?;
         }
         if let Some(v) = settings.connect_timeout_s {
             c.connect_timeout = secs("connect_timeout_s", v)?;

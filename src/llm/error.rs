@@ -45,6 +45,24 @@ pub enum LlmError {
         /// How many requests were sent.
         attempts: u32,
     },
+    /// A retryable failure (408/429/5xx, timeout, connection) whose next attempt would not fit in the
+    /// call's time limit (`call_timeout_s`), or whose server asked for a `Retry-After` beyond it: the
+    /// call ends at once instead of waiting.
+    #[error(
+        "{url}: gave up after {attempts} attempt(s) in {elapsed_s:.1} s: {reason}; the last attempt: {last}"
+    )]
+    GaveUp {
+        /// The endpoint.
+        url: String,
+        /// How many requests were sent.
+        attempts: u32,
+        /// Time the call took (s).
+        elapsed_s: f64,
+        /// Why no further attempt was made (the limit, or the server's `Retry-After`).
+        reason: String,
+        /// What the last attempt got.
+        last: String,
+    },
     /// The endpoint answered 200 but not with a chat completion.
     #[error("{url}: the answer is not a chat completion: {message}")]
     BadResponse {
@@ -105,7 +123,10 @@ impl LlmError {
     pub fn is_unavailable(&self) -> bool {
         matches!(
             self,
-            LlmError::Status { .. } | LlmError::Timeout { .. } | LlmError::Connection { .. }
+            LlmError::Status { .. }
+                | LlmError::Timeout { .. }
+                | LlmError::Connection { .. }
+                | LlmError::GaveUp { .. }
         )
     }
 }

@@ -1,7 +1,8 @@
 //! Language models: an OpenAI-compatible chat-completions client, prompt templates, and the parsing of
 //! answers into code and labels.
 //!
-//! **Owns:** the HTTP client ([`LlmClient`]: concurrency limit, timeouts, retries with seeded backoff,
+//! **Owns:** the HTTP client ([`LlmClient`]: concurrency limit, timeouts and a time limit per call,
+//! retries with seeded backoff, "still waiting" notices ([`WaitNotice`]),
 //! budget, recording every attempt in the run's `llm_calls` table, replay from it), its configuration
 //! ([`LlmConfig`], from [`LlmSettings`] and the `ANNOTRACE_LLM_*` variables the caller passes in), the
 //! prompt templates of `prompts/` ([`Prompts`]), code extraction ([`extract_code`]) and label
@@ -39,12 +40,13 @@ mod message;
 mod prompt;
 pub mod record;
 mod replay;
+mod waiting;
 
 pub use self::budget::Usage;
 pub use self::client::LlmClient;
 pub use self::config::{
-    ApiKey, Budget, ENV_API_KEY, ENV_BASE_URL, ENV_MODEL, LlmConfig, LlmSettings, ReplayConfig,
-    endpoint_url, redact_url,
+    ApiKey, Budget, DEFAULT_CALL_TIMEOUT, DEFAULT_TIMEOUT, DEFAULT_WAIT_NOTICE, ENV_API_KEY,
+    ENV_BASE_URL, ENV_MODEL, LlmConfig, LlmSettings, ReplayConfig, endpoint_url, redact_url,
 };
 pub use self::error::LlmError;
 pub use self::extract::{ExtractError, Fence, extract_code, fences, strip_think};
@@ -57,3 +59,4 @@ pub use self::prompt::{
     EvolveContext, LabelsContext, LibraryEntry, ParentView, PromptSource, Prompts, RepairContext,
 };
 pub use self::record::{CallRecord, read_calls};
+pub use self::waiting::{WaitNotice, WaitObserver};

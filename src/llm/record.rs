@@ -3,9 +3,11 @@
 //!
 //! Parquet files cannot grow, so "appending" means adding files: a client buffers rows and writes
 //! `llm_calls/llm-<session>.<nnnnn>.parquet` (atomically, through [`ParquetSink`]) every
-//! [`FLUSH_EVERY`] rows or when the oldest buffered row is [`FLUSH_AFTER`] old, on `CallLog::flush`
-//! and when dropped. A killed process loses at most the calls of the last [`FLUSH_AFTER`] (calls take
-//! seconds, so that is one or two); no reader ever sees a partial file. Every text column has the API key
+//! [`FLUSH_EVERY`] rows, as soon as the oldest buffered row is [`FLUSH_AFTER`] old (checked on every
+//! row and by the client's watch thread, `llm::waiting`, several times a second — so also while the
+//! client waits on a hung request or a `Retry-After`), on `CallLog::flush` and when dropped. A killed
+//! process loses at most the attempts that ended in its last second or so; no reader ever sees a
+//! partial file. Every text column has the API key
 //! scrubbed before it is stored.
 
 use std::path::PathBuf;
@@ -329,6 +331,16 @@ impl CallLog {
             self.write(&mut st)?;
         }
         Ok(())
+    }
+
+    /// Writes buffered rows when the oldest is at least `age` old (the client's watch thread calls
+    /// this every fraction of a second, so a row never waits for the next call to be written).
+    pub fn flush_older_than(&self, age: std::time::Duration) -> Result<(), LlmError> {
+        let mut st = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        match st.oldest {
+            Some(t) if t.elapsed() >= age => self.write(&mut st),
+            _ => Ok(()),
+        }
     }
 
     /// Writes buffered rows, if any.

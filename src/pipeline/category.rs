@@ -229,7 +229,9 @@ impl Categorize for SearchError {
     fn category(&self) -> ErrorCategory {
         match self {
             SearchError::Proposer { source, .. } => source.category(),
-            SearchError::Seed { .. } => ErrorCategory::Failed,
+            SearchError::Seed { .. } | SearchError::AllProposalsFailed { .. } => {
+                ErrorCategory::Failed
+            }
             SearchError::Checkpoint(_) => ErrorCategory::Io,
         }
     }

@@ -9,7 +9,8 @@
 //! - [`evaluator`]: cheap checks (probe set, behaviour signatures) and Evaluate in the worker pool;
 //! - [`run`]: one label's search in rounds, checkpointed and resumable; [`discover`]: Algorithm 2;
 //! - [`candidate`]: the `candidates` table; [`library_out`]: the grown library as a folder;
-//!   [`tables`]: the other evolution tables.
+//!   [`tables`]: the other evolution tables; [`tally`]: proposals by outcome (every one failed is an
+//!   error).
 //!
 //! **Owns:** everything above. **Does not:** run candidate code in this process (`detect/` workers do),
 //! compute distances (`fitness/`), make HTTP requests (`llm/` does, and records each call in the run's
@@ -27,6 +28,7 @@ pub mod proposer;
 pub mod run;
 pub mod skeleton;
 pub mod tables;
+pub mod tally;
 
 pub use self::candidate::{CandidateRecord, code_hash};
 pub use self::discover::{Acceptance, ConvergenceRow, Discovery, LabelResult};
@@ -38,3 +40,4 @@ pub use self::proposer::{Parent, Proposal, ProposalRequest, ProposeError, Propos
 pub use self::run::{
     Checkpoint, LabelOutcome, LabelSearch, MemoryCheckpoint, SearchConfig, SearchError,
 };
+pub use self::tally::ProposalTally;

@@ -100,6 +100,19 @@ pub enum SearchError {
     /// Saving or loading a checkpoint failed.
     #[error("checkpoint: {0}")]
     Checkpoint(String),
+    /// Proposals were asked for and not one gave a program that ran: the search learned nothing (its
+    /// best detectors are the seed programs).
+    #[error(
+        "all {} proposal(s) of the {proposer} proposer failed {}",
+        tally.asked,
+        tally.breakdown()
+    )]
+    AllProposalsFailed {
+        /// The proposer's name (`llm:<model>`, `mutate`).
+        proposer: String,
+        /// The proposals by outcome, with the first failure.
+        tally: super::tally::ProposalTally,
+    },
 }
 
 /// Where a search keeps its finished rounds (round 0 holds the seed programs).

@@ -425,3 +425,71 @@ fn acceptance_uses_the_held_out_rho_and_sql_recomputes_it() {
     );
     assert_eq!(check.lines().nth(1), Some("true,true"), "{check}");
 }
+
+/// `annotrace evolve` with an LLM proposer against `server`, budget 4 for one label.
+fn evolve_with(t: &TestRun, server: &crate::common::chat_server::ChatServer) -> crate::common::Ran {
+    t.run(&[
+        "evolve",
+        "--run",
+        "r",
+        "--labels",
+        "moving ball",
+        "--budget",
+        "4",
+        "--parallel",
+        "2",
+        "--repair-attempts",
+        "0",
+        "--no-time-penalty",
+        "--workers",
+        "1",
+        "--llm-base-url",
+        &server.url(),
+        "--llm-model",
+        "scripted",
+    ])
+}
+
+#[test]
+fn a_search_whose_every_llm_proposal_failed_is_a_failure_and_partial_failures_are_reported() {
+    use crate::common::chat_server::{ChatServer, Reply};
+    use annotrace::search::skeleton::skeleton;
+    use annotrace::trace::Env;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    let t = TestRun::new();
+    t.run(&[
+        "simulate", "--run", "r", "--scenes", "8", "--seed", "4", "--dt", "0.1", "-q",
+    ])
+    .ok();
+    // Every answer is prose without code: the library's seed would have been "accepted" before.
+    let garbage = ChatServer::responder(|_| Reply::chat("lorem ipsum, no code today"));
+    evolve_with(&t, &garbage)
+        .code(1)
+        .stderr_has("all 4 proposal(s) of the llm:scripted proposer failed (4 without a program, 0 whose program did not run)")
+        .stderr_has("the first: label \"moving ball\" step ")
+        .stderr_has("no Python code in the answer; it starts: lorem ipsum");
+    assert_eq!(garbage.seen().len(), 4);
+    // The failed stage committed nothing, but the calls are recorded.
+    let tables = t.run(&["tables", "--run", "r"]);
+    assert!(!tables.stdout.contains("candidates"), "{}", tables.stdout);
+    let calls = t.csv("r", "SELECT count(*) AS n FROM llm_calls");
+    assert_eq!(calls.lines().nth(1), Some("4"), "{calls}");
+
+    // One garbage answer among good ones: the search succeeds and says what failed.
+    let good =
+        skeleton(Env::Pooltool, "moving ball").replace("THRESHOLD = 0.05", "THRESHOLD = 0.3");
+    let answer = format!("```python\n{good}```\n");
+    let n = AtomicUsize::new(0);
+    let mixed = ChatServer::responder(move |_| {
+        if n.fetch_add(1, Ordering::SeqCst) == 0 {
+            Reply::chat("sorry, I cannot help with that")
+        } else {
+            Reply::chat(&answer)
+        }
+    });
+    evolve_with(&t, &mixed)
+        .ok()
+        .stdout_has("proposals: 1 of 4 proposal(s) failed (1 without a program, 0 whose program did not run)")
+        .stdout_has("it starts: sorry, I cannot help");
+}

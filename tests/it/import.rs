@@ -333,3 +333,139 @@ fn folders_arrays_and_duplicate_ids() {
         .ok()
         .stdout_has("already imported");
 }
+
+/// A seeded sweep of the JSON importer, the cheap counterpart of the `json_import` fuzz target
+/// (fuzz/): the examples of every environment, as `.json` and as JSON Lines, edited at random
+/// (bytes changed, ranges dropped or repeated, numbers swapped for hostile literals, the text cut
+/// short), must each end in traces and typed errors, and every accepted trace must survive the trip
+/// to Arrow rows and back and through export (`testutil::import_round_trip`).
+#[test]
+fn no_input_makes_the_json_importer_panic_or_lose_an_accepted_trace() {
+    let (cases, accepted) = sweep_json_import(0x0bad_5eed_1234_5678, 60, None);
+    assert_eq!(cases, 360);
+    // Some edits keep a valid trace (a changed digit, a repeated object field), so both paths run.
+    assert!(accepted > 0, "no edited input was accepted");
+}
+
+/// The same sweep for `ANNOTRACE_SWEEP_SECONDS` (default 60) with a seed from `ANNOTRACE_SWEEP_SEED`
+/// (default the clock), for a machine without the nightly toolchain:
+/// `ANNOTRACE_SWEEP_SECONDS=600 cargo test --test it -- --ignored --nocapture json_importer_for_a_while`.
+#[test]
+#[ignore = "runs for a minute or more; see its doc"]
+fn the_json_importer_for_a_while() {
+    let var = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<u64>().ok());
+    let secs = var("ANNOTRACE_SWEEP_SECONDS").unwrap_or(60);
+    let seed = var("ANNOTRACE_SWEEP_SEED").unwrap_or_else(|| {
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(1, |d| d.as_nanos() as u64)
+            | 1
+    });
+    let until = std::time::Instant::now() + std::time::Duration::from_secs(secs);
+    let (cases, accepted) = sweep_json_import(seed, u64::MAX, Some(until));
+    eprintln!(
+        "json importer sweep: seed {seed}, {secs} s, {cases} inputs, {accepted} traces accepted"
+    );
+}
+
+/// Edits the examples `per_form` times per environment and layout (or until `until`), checking
+/// each edited file with the importer's oracle; (inputs, traces accepted). Panics with the input on
+/// a broken contract.
+fn sweep_json_import(seed: u64, per_form: u64, until: Option<std::time::Instant>) -> (u64, usize) {
+    use annotrace::testutil::import_round_trip;
+    use annotrace::trace::json::SourceKind;
+
+    const BYTES: &[u8] = b"{}[]\":,0123456789eE.+-ntrufalsNI \n\t\\u\xff\x00";
+    const LITERALS: &[&str] = &[
+        "NaN",
+        "1e999",
+        "-1e999",
+        "-0",
+        "1e-400",
+        "9223372036854775808",
+        "-9223372036854775809",
+        "1.5",
+        "null",
+        "\"x\"",
+        "[]",
+        "{}",
+        "true",
+        "\"\\ud800\"",
+        "[[[[[[[[",
+        "-",
+    ];
+    let mut state = seed | 1;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    let forms: Vec<(Env, Vec<u8>, SourceKind)> = Env::ALL
+        .iter()
+        .flat_map(|&env| {
+            let pretty = std::fs::read(example(env)).unwrap();
+            let compact = serde_json::to_vec(&read_json(&example(env))).unwrap();
+            let mut lines = compact.clone();
+            lines.push(b'\n');
+            lines.extend_from_slice(&compact);
+            [
+                (env, pretty, SourceKind::Json),
+                (env, lines, SourceKind::JsonLines),
+            ]
+        })
+        .collect();
+    for (env, base, kind) in &forms {
+        assert!(
+            import_round_trip(base, *kind, *env).unwrap() >= 1,
+            "{env}: the example itself is accepted"
+        );
+    }
+    let (mut cases, mut accepted) = (0u64, 0usize);
+    'rounds: for _ in 0..per_form {
+        for (env, base, kind) in &forms {
+            if until.is_some_and(|u| std::time::Instant::now() >= u) {
+                break 'rounds;
+            }
+            let mut b = base.clone();
+            for _ in 0..1 + next() % 3 {
+                let at = (next() as usize) % b.len().max(1);
+                match next() % 5 {
+                    0 if !b.is_empty() => b[at] = BYTES[next() as usize % BYTES.len()],
+                    1 => {
+                        let end = (at + 1 + next() as usize % 24).min(b.len());
+                        b.drain(at..end);
+                    }
+                    2 => {
+                        let end = (at + 1 + next() as usize % 40).min(b.len());
+                        let piece = b[at..end].to_vec();
+                        b.splice(at..at, piece);
+                    }
+                    3 => {
+                        // Swap the number starting at or after `at` for a literal.
+                        let Some(s) = (at..b.len()).find(|&i| b[i].is_ascii_digit()) else {
+                            continue;
+                        };
+                        let e = (s..b.len())
+                            .find(|&i| {
+                                !matches!(b[i], b'0'..=b'9' | b'.' | b'e' | b'E' | b'-' | b'+')
+                            })
+                            .unwrap_or(b.len());
+                        let lit = LITERALS[next() as usize % LITERALS.len()];
+                        b.splice(s..e, lit.bytes());
+                    }
+                    _ => b.truncate(at),
+                }
+            }
+            cases += 1;
+            match import_round_trip(&b, *kind, *env) {
+                Ok(n) => accepted += n,
+                Err(e) => panic!(
+                    "{env} {kind:?}: {e}\ninput: {}",
+                    String::from_utf8_lossy(&b)
+                ),
+            }
+        }
+    }
+    (cases, accepted)
+}

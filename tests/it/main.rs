@@ -11,6 +11,7 @@ mod import;
 mod iphyre;
 mod libraries;
 mod llm;
+mod llm_time;
 mod optimise;
 mod originals;
 mod phyre;

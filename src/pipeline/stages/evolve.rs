@@ -30,8 +30,8 @@ use crate::search::library_out::write_library;
 use crate::search::run::Checkpoint;
 use crate::search::tables::{SetIds, convergence_batch, histograms_batch, labels_batch};
 use crate::search::{
-    CandidateRecord, Discovery, EvalSettings, LlmProposer, MutateProposer, Proposer, SearchConfig,
-    SearchError, Strategy, Temperatures,
+    CandidateRecord, Discovery, EvalSettings, LlmProposer, MutateProposer, ProposalTally, Proposer,
+    SearchConfig, SearchError, Strategy, Temperatures,
 };
 use crate::trace::{Env, Trace};
 
@@ -94,8 +94,8 @@ pub struct EvolveParams {
     /// Where children come from: syntax-tree edits (mutate) or an LLM; auto = llm when an endpoint
     /// (llm.base_url or ANNOTRACE_LLM_BASE_URL) or a replay run is configured, else mutate.
     pub proposer: ProposerChoice,
-    /// LLM settings (base_url, model, parallel, timeout_s, max_retries, max_calls, max_tokens,
-    /// temperature, replay, …; docs/llm.md), over the ANNOTRACE_LLM_* variables.
+    /// LLM settings (base_url, model, parallel, timeout_s, call_timeout_s, max_retries, max_calls,
+    /// max_tokens, temperature, replay, …; docs/llm.md), over the ANNOTRACE_LLM_* variables.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub llm: Option<LlmSettings>,
     /// Prompt template folder, relative to the project (default: `<project>/prompts` if present, else
@@ -237,6 +237,10 @@ pub struct EvolveSummary {
     pub labels: Vec<LabelSummary>,
     /// Labels whose best detector was added to the library.
     pub accepted: usize,
+    /// The proposals of every label by outcome (a stage whose every proposal failed is an error
+    /// instead; absent from summaries recorded before it was added).
+    #[serde(default)]
+    pub proposals: ProposalTally,
     /// The grown library's folder.
     pub library: String,
     /// Wall time of the stage (s).
@@ -686,6 +690,39 @@ fn label_summary(r: &crate::search::LabelResult) -> (LabelSummary, String) {
     (summary, line)
 }
 
+/// Runs `f` with the LLM client's "still waiting" notices shown as notes of the stage's progress (so
+/// the command line prints them with its other progress lines rather than as log lines).
+fn with_wait_notices<T>(
+    ctx: &StageContext<'_>,
+    client: Option<&LlmClient>,
+    f: impl FnOnce() -> T,
+) -> T {
+    let Some(client) = client else {
+        return f();
+    };
+    let (tx, rx) = std::sync::mpsc::channel::<String>();
+    client.set_wait_observer(Arc::new(move |n| {
+        let _ = tx.send(n.to_string());
+    }));
+    /// Drops the observer (the only sender) however `f` ends, which ends the printing thread.
+    struct Clear<'c>(&'c LlmClient);
+    impl Drop for Clear<'_> {
+        fn drop(&mut self) {
+            self.0.clear_wait_observer();
+        }
+    }
+    let (progress, stage) = (ctx.progress(), ctx.stage_id());
+    std::thread::scope(|s| {
+        s.spawn(move || {
+            for line in rx {
+                progress.note(stage, &line);
+            }
+        });
+        let _clear = Clear(client);
+        f()
+    })
+}
+
 impl Stage for EvolveStage {
     fn fingerprint_extra(&self) -> Result<Value, StageError> {
         let h = |s: &str| crate::search::code_hash(s);
@@ -766,7 +803,9 @@ impl Stage for EvolveStage {
             checkpoint.write_label(&tables, m, r, &mut rows)
         };
         let base = self.setup.library.detectors.clone();
-        let result = discovery.run(base, &self.labels, &mut after);
+        let result = with_wait_notices(ctx, llm_client.as_deref(), || {
+            discovery.run(base, &self.labels, &mut after)
+        });
         if let Some(c) = &llm_client {
             c.flush()?;
         }
@@ -780,6 +819,16 @@ impl Stage for EvolveStage {
                     .unwrap_or_else(|| e.into()));
             }
         };
+        // A search whose every proposal failed learned nothing: its "accepted" detectors would be
+        // the seed programs. Partial failures are reported in the summary.
+        let proposals = ProposalTally::of(results.iter().flat_map(|r| &r.outcome.records));
+        if proposals.all_failed() {
+            return Err(SearchError::AllProposalsFailed {
+                proposer: proposer.name().to_string(),
+                tally: proposals,
+            }
+            .into());
+        }
         if !reused {
             *rows.entry("trace_distances".into()).or_default() += dx.upper.len() as u64;
         }
@@ -790,8 +839,12 @@ impl Stage for EvolveStage {
         let wall: f64 = results.iter().map(|r| r.outcome.wall_s).sum();
         let prop: f64 = results.iter().map(|r| r.outcome.propose_s).sum();
         let accepted = results.iter().filter(|r| r.accepted).count();
+        let failures = proposals
+            .failures()
+            .map(|f| format!("; {f}"))
+            .unwrap_or_default();
         let line = format!(
-            "{} label(s) on {} training / {} held-out {env} trace(s), {accepted} accepted; {}; library: {}",
+            "{} label(s) on {} training / {} held-out {env} trace(s), {accepted} accepted; {}{failures}; library: {}",
             results.len(),
             train.len(),
             holdout.len(),
@@ -817,6 +870,7 @@ impl Stage for EvolveStage {
                 },
                 labels: labels_summary,
                 accepted,
+                proposals,
                 library: out_dir.to_string_lossy().into_owned(),
                 wall_s: wall,
                 propose_s: prop,

@@ -22,8 +22,8 @@ mod write;
 
 pub use error::{Fault, FaultKind, TraceError, TraceLocation};
 pub use read::{
-    SourceError, SourceKind, TraceConsumer, TraceHeader, default_trace_id, expand_paths, read_file,
-    read_path, read_str,
+    SourceError, SourceKind, TraceConsumer, TraceHeader, default_trace_id, expand_paths,
+    read_bytes, read_file, read_path, read_str,
 };
 pub use write::{
     PaperTrace, timestep_to_value, to_value, write_steps_sharing_repeats, write_trace,

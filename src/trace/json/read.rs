@@ -157,7 +157,7 @@ pub fn read_file(
     match SourceKind::of(path) {
         SourceKind::JsonLines => read_lines(path, reader, env, consumer).map_err(err),
         SourceKind::Json => {
-            read_json(path, reader, env, consumer);
+            read_json(path, reader, env, consumer, &|n| nth_line(path, n));
             Ok(())
         }
     }
@@ -166,8 +166,34 @@ pub fn read_file(
 /// Reads traces from an in-memory JSON text (one trace or an array) into complete [`Trace`] values.
 /// `name` stands for the file in error messages; trace ids default to `name` (or `name-N` in arrays).
 pub fn read_str(name: &str, text: &str, env: Env) -> Vec<Result<Trace, TraceError>> {
+    read_bytes(name, text.as_bytes(), SourceKind::Json, env)
+}
+
+/// Reads traces from in-memory bytes laid out as `kind` into complete [`Trace`] values, exactly as
+/// [`read_file`] would read a file holding them (any bytes: invalid UTF-8, syntax errors and every
+/// other fault end in a [`TraceError`]). `name` stands for the file in error messages; trace ids
+/// default to `name` (`name-N` in arrays, `name-L<line>` in JSON Lines).
+pub fn read_bytes(
+    name: &str,
+    bytes: &[u8],
+    kind: SourceKind,
+    env: Env,
+) -> Vec<Result<Trace, TraceError>> {
     let mut collect = Collect::new(name);
-    read_json(Path::new(name), text.as_bytes(), env, &mut collect);
+    let path = Path::new(name);
+    match kind {
+        SourceKind::Json => {
+            let text_at = |n: usize| {
+                let line = bytes.split(|b| *b == b'\n').nth(n.checked_sub(1)?)?;
+                Some(String::from_utf8_lossy(line).into_owned())
+            };
+            read_json(path, bytes, env, &mut collect, &text_at);
+        }
+        // Reading from memory cannot fail.
+        SourceKind::JsonLines => {
+            let _ = read_lines(path, bytes, env, &mut collect);
+        }
+    }
     collect.out
 }
 
@@ -386,7 +412,14 @@ fn read_lines(
     }
 }
 
-fn read_json(path: &Path, reader: impl io::Read, env: Env, consumer: &mut dyn TraceConsumer) {
+/// Reads a `.json` text; `text_at(n)` gives its line `n` (1-based) for error messages.
+fn read_json(
+    path: &Path,
+    reader: impl io::Read,
+    env: Env,
+    consumer: &mut dyn TraceConsumer,
+    text_at: &dyn Fn(usize) -> Option<String>,
+) {
     let mut st = FileState {
         env,
         file: path.to_path_buf(),
@@ -406,8 +439,7 @@ fn read_json(path: &Path, reader: impl io::Read, env: Env, consumer: &mut dyn Tr
         return;
     }
     if let Err(e) = res {
-        let file = path.to_path_buf();
-        st.syntax(e, |line| nth_line(&file, line));
+        st.syntax(e, text_at);
     }
 }
 
