@@ -54,6 +54,7 @@ pub static STAGE_KINDS: &[&StageKind] = &[
     &stages::annotate::KIND,
     &stages::accuracy::KIND,
     &stages::optimise::KIND,
+    &stages::benchmark::KIND,
     &stages::evolve::KIND,
     &stages::sql::KIND,
     &stages::export::KIND,

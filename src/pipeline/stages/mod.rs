@@ -2,7 +2,7 @@
 //! (paper-format JSON into the trace tables), `simulate` (an environment's simulator into the trace
 //! tables; `simulate.rs` with `simulate_phyre.rs` and `simulate_iphyre.rs` for the other environments),
 //! `annotate` (a detector library run over the traces), `accuracy` (its event-grounded labels scored
-//! against simulator events), `optimise` (annealing actions for reward programs), `evolve` (the
+//! against simulator events), `optimise` (annealing actions for reward programs), `benchmark` (DeepPHY's agent loop), `evolve` (the
 //! evolutionary search for detectors), `sql` (a query over the run stored as a table) and `export` (a
 //! table or query written to `exports/`).
 //!
@@ -13,6 +13,7 @@
 
 pub mod accuracy;
 pub mod annotate;
+pub mod benchmark;
 pub mod detector_setup;
 pub mod evolve;
 pub mod export;
