@@ -29,6 +29,18 @@ pub enum Format {
     PoolFree,
 }
 
+impl Format {
+    /// The format's name (`phyre-grid`, `iphyre-removals`, `pool-deepphy`, `pool-free`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Format::PhyreGrid => "phyre-grid",
+            Format::IphyreRemovals => "iphyre-removals",
+            Format::PoolDeepphy => "pool-deepphy",
+            Format::PoolFree => "pool-free",
+        }
+    }
+}
+
 /// Largest removal time (s) of the I-PHYRE format: the episode's length.
 pub const IPHYRE_MAX_TIME: f64 = 15.0;
 /// I-PHYRE's frame rate in the benchmark (DeepPHY's).

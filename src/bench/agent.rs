@@ -261,15 +261,6 @@ pub fn add_templates(prompts: &mut Prompts) -> Result<(), crate::llm::LlmError> 
     Ok(())
 }
 
-fn format_name(f: Format) -> &'static str {
-    match f {
-        Format::PhyreGrid => "phyre-grid",
-        Format::IphyreRemovals => "iphyre-removals",
-        Format::PoolDeepphy => "pool-deepphy",
-        Format::PoolFree => "pool-free",
-    }
-}
-
 fn env_name(scene: &TaskScene) -> &'static str {
     match scene {
         TaskScene::Phyre(_) => "phyre",
@@ -292,7 +283,7 @@ pub fn messages(prompts: &Prompts, view: &View<'_>) -> Result<Vec<Message>, crat
     let env = env_name(view.scene);
     let mut out = vec![Message::system(prompts.render(
         "bench/system.j2",
-        json!({"env": env, "format": format_name(view.format), "attempts": view.attempts,
+        json!({"env": env, "format": view.format.as_str(), "attempts": view.attempts,
                "feedback": view.feedback.as_str()}),
     )?)];
     let captions: Vec<&str> = view.intro.iter().map(|i| i.caption.as_str()).collect();

@@ -55,6 +55,8 @@ pub struct Row {
     pub reason: Option<String>,
     /// The attempt solved the task.
     pub success: bool,
+    /// Answer format (`phyre-grid`, `iphyre-removals`, `pool-deepphy`, `pool-free`).
+    pub format: String,
     /// Feedback mode.
     pub feedback: String,
     /// Library of the annotations (empty when none).
@@ -196,6 +198,7 @@ pub fn play_task(
             valid,
             reason,
             success,
+            format: settings.format.as_str().into(),
             feedback: settings.feedback.as_str().into(),
             library: settings.library.clone(),
             agent: agent.kind().as_str().into(),
