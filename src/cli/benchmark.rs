@@ -130,9 +130,11 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
         timeout: a.timeout,
         memory_mb: a.memory_mb,
     };
-    // Replaying gives the same table under its own stage id: the id leaves the replay source out.
+    // A replay gives the same table under the same stage id: the id leaves out where answers come from
+    // (the endpoint's address, the replay run).
     let mut id_params = params.clone();
     if let Some(l) = &mut id_params.llm {
+        l.base_url = None;
         l.replay = None;
         l.strict_replay = None;
     }

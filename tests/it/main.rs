@@ -3,6 +3,7 @@
 mod common;
 
 mod annotate;
+mod benchmark;
 mod anywhere;
 mod evolve;
 mod exit_codes;
