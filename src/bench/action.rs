@@ -155,13 +155,9 @@ fn values_after(text: &str, key: &str) -> Vec<String> {
             .chars()
             .take_while(|c| !matches!(c, ',' | ';' | '\n' | ')' | ']' | '}'))
             .collect();
-        out.push(
-            value
-                .trim()
-                .trim_end_matches(['.', '*', '"'])
-                .trim()
-                .to_string(),
-        );
+        // A value is one token: `2. So …` is `2`.
+        let token = value.split_whitespace().next().unwrap_or("");
+        out.push(token.trim_end_matches(['.', '*', '"']).to_string());
     }
     out
 }

@@ -353,3 +353,155 @@ impl Agent for LlmAgent {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bench::task::{TaskChoice, choose_tasks};
+    use crate::envs::phyre::EvalSetup;
+    use crate::trace::Env;
+
+    /// The conversation as a person reads it: roles, texts, images as `[image]`.
+    fn transcript(msgs: &[Message]) -> String {
+        let mut out = String::new();
+        for m in msgs {
+            out.push_str(&format!("=== {:?}\n", m.role));
+            for p in &m.parts {
+                match p {
+                    Part::Text(t) => out.push_str(t),
+                    Part::ImageUrl(u) => {
+                        assert!(u.starts_with("data:image/png;base64,"));
+                        out.push_str("[image]");
+                    }
+                }
+                out.push('\n');
+            }
+        }
+        out
+    }
+
+    fn image(caption: &str) -> Image {
+        Image {
+            caption: caption.into(),
+            png: vec![0x89, b'P', b'N', b'G'],
+        }
+    }
+
+    /// Every environment × feedback mode: the system rules, the task, an invalid answer and a failed one
+    /// with its feedback.
+    #[test]
+    fn prompts_per_environment_and_feedback_mode_snapshot() {
+        let sims = Simulators::new().unwrap();
+        let mut prompts = Prompts::builtin();
+        add_templates(&mut prompts).unwrap();
+        let cases = [
+            (Env::Phyre, Format::PhyreGrid, "Cell: 70, Radius: 2", "Cell: 12, Radius: 3"),
+            (Env::Iphyre, Format::IphyreRemovals, "remove the left block", "[{\"time\": 1.5, \"index\": 0}]"),
+            (Env::Pooltool, Format::PoolDeepphy, "Speed: Fast", "Speed: High, Strikespot: Top Spin"),
+            (Env::Pooltool, Format::PoolFree, "V0: 3", "V0: 3, phi: 90, theta: 0, a: 0, b: 0.2"),
+        ];
+        for (env, format, bad, good) in cases {
+            let scene = choose_tasks(
+                &sims,
+                &TaskChoice {
+                    env,
+                    count: 1,
+                    ids: vec![],
+                    phyre_setup: EvalSetup::WithinTemplate,
+                    phyre_fold: 0,
+                    pool_seed: 1,
+                },
+            )
+            .unwrap()
+            .remove(0);
+            let invalid = parse(format, bad, scene.blocks()).unwrap_err();
+            let action = parse(format, good, scene.blocks()).unwrap().text();
+            for mode in [FeedbackMode::None, FeedbackMode::ImageOnly, FeedbackMode::Annotations] {
+                let fb = match mode {
+                    FeedbackMode::None => Feedback::default(),
+                    FeedbackMode::ImageOnly => Feedback {
+                        text: None,
+                        images: vec![image("t = 0.0 s"), image("t = 1.0 s")],
+                    },
+                    FeedbackMode::Annotations => Feedback {
+                        text: Some("trace x: 10 steps\npatterns (steps, time, label: objects; key parameters):\n2-4 t0.20 bounce: 3".into()),
+                        images: vec![],
+                    },
+                };
+                let history = vec![
+                    Turn {
+                        answer: bad.into(),
+                        action: None,
+                        verdict: Verdict::Invalid(invalid.clone()),
+                        feedback: Feedback::default(),
+                    },
+                    Turn {
+                        answer: good.into(),
+                        action: Some(action.clone()),
+                        verdict: Verdict::Failed,
+                        feedback: fb,
+                    },
+                ];
+                let intro = [image("initial scene")];
+                let view = View {
+                    format,
+                    feedback: mode,
+                    seed: 1,
+                    task_index: 0,
+                    scene: &scene,
+                    intro: &intro,
+                    attempt: 3,
+                    attempts: 10,
+                    history: &history,
+                };
+                let msgs = messages(&prompts, &view).unwrap();
+                insta::assert_snapshot!(
+                    format!("bench_{}_{}", format.as_str(), mode.as_str()),
+                    transcript(&msgs)
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn random_answers_always_parse_and_are_seeded() {
+        let sims = Simulators::new().unwrap();
+        for (env, format) in [
+            (Env::Phyre, Format::PhyreGrid),
+            (Env::Iphyre, Format::IphyreRemovals),
+            (Env::Pooltool, Format::PoolDeepphy),
+            (Env::Pooltool, Format::PoolFree),
+        ] {
+            let scene = choose_tasks(
+                &sims,
+                &TaskChoice {
+                    env,
+                    count: 1,
+                    ids: vec![],
+                    phyre_setup: EvalSetup::WithinTemplate,
+                    phyre_fold: 0,
+                    pool_seed: 1,
+                },
+            )
+            .unwrap()
+            .remove(0);
+            let view = |attempt| View {
+                format,
+                feedback: FeedbackMode::None,
+                seed: 9,
+                task_index: 2,
+                scene: &scene,
+                intro: &[],
+                attempt,
+                attempts: 10,
+                history: &[],
+            };
+            let a = RandomAgent.answer(&view(1)).unwrap().text;
+            assert_eq!(a, RandomAgent.answer(&view(1)).unwrap().text);
+            for n in 1..50 {
+                let t = RandomAgent.answer(&view(n)).unwrap().text;
+                parse(format, &t, scene.blocks()).unwrap_or_else(|e| panic!("{t}: {e}"));
+            }
+        }
+    }
+}
