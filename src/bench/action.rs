@@ -142,7 +142,8 @@ fn values_after(text: &str, key: &str) -> Vec<String> {
     while let Some(pos) = lower[from..].find(&key) {
         let start = from + pos;
         from = start + key.len();
-        let word_start = start == 0 || !(bytes[start - 1].is_ascii_alphanumeric() || bytes[start - 1] == b'_');
+        let word_start =
+            start == 0 || !(bytes[start - 1].is_ascii_alphanumeric() || bytes[start - 1] == b'_');
         if !word_start {
             continue;
         }
@@ -212,7 +213,9 @@ fn parse_phyre(text: &str) -> Result<Answer, Invalid> {
         return Err(Invalid::OutOfRange(format!("cell {cell} is outside 1..64")));
     }
     if !(1..=8).contains(&radius) {
-        return Err(Invalid::OutOfRange(format!("radius {radius} is outside 1..8")));
+        return Err(Invalid::OutOfRange(format!(
+            "radius {radius} is outside 1..8"
+        )));
     }
     Ok(Answer::Phyre {
         cell: cell as u32,
@@ -270,7 +273,11 @@ fn parse_pool_free(text: &str) -> Result<Answer, Invalid> {
         ("b", shot.b, -1.0, 1.0, "ball radii"),
     ];
     for (k, v, lo, hi, unit) in checks {
-        let ok = if k == "V0" { v > lo && v <= hi } else { v >= lo && v < hi || (k != "phi" && v == hi) };
+        let ok = if k == "V0" {
+            v > lo && v <= hi
+        } else {
+            v >= lo && v < hi || (k != "phi" && v == hi)
+        };
         if !ok {
             return Err(Invalid::OutOfRange(format!(
                 "{k} = {v} is outside [{lo}, {hi}] {unit}"
@@ -287,8 +294,15 @@ mod tests {
     #[test]
     fn phyre_answers_parse_strictly() {
         assert_eq!(
-            parse(Format::PhyreGrid, "I will drop it there.\nCell: 27, Radius: 4", 0),
-            Ok(Answer::Phyre { cell: 27, radius: 4 })
+            parse(
+                Format::PhyreGrid,
+                "I will drop it there.\nCell: 27, Radius: 4",
+                0
+            ),
+            Ok(Answer::Phyre {
+                cell: 27,
+                radius: 4
+            })
         );
         assert_eq!(
             parse(Format::PhyreGrid, "**Cell:** 3, **Radius:** 8.", 0),
@@ -298,33 +312,120 @@ mod tests {
         assert_eq!(e.kind(), "out_of_range");
         let e = parse(Format::PhyreGrid, "Cell: 2, Radius: 9", 0).unwrap_err();
         assert_eq!(e.kind(), "out_of_range");
-        for bad in ["Cell: two, Radius: 2", "Radius: 2", "Cell: 1, Radius: 2\nCell: 5, Radius: 2", "Cell: 2.5, Radius: 1", ""] {
-            assert_eq!(parse(Format::PhyreGrid, bad, 0).unwrap_err().kind(), "unparsable", "{bad}");
+        for bad in [
+            "Cell: two, Radius: 2",
+            "Radius: 2",
+            "Cell: 1, Radius: 2\nCell: 5, Radius: 2",
+            "Cell: 2.5, Radius: 1",
+            "",
+        ] {
+            assert_eq!(
+                parse(Format::PhyreGrid, bad, 0).unwrap_err().kind(),
+                "unparsable",
+                "{bad}"
+            );
         }
         // The same action repeated is one action; a <think> block is ignored.
-        assert!(parse(Format::PhyreGrid, "<think>Cell: 9, Radius: 1?</think>Cell: 5, Radius: 2. So Cell: 5, Radius: 2", 0).is_ok());
-        assert_eq!(Answer::Phyre { cell: 5, radius: 2 }.text(), "Cell: 5, Radius: 2");
+        assert!(
+            parse(
+                Format::PhyreGrid,
+                "<think>Cell: 9, Radius: 1?</think>Cell: 5, Radius: 2. So Cell: 5, Radius: 2",
+                0
+            )
+            .is_ok()
+        );
+        assert_eq!(
+            Answer::Phyre { cell: 5, radius: 2 }.text(),
+            "Cell: 5, Radius: 2"
+        );
     }
 
     #[test]
     fn iphyre_answers_parse_strictly() {
-        let a = parse(Format::IphyreRemovals, "Remove: [{\"time\": 0.5, \"index\": 1}, {\"time\": 2, \"index\": 0}]", 2).unwrap();
-        assert_eq!(a.text(), "[{\"time\": 0.5, \"index\": 1}, {\"time\": 2, \"index\": 0}]");
-        assert_eq!(parse(Format::IphyreRemovals, "[]", 2), Ok(Answer::Iphyre(vec![])));
-        assert_eq!(parse(Format::IphyreRemovals, "[{\"time\": 1, \"index\": 2}]", 2).unwrap_err().kind(), "out_of_range");
-        assert_eq!(parse(Format::IphyreRemovals, "[{\"time\": 16, \"index\": 0}]", 2).unwrap_err().kind(), "out_of_range");
-        assert_eq!(parse(Format::IphyreRemovals, "[{\"t\": 1, \"index\": 0}]", 2).unwrap_err().kind(), "unparsable");
-        assert_eq!(parse(Format::IphyreRemovals, "remove block 1", 2).unwrap_err().kind(), "unparsable");
-        assert_eq!(parse(Format::IphyreRemovals, "] oops [", 2).unwrap_err().kind(), "unparsable");
+        let a = parse(
+            Format::IphyreRemovals,
+            "Remove: [{\"time\": 0.5, \"index\": 1}, {\"time\": 2, \"index\": 0}]",
+            2,
+        )
+        .unwrap();
+        assert_eq!(
+            a.text(),
+            "[{\"time\": 0.5, \"index\": 1}, {\"time\": 2, \"index\": 0}]"
+        );
+        assert_eq!(
+            parse(Format::IphyreRemovals, "[]", 2),
+            Ok(Answer::Iphyre(vec![]))
+        );
+        assert_eq!(
+            parse(Format::IphyreRemovals, "[{\"time\": 1, \"index\": 2}]", 2)
+                .unwrap_err()
+                .kind(),
+            "out_of_range"
+        );
+        assert_eq!(
+            parse(Format::IphyreRemovals, "[{\"time\": 16, \"index\": 0}]", 2)
+                .unwrap_err()
+                .kind(),
+            "out_of_range"
+        );
+        assert_eq!(
+            parse(Format::IphyreRemovals, "[{\"t\": 1, \"index\": 0}]", 2)
+                .unwrap_err()
+                .kind(),
+            "unparsable"
+        );
+        assert_eq!(
+            parse(Format::IphyreRemovals, "remove block 1", 2)
+                .unwrap_err()
+                .kind(),
+            "unparsable"
+        );
+        assert_eq!(
+            parse(Format::IphyreRemovals, "] oops [", 2)
+                .unwrap_err()
+                .kind(),
+            "unparsable"
+        );
     }
 
     #[test]
     fn pool_answers_parse_strictly() {
-        let a = parse(Format::PoolFree, "V0: 3.5, phi: 87, theta: 0, a: 0.1, b: -0.2", 0).unwrap();
+        let a = parse(
+            Format::PoolFree,
+            "V0: 3.5, phi: 87, theta: 0, a: 0.1, b: -0.2",
+            0,
+        )
+        .unwrap();
         assert_eq!(a.text(), "V0: 3.5, phi: 87, theta: 0, a: 0.1, b: -0.2");
-        assert_eq!(parse(Format::PoolFree, "V0: 30, phi: 87, theta: 0, a: 0.1, b: -0.2", 0).unwrap_err().kind(), "out_of_range");
-        assert_eq!(parse(Format::PoolFree, "V0: 3, phi: 87, theta: 0, b: -0.2", 0).unwrap_err().kind(), "unparsable");
-        assert!(parse(Format::PoolDeepphy, "Speed: Low, Strikespot: Middle Spin", 0).is_ok());
-        assert_eq!(parse(Format::PoolDeepphy, "Speed: warp", 0).unwrap_err().kind(), "unparsable");
+        assert_eq!(
+            parse(
+                Format::PoolFree,
+                "V0: 30, phi: 87, theta: 0, a: 0.1, b: -0.2",
+                0
+            )
+            .unwrap_err()
+            .kind(),
+            "out_of_range"
+        );
+        assert_eq!(
+            parse(Format::PoolFree, "V0: 3, phi: 87, theta: 0, b: -0.2", 0)
+                .unwrap_err()
+                .kind(),
+            "unparsable"
+        );
+        assert!(
+            parse(
+                Format::PoolDeepphy,
+                "Speed: Low, Strikespot: Middle Spin",
+                0
+            )
+            .is_ok()
+        );
+        assert_eq!(
+            parse(Format::PoolDeepphy, "Speed: warp", 0)
+                .unwrap_err()
+                .kind(),
+            "unparsable"
+        );
     }
 }

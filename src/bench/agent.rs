@@ -19,7 +19,9 @@ use crate::llm::{ChatRequest, LlmClient, Message, Part, Prompts, Role};
 use crate::rng::{SplitMix64, finalize, keyed_stream};
 
 /// Which agent.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum AgentKind {
     /// Uniform over the answer format (seeded).
@@ -128,11 +130,7 @@ fn stream(salt: &str, view: &View<'_>) -> SplitMix64 {
 /// (a, b) uniform in the disc of radius 0.5).
 pub fn random_answer(format: Format, scene: &TaskScene, rng: &mut SplitMix64) -> String {
     match format {
-        Format::PhyreGrid => format!(
-            "Cell: {}, Radius: {}",
-            1 + rng.below(64),
-            1 + rng.below(8)
-        ),
+        Format::PhyreGrid => format!("Cell: {}, Radius: {}", 1 + rng.below(64), 1 + rng.below(8)),
         Format::IphyreRemovals => {
             let mut items = Vec::new();
             for index in 0..scene.blocks() {
@@ -154,7 +152,10 @@ pub fn random_answer(format: Format, scene: &TaskScene, rng: &mut SplitMix64) ->
             let v0 = rng.uniform(0.5, 8.0);
             let phi = rng.uniform(0.0, 360.0);
             let theta = rng.uniform(0.0, 45.0);
-            let (r, ang) = (0.5 * rng.next_f64().sqrt(), rng.uniform(0.0, std::f64::consts::TAU));
+            let (r, ang) = (
+                0.5 * rng.next_f64().sqrt(),
+                rng.uniform(0.0, std::f64::consts::TAU),
+            );
             Answer::PoolFree(crate::envs::pool::Shot {
                 v0: (v0 * 1000.0).round() / 1000.0,
                 phi: ((phi * 1000.0).round() / 1000.0).min(359.999),
@@ -202,7 +203,11 @@ impl Agent for SearchAgent {
     }
     fn answer(&self, view: &View<'_>) -> Result<Reply, BenchError> {
         let mut rng = stream("bench-search", view);
-        let given: Vec<&str> = view.history.iter().filter_map(|t| t.action.as_deref()).collect();
+        let given: Vec<&str> = view
+            .history
+            .iter()
+            .filter_map(|t| t.action.as_deref())
+            .collect();
         let mut fallback: Option<String> = None;
         let mut simulations = 0u64;
         // Draws beyond the budget only skip repeats and invalid candidates; they are bounded too.
@@ -248,9 +253,15 @@ pub const MAX_IMAGE_HISTORY: usize = 5;
 
 /// The built-in benchmark templates.
 pub const TEMPLATES: [(&str, &str); 3] = [
-    ("bench/system.j2", include_str!("../../prompts/bench/system.j2")),
+    (
+        "bench/system.j2",
+        include_str!("../../prompts/bench/system.j2"),
+    ),
     ("bench/task.j2", include_str!("../../prompts/bench/task.j2")),
-    ("bench/feedback.j2", include_str!("../../prompts/bench/feedback.j2")),
+    (
+        "bench/feedback.j2",
+        include_str!("../../prompts/bench/feedback.j2"),
+    ),
 ];
 
 /// Adds the benchmark templates to `prompts` (read from its folder when there).
@@ -340,8 +351,8 @@ impl Agent for LlmAgent {
         self.client.model().to_string()
     }
     fn answer(&self, view: &View<'_>) -> Result<Reply, BenchError> {
-        let mut req = ChatRequest::new("benchmark")
-            .seed(stream("bench-llm", view).next_u64() >> 11);
+        let mut req =
+            ChatRequest::new("benchmark").seed(stream("bench-llm", view).next_u64() >> 11);
         req.messages = messages(&self.prompts, view)?;
         let reply = self.client.chat(&req)?;
         Ok(Reply {
@@ -395,10 +406,30 @@ mod tests {
         let mut prompts = Prompts::builtin();
         add_templates(&mut prompts).unwrap();
         let cases = [
-            (Env::Phyre, Format::PhyreGrid, "Cell: 70, Radius: 2", "Cell: 12, Radius: 3"),
-            (Env::Iphyre, Format::IphyreRemovals, "remove the left block", "[{\"time\": 1.5, \"index\": 0}]"),
-            (Env::Pooltool, Format::PoolDeepphy, "Speed: Fast", "Speed: High, Strikespot: Top Spin"),
-            (Env::Pooltool, Format::PoolFree, "V0: 3", "V0: 3, phi: 90, theta: 0, a: 0, b: 0.2"),
+            (
+                Env::Phyre,
+                Format::PhyreGrid,
+                "Cell: 70, Radius: 2",
+                "Cell: 12, Radius: 3",
+            ),
+            (
+                Env::Iphyre,
+                Format::IphyreRemovals,
+                "remove the left block",
+                "[{\"time\": 1.5, \"index\": 0}]",
+            ),
+            (
+                Env::Pooltool,
+                Format::PoolDeepphy,
+                "Speed: Fast",
+                "Speed: High, Strikespot: Top Spin",
+            ),
+            (
+                Env::Pooltool,
+                Format::PoolFree,
+                "V0: 3",
+                "V0: 3, phi: 90, theta: 0, a: 0, b: 0.2",
+            ),
         ];
         for (env, format, bad, good) in cases {
             let scene = choose_tasks(
@@ -416,7 +447,11 @@ mod tests {
             .remove(0);
             let invalid = parse(format, bad, scene.blocks()).unwrap_err();
             let action = parse(format, good, scene.blocks()).unwrap().text();
-            for mode in [FeedbackMode::None, FeedbackMode::ImageOnly, FeedbackMode::Annotations] {
+            for mode in [
+                FeedbackMode::None,
+                FeedbackMode::ImageOnly,
+                FeedbackMode::Annotations,
+            ] {
                 let fb = match mode {
                     FeedbackMode::None => Feedback::default(),
                     FeedbackMode::ImageOnly => Feedback {

@@ -23,7 +23,9 @@ use crate::envs::pool::render as pool_render;
 use crate::trace::{Body, Env, Object, Outcome, PoolBall, Timestep, Trace};
 
 /// What follows a failed attempt.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum FeedbackMode {
     /// The verdict only.
@@ -66,7 +68,11 @@ pub struct Feedback {
 
 /// The images shown with a task before the first attempt, `size` px square: PHYRE the scene and the
 /// scene with the numbered grid, I-PHYRE the game with block indices, billiards the table.
-pub fn task_images(scene: &TaskScene, sims: &Simulators, size: u32) -> Result<Vec<Image>, EnvError> {
+pub fn task_images(
+    scene: &TaskScene,
+    sims: &Simulators,
+    size: u32,
+) -> Result<Vec<Image>, EnvError> {
     match scene {
         TaskScene::Phyre(task) => {
             let plain = phyre_render::RenderOptions { size, grid: false };

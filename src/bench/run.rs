@@ -132,7 +132,13 @@ pub fn play_task(
         let th = Instant::now();
         let parsed = parse(settings.format, &reply.text, scene.blocks());
         let (verdict, action, success, fb, next) = match parsed {
-            Err(invalid) => (Verdict::Invalid(invalid), None, false, Feedback::default(), None),
+            Err(invalid) => (
+                Verdict::Invalid(invalid),
+                None,
+                false,
+                Feedback::default(),
+                None,
+            ),
             Ok(answer) => {
                 let canonical = answer.text();
                 match attempt(sims, &scene, &answer) {
@@ -144,7 +150,13 @@ pub fn play_task(
                         None,
                     ),
                     Err(Err(e)) => return Err(e),
-                    Ok(r) if r.success => (Verdict::Failed, Some(canonical), true, Feedback::default(), None),
+                    Ok(r) if r.success => (
+                        Verdict::Failed,
+                        Some(canonical),
+                        true,
+                        Feedback::default(),
+                        None,
+                    ),
                     Ok(r) => {
                         let last_removal = match &answer {
                             Answer::Iphyre(rs) => rs.iter().map(|x| x.time).fold(0.0, f64::max),

@@ -44,9 +44,17 @@ pub fn batch(rows: &[Row]) -> Result<RecordBatch, arrow::error::ArrowError> {
             i(|r| r.seed),
             i(|r| r.attempt),
             s(|r| &r.action),
-            Arc::new(BooleanArray::from(rows.iter().map(|r| r.valid).collect::<Vec<_>>())),
-            Arc::new(rows.iter().map(|r| r.reason.as_deref()).collect::<StringArray>()),
-            Arc::new(BooleanArray::from(rows.iter().map(|r| r.success).collect::<Vec<_>>())),
+            Arc::new(BooleanArray::from(
+                rows.iter().map(|r| r.valid).collect::<Vec<_>>(),
+            )),
+            Arc::new(
+                rows.iter()
+                    .map(|r| r.reason.as_deref())
+                    .collect::<StringArray>(),
+            ),
+            Arc::new(BooleanArray::from(
+                rows.iter().map(|r| r.success).collect::<Vec<_>>(),
+            )),
             s(|r| &r.format),
             s(|r| &r.feedback),
             s(|r| &r.library),
@@ -54,7 +62,9 @@ pub fn batch(rows: &[Row]) -> Result<RecordBatch, arrow::error::ArrowError> {
             s(|r| &r.model),
             i(|r| r.prompt_tokens),
             i(|r| r.completion_tokens),
-            Arc::new(Float64Array::from_iter_values(rows.iter().map(|r| r.seconds))),
+            Arc::new(Float64Array::from_iter_values(
+                rows.iter().map(|r| r.seconds),
+            )),
             i(|r| r.simulations),
         ],
     )

@@ -58,7 +58,9 @@ impl TaskScene {
 }
 
 /// Which billiards action format to use.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum PoolAction {
     /// DeepPHY's speed level and strike spot, φ aimed automatically at the lowest-numbered ball.
@@ -358,19 +360,33 @@ mod tests {
         let sims = Simulators::new().unwrap();
         let t = choose_tasks(&sims, &choice(Env::Phyre, 30)).unwrap();
         assert_eq!(t.len(), 30);
-        let templates: std::collections::BTreeSet<&str> =
-            t.iter().map(|s| &s.id()[..5]).collect();
+        let templates: std::collections::BTreeSet<&str> = t.iter().map(|s| &s.id()[..5]).collect();
         assert_eq!(templates.len(), 25);
-        let test = phyre::fold(TaskSet::default_tasks().unwrap(), EvalSetup::WithinTemplate, 0).test;
+        let test = phyre::fold(
+            TaskSet::default_tasks().unwrap(),
+            EvalSetup::WithinTemplate,
+            0,
+        )
+        .test;
         assert!(t.iter().all(|s| test.iter().any(|id| id == s.id())));
-        assert_eq!(choose_tasks(&sims, &choice(Env::Iphyre, 3)).unwrap()[0].id(), "support");
-        assert_eq!(choose_tasks(&sims, &choice(Env::Pooltool, 2)).unwrap().len(), 2);
+        assert_eq!(
+            choose_tasks(&sims, &choice(Env::Iphyre, 3)).unwrap()[0].id(),
+            "support"
+        );
+        assert_eq!(
+            choose_tasks(&sims, &choice(Env::Pooltool, 2))
+                .unwrap()
+                .len(),
+            2
+        );
     }
 
     #[test]
     fn an_occluding_phyre_ball_is_invalid_and_a_free_one_simulates() {
         let sims = Simulators::new().unwrap();
-        let task = choose_tasks(&sims, &choice(Env::Phyre, 1)).unwrap().remove(0);
+        let task = choose_tasks(&sims, &choice(Env::Phyre, 1))
+            .unwrap()
+            .remove(0);
         let mut occluding = 0;
         let mut valid = 0;
         for cell in 1..=64 {
@@ -391,8 +407,15 @@ mod tests {
     #[test]
     fn the_pool_table_evolves_between_shots() {
         let sims = Simulators::new().unwrap();
-        let rack = choose_tasks(&sims, &choice(Env::Pooltool, 1)).unwrap().remove(0);
-        let a = parse(Format::PoolDeepphy, "Speed: High, Strikespot: Middle Spin", 0).unwrap();
+        let rack = choose_tasks(&sims, &choice(Env::Pooltool, 1))
+            .unwrap()
+            .remove(0);
+        let a = parse(
+            Format::PoolDeepphy,
+            "Speed: High, Strikespot: Middle Spin",
+            0,
+        )
+        .unwrap();
         let r = attempt(&sims, &rack, &a).unwrap();
         let (TaskScene::Pool(before), TaskScene::Pool(after)) = (&rack, &r.next) else {
             panic!()

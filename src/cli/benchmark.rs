@@ -5,8 +5,8 @@
 
 use std::path::PathBuf;
 
-use annotrace::bench::{FeedbackMode, PoolAction};
 use annotrace::bench::agent::AgentKind;
+use annotrace::bench::{FeedbackMode, PoolAction};
 use annotrace::llm::LlmSettings;
 use annotrace::pipeline::ErrorCategory;
 use annotrace::pipeline::stages::benchmark::{BenchmarkParams, BenchmarkSummary, KIND, PhyreSetup};
@@ -154,7 +154,11 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
     })?;
     println!(
         "benchmark {id}{}: {}",
-        if stage.cached { " [recorded result]" } else { "" },
+        if stage.cached {
+            " [recorded result]"
+        } else {
+            ""
+        },
         s.line()
     );
     Ok(0)

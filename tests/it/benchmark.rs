@@ -42,9 +42,27 @@ fn last_user(s: &Seen) -> (String, usize) {
 
 fn bench_args<'a>(env: &'a str, feedback: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
     let mut a = vec![
-        "benchmark", "--run", "run", "--env", env, "--agent", "llm", "--feedback", feedback,
-        "--tasks", "1", "--seeds", "1", "--attempts", "3", "--llm-model", "vlm", "--llm-retries", "0",
-        "--workers", "1",
+        "benchmark",
+        "--run",
+        "run",
+        "--env",
+        env,
+        "--agent",
+        "llm",
+        "--feedback",
+        feedback,
+        "--tasks",
+        "1",
+        "--seeds",
+        "1",
+        "--attempts",
+        "3",
+        "--llm-model",
+        "vlm",
+        "--llm-retries",
+        "0",
+        "--workers",
+        "1",
     ];
     a.extend_from_slice(extra);
     a
@@ -72,7 +90,11 @@ fn loop_on(env: &str, feedback: &str, valid: [&'static str; 2]) {
     assert!(rows[0].starts_with("1,false,\"unparsable:"), "{csv}");
     assert!(rows[1].starts_with("2,true,,false"), "{csv}");
     assert!(rows[2].starts_with("3,true,,false"), "{csv}");
-    assert!(rows.iter().all(|r| r.ends_with(&format!("{feedback},100,20"))), "{csv}");
+    assert!(
+        rows.iter()
+            .all(|r| r.ends_with(&format!("{feedback},100,20"))),
+        "{csv}"
+    );
     let seen = server.seen();
     assert_eq!(seen.len(), 3);
     // The first request: the rules, the task and its images.
@@ -81,7 +103,10 @@ fn loop_on(env: &str, feedback: &str, valid: [&'static str; 2]) {
     assert!(images >= 1);
     // The second: the invalid answer was reported with its reason.
     let (text, _) = last_user(&seen[1]);
-    assert!(text.contains("Attempt 1 of 3: INVALID (unparsable"), "{text}");
+    assert!(
+        text.contains("Attempt 1 of 3: INVALID (unparsable"),
+        "{text}"
+    );
     // The third: the failed rollout, with the feedback of the mode.
     let (text, images) = last_user(&seen[2]);
     assert!(text.contains("was simulated and FAILED"), "{text}");
@@ -90,18 +115,29 @@ fn loop_on(env: &str, feedback: &str, valid: [&'static str; 2]) {
         "annotations" => assert!(text.contains("patterns (steps, time, label"), "{text}"),
         _ => {}
     }
-    let calls = t.csv("run", "SELECT count(*) AS n FROM llm_calls WHERE purpose = 'benchmark' AND status = 'ok'");
+    let calls = t.csv(
+        "run",
+        "SELECT count(*) AS n FROM llm_calls WHERE purpose = 'benchmark' AND status = 'ok'",
+    );
     assert_eq!(calls.lines().nth(1), Some("3"));
 }
 
 #[test]
 fn phyre_attempt_feedback_attempt_with_annotations() {
-    loop_on("phyre", "annotations", ["Cell: 1, Radius: 1", "Cell: 2, Radius: 1"]);
+    loop_on(
+        "phyre",
+        "annotations",
+        ["Cell: 1, Radius: 1", "Cell: 2, Radius: 1"],
+    );
 }
 
 #[test]
 fn iphyre_attempt_feedback_attempt_with_keyframes() {
-    loop_on("iphyre", "image-only", ["[]", "[{\"time\": 14.9, \"index\": 0}]"]);
+    loop_on(
+        "iphyre",
+        "image-only",
+        ["[]", "[{\"time\": 14.9, \"index\": 0}]"],
+    );
 }
 
 #[test]
@@ -120,8 +156,21 @@ fn pooltool_attempt_feedback_attempt_with_annotations() {
 fn an_endpoint_failure_mid_benchmark_resumes_without_asking_again() {
     let t = TestRun::new();
     let args = [
-        "benchmark", "--run", "run", "--env", "phyre", "--agent", "llm", "--tasks", "3", "--seeds",
-        "1", "--attempts", "2", "--llm-retries", "0",
+        "benchmark",
+        "--run",
+        "run",
+        "--env",
+        "phyre",
+        "--agent",
+        "llm",
+        "--tasks",
+        "3",
+        "--seeds",
+        "1",
+        "--attempts",
+        "2",
+        "--llm-retries",
+        "0",
     ];
     // Task 0 takes two calls, task 1's first is answered, its second fails: the endpoint is down.
     let down = ChatServer::responder({
@@ -135,30 +184,50 @@ fn an_endpoint_failure_mid_benchmark_resumes_without_asking_again() {
         }
     });
     let url = down.url();
-    let env = [("ANNOTRACE_LLM_BASE_URL", url.as_str()), ("ANNOTRACE_LLM_MODEL", "vlm")];
+    let env = [
+        ("ANNOTRACE_LLM_BASE_URL", url.as_str()),
+        ("ANNOTRACE_LLM_MODEL", "vlm"),
+    ];
     t.run_env(&args, &env).code(3);
     assert_eq!(down.seen().len(), 4);
     // Back up: the rerun skips task 0, serves task 1's first answer from llm_calls and asks the rest.
     let up = ChatServer::responder(|_| Reply::chat("Cell: 1, Radius: 1"));
     let url = up.url();
-    let env = [("ANNOTRACE_LLM_BASE_URL", url.as_str()), ("ANNOTRACE_LLM_MODEL", "vlm")];
+    let env = [
+        ("ANNOTRACE_LLM_BASE_URL", url.as_str()),
+        ("ANNOTRACE_LLM_MODEL", "vlm"),
+    ];
     t.run_env(&args, &env).ok();
     assert_eq!(up.seen().len(), 3, "task 1's second call and task 2's two");
-    let csv = t.csv("run", "SELECT task, count(*) AS n FROM benchmark GROUP BY task ORDER BY task");
+    let csv = t.csv(
+        "run",
+        "SELECT task, count(*) AS n FROM benchmark GROUP BY task ORDER BY task",
+    );
     assert_eq!(csv.lines().skip(1).count(), 3, "{csv}");
     assert!(csv.lines().skip(1).all(|l| l.ends_with(",2")), "{csv}");
 }
 
 #[test]
 fn replay_reproduces_the_table_byte_for_byte() {
-    let server = ChatServer::responder(|s| {
-        Reply::chat(&format!("Cell: {}, Radius: 2", 10 + turn(s)))
-    });
+    let server =
+        ChatServer::responder(|s| Reply::chat(&format!("Cell: {}, Radius: 2", 10 + turn(s))));
     let t = TestRun::new();
     let url = server.url();
     let common = [
-        "--env", "phyre", "--agent", "llm", "--feedback", "image-only", "--tasks", "2", "--seeds",
-        "2", "--attempts", "3", "--llm-model", "vlm",
+        "--env",
+        "phyre",
+        "--agent",
+        "llm",
+        "--feedback",
+        "image-only",
+        "--tasks",
+        "2",
+        "--seeds",
+        "2",
+        "--attempts",
+        "3",
+        "--llm-model",
+        "vlm",
     ];
     let mut a: Vec<&str> = vec!["benchmark", "--run", "a", "--llm-base-url", &url];
     a.extend_from_slice(&common);
@@ -194,27 +263,68 @@ fn offline_agents_fill_the_table1_layout() {
     let t = TestRun::new();
     for agent in ["random", "search"] {
         t.run(&[
-            "benchmark", "--run", "run", "--env", "iphyre", "--agent", agent, "--tasks", "2",
-            "--seeds", "2", "--attempts", "3", "--search-budget", "3",
+            "benchmark",
+            "--run",
+            "run",
+            "--env",
+            "iphyre",
+            "--agent",
+            agent,
+            "--tasks",
+            "2",
+            "--seeds",
+            "2",
+            "--attempts",
+            "3",
+            "--search-budget",
+            "3",
         ])
         .ok()
         .stdout_has(&format!("iphyre {agent} agent"));
     }
-    let sql = std::fs::read_to_string(crate::common::repo().join("sql/benchmark_table1.sql")).unwrap();
+    let sql =
+        std::fs::read_to_string(crate::common::repo().join("sql/benchmark_table1.sql")).unwrap();
     let r = t.run(&["query", "--run", "run", "--format", "csv", "--", &sql]);
     let csv = r.ok().stdout.clone();
     let lines: Vec<&str> = csv.lines().collect();
-    assert_eq!(lines[0], "agent,feedback,PHYRE,I-PHYRE,PoolTool,seeds,tasks");
-    assert!(lines[1].starts_with("random,none,,") && lines[2].starts_with("search,none,,"), "{csv}");
+    assert_eq!(
+        lines[0],
+        "agent,feedback,PHYRE,I-PHYRE,PoolTool,seeds,tasks"
+    );
+    assert!(
+        lines[1].starts_with("random,none,,") && lines[2].starts_with("search,none,,"),
+        "{csv}"
+    );
     assert!(lines[1].contains(" ± "), "{csv}");
     // Rerunning the same command reuses the recorded result; the LLM flags need the llm agent.
     t.run(&[
-        "benchmark", "--run", "run", "--env", "iphyre", "--agent", "random", "--tasks", "2",
-        "--seeds", "2", "--attempts", "3", "--search-budget", "3",
+        "benchmark",
+        "--run",
+        "run",
+        "--env",
+        "iphyre",
+        "--agent",
+        "random",
+        "--tasks",
+        "2",
+        "--seeds",
+        "2",
+        "--attempts",
+        "3",
+        "--search-budget",
+        "3",
     ])
     .ok()
     .stdout_has("[recorded result]");
-    t.run(&["benchmark", "--run", "run", "--agent", "random", "--llm-model", "x"])
-        .code(2)
-        .stderr_has("only used with --agent llm");
+    t.run(&[
+        "benchmark",
+        "--run",
+        "run",
+        "--agent",
+        "random",
+        "--llm-model",
+        "x",
+    ])
+    .code(2)
+    .stderr_has("only used with --agent llm");
 }

@@ -3,8 +3,8 @@
 mod common;
 
 mod annotate;
-mod benchmark;
 mod anywhere;
+mod benchmark;
 mod evolve;
 mod exit_codes;
 mod export;

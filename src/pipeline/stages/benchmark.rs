@@ -181,9 +181,17 @@ impl BenchmarkSummary {
             "{} {}{} agent, {} feedback{}: {}/{} task runs solved ({:.1} %) over {} seed(s), {} attempts; harness {:.1} ms per attempt",
             self.env,
             self.agent,
-            if self.model.is_empty() { String::new() } else { format!(" ({})", self.model) },
+            if self.model.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", self.model)
+            },
             self.feedback,
-            if self.library.is_empty() { String::new() } else { format!(" ({})", self.library) },
+            if self.library.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", self.library)
+            },
             self.solved,
             total,
             100.0 * self.success_rate,
@@ -236,7 +244,10 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     let p: BenchmarkParams = def.params()?;
     let at_least = |k: &'static str, v: u64, min: u64, max: u64| -> Result<u64, BuildError> {
         if v < min || v > max {
-            Err(BuildError::param(k, format!("`{k}` must be in {min}..={max}, found {v}")))
+            Err(BuildError::param(
+                k,
+                format!("`{k}` must be in {min}..={max}, found {v}"),
+            ))
         } else {
             Ok(v)
         }
@@ -272,7 +283,10 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     if p.agent != AgentKind::Llm && p.llm.is_some() {
         return Err(BuildError::param(
             "llm",
-            format!("`llm` settings are only used with agent = \"llm\", not {:?}", p.agent.as_str()),
+            format!(
+                "`llm` settings are only used with agent = \"llm\", not {:?}",
+                p.agent.as_str()
+            ),
         ));
     }
     let stage = BenchmarkStage {
@@ -309,6 +323,9 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     Ok(Box::new(stage))
 }
 
+/// An agent and, for the LLM agent, its client (flushed after every task).
+type AgentAndClient = (Box<dyn Agent>, Option<Arc<LlmClient>>);
+
 fn bench_error(task: &str, e: BenchError) -> StageError {
     match e {
         BenchError::Llm(e) => StageError::Llm(Box::new(e)),
@@ -334,7 +351,7 @@ impl BenchmarkStage {
         &self,
         ctx: &StageContext<'_>,
         sims: &Simulators,
-    ) -> Result<(Box<dyn Agent>, Option<Arc<LlmClient>>), StageError> {
+    ) -> Result<AgentAndClient, StageError> {
         match self.agent {
             AgentKind::Random => Ok((Box::new(RandomAgent), None)),
             AgentKind::Search => Ok((
@@ -390,7 +407,8 @@ impl Stage for BenchmarkStage {
             source: Box::new(e),
         })?;
         let tasks = choose_tasks(&sims, &self.choice).map_err(|e| bench_error("-", e))?;
-        if self.agent == AgentKind::Llm && self.skip_without_endpoint && !self.endpoint_configured() {
+        if self.agent == AgentKind::Llm && self.skip_without_endpoint && !self.endpoint_configured()
+        {
             let summary = BenchmarkSummary {
                 env: self.env.to_string(),
                 agent: self.agent.as_str().into(),
@@ -400,7 +418,8 @@ impl Stage for BenchmarkStage {
             };
             return Ok(StageOutput {
                 line: summary.line(),
-                summary: serde_json::to_value(&summary).map_err(|e| StageError::Internal(e.to_string()))?,
+                summary: serde_json::to_value(&summary)
+                    .map_err(|e| StageError::Internal(e.to_string()))?,
                 ..StageOutput::default()
             });
         }
@@ -440,7 +459,8 @@ impl Stage for BenchmarkStage {
                 let record = match ctx.finished_shard(&shard)? {
                     Some(r) => r,
                     None => {
-                        let result = play_task(&sims, agent.as_ref(), annotator, &settings, seed, i, task);
+                        let result =
+                            play_task(&sims, agent.as_ref(), annotator, &settings, seed, i, task);
                         let p = match result {
                             Ok(p) => p,
                             Err(e) => {
@@ -452,7 +472,12 @@ impl Stage for BenchmarkStage {
                         };
                         let ordinal = ctx.shard_started();
                         ctx.checkpoint_mid_shard(ordinal)?;
-                        let n = ctx.write_batch(table::TABLE, self.env, &shard, &table::batch(&p.rows)?)?;
+                        let n = ctx.write_batch(
+                            table::TABLE,
+                            self.env,
+                            &shard,
+                            &table::batch(&p.rows)?,
+                        )?;
                         played += n;
                         harness_s += p.harness_s;
                         agent_s += p.agent_s;
@@ -498,7 +523,8 @@ impl Stage for BenchmarkStage {
             rows: [(table::TABLE.to_string(), rows)].into_iter().collect(),
             files: Vec::new(),
             line: summary.line(),
-            summary: serde_json::to_value(&summary).map_err(|e| StageError::Internal(e.to_string()))?,
+            summary: serde_json::to_value(&summary)
+                .map_err(|e| StageError::Internal(e.to_string()))?,
         })
     }
 }
@@ -510,6 +536,9 @@ mod tests {
     #[test]
     fn defaults_build_and_unknown_tasks_are_refused() {
         let p = BenchmarkParams::default();
-        assert_eq!((p.attempts, p.agent, p.feedback), (10, AgentKind::Random, FeedbackMode::None));
+        assert_eq!(
+            (p.attempts, p.agent, p.feedback),
+            (10, AgentKind::Random, FeedbackMode::None)
+        );
     }
 }
