@@ -328,3 +328,64 @@ fn offline_agents_fill_the_table1_layout() {
     .code(2)
     .stderr_has("only used with --agent llm");
 }
+
+#[test]
+fn a_pipeline_skips_the_llm_stage_without_an_endpoint_and_reports_bad_tasks_at_their_line() {
+    let t = TestRun::new();
+    let sql =
+        std::fs::read_to_string(crate::common::repo().join("sql/benchmark_table1.sql")).unwrap();
+    t.write("sql/benchmark_table1.sql", &sql);
+    t.write(
+        "pipelines/b.toml",
+        r#"[pipeline]
+name = "b"
+seed = 3
+
+[[stage]]
+id = "random"
+kind = "benchmark"
+env = "phyre"
+tasks = 2
+seeds = 2
+attempts = 2
+
+[[stage]]
+id = "llm"
+kind = "benchmark"
+env = "phyre"
+tasks = 2
+agent = "llm"
+feedback = "annotations"
+skip_without_endpoint = true
+
+[[stage]]
+id = "table1"
+kind = "sql"
+inputs = ["random", "llm"]
+query = "benchmark_table1.sql"
+
+[[stage]]
+id = "md"
+kind = "export"
+inputs = ["table1"]
+table = "table1"
+format = "markdown"
+"#,
+    );
+    let r = t.run_env(
+        &["run", "pipelines/b.toml", "--run-dir", "run"],
+        &[("ANNOTRACE_LLM_BASE_URL", "")],
+    );
+    r.ok().stderr_has("skipped: agent = llm but no endpoint");
+    let md = std::fs::read_to_string(t.path("run/exports/table1.md")).unwrap();
+    assert!(md.contains("| random | none | "), "{md}");
+    assert!(!md.contains("llm"), "{md}");
+    t.write(
+        "pipelines/bad.toml",
+        "[pipeline]\nname = \"bad\"\n\n[[stage]]\nid = \"b\"\nkind = \"benchmark\"\nenv = \"iphyre\"\ntask_ids = [\"nope\"]\n",
+    );
+    t.run(&["run", "pipelines/bad.toml", "--run-dir", "run2"])
+        .code(2)
+        .stderr_has("pipelines/bad.toml:8")
+        .stderr_has("no I-PHYRE game \"nope\"");
+}
