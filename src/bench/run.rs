@@ -27,6 +27,8 @@ pub struct Settings {
     pub seed: u64,
     /// The library's name (annotations feedback; empty otherwise).
     pub library: String,
+    /// Detectors of the library that annotate (0 unless annotations feedback).
+    pub patterns: usize,
 }
 
 /// The detectors that annotate rollouts for `annotations` feedback, and their worker pool.
@@ -61,6 +63,8 @@ pub struct Row {
     pub feedback: String,
     /// Library of the annotations (empty when none).
     pub library: String,
+    /// Detectors of the library used (0 when none).
+    pub patterns: i64,
     /// Agent kind.
     pub agent: String,
     /// Model (empty for offline agents).
@@ -213,6 +217,7 @@ pub fn play_task(
             format: settings.format.as_str().into(),
             feedback: settings.feedback.as_str().into(),
             library: settings.library.clone(),
+            patterns: settings.patterns as i64,
             agent: agent.kind().as_str().into(),
             model: agent.model(),
             prompt_tokens: reply.tokens_in as i64,

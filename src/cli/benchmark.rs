@@ -70,6 +70,9 @@ pub struct Args {
     /// Detector library of the annotations feedback (default: the built-in one of the environment).
     #[arg(long)]
     library: Option<PathBuf>,
+    /// Only these labels of the library annotate (one: the -SP ablation); comma-separated or repeated.
+    #[arg(long, value_delimiter = ',')]
+    labels: Vec<String>,
     /// Python worker processes (0 = one per core).
     #[arg(long, default_value_t = 0)]
     workers: u64,
@@ -124,6 +127,7 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
         keyframes: a.keyframes,
         image_size: a.image_size,
         library: a.library.as_deref().map(absolute).transpose()?,
+        labels: (!a.labels.is_empty()).then(|| a.labels.clone()),
         llm,
         prompts: a.llm.prompts.as_deref().map(absolute).transpose()?,
         workers: a.workers,

@@ -115,6 +115,11 @@ fn loop_on(env: &str, feedback: &str, valid: [&'static str; 2]) {
         "annotations" => assert!(text.contains("patterns (steps, time, label"), "{text}"),
         _ => {}
     }
+    let patterns = t.csv("run", "SELECT DISTINCT patterns FROM benchmark");
+    match feedback {
+        "annotations" => assert_ne!(patterns.lines().nth(1), Some("0"), "{patterns}"),
+        _ => {}
+    }
     let calls = t.csv(
         "run",
         "SELECT count(*) AS n FROM llm_calls WHERE purpose = 'benchmark' AND status = 'ok'",

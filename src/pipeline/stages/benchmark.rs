@@ -81,6 +81,10 @@ pub struct BenchmarkParams {
     /// Detector library of the annotations (default: the built-in library of the environment).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub library: Option<String>,
+    /// Only these labels of the library annotate (a single one: the -SP ablation; growing subsets: the
+    /// library-size ablation). Default: every label.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub labels: Option<Vec<String>>,
     /// LLM settings (endpoint, model, temperature, replay, …; docs/llm.md), over the ANNOTRACE_LLM_* variables.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub llm: Option<LlmSettings>,
@@ -116,6 +120,7 @@ impl Default for BenchmarkParams {
             keyframes: 5,
             image_size: 256,
             library: None,
+            labels: None,
             llm: None,
             prompts: None,
             workers: s.workers,
@@ -235,6 +240,7 @@ pub struct BenchmarkStage {
     keyframes: usize,
     image_size: u32,
     setup: Option<DetectorSetup>,
+    detectors: Vec<crate::detect::Detector>,
     llm: LlmSettings,
     prompts: Option<PathBuf>,
     project: PathBuf,
@@ -268,13 +274,43 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         };
         Some(DetectorSetup::new(&sandbox, spec)?)
     } else {
-        if p.library.is_some() {
-            return Err(BuildError::param(
-                "library",
-                "a library is only used with feedback = \"annotations\"",
-            ));
+        for (given, key) in [
+            (p.library.is_some(), "library"),
+            (p.labels.is_some(), "labels"),
+        ] {
+            if given {
+                return Err(BuildError::param(
+                    key,
+                    format!("`{key}` is only used with feedback = \"annotations\""),
+                ));
+            }
         }
         None
+    };
+    let detectors = match (&setup, &p.labels) {
+        (None, _) => Vec::new(),
+        (Some(s), None) => s.library.detectors.clone(),
+        (Some(s), Some(labels)) => {
+            let known = s.library.labels();
+            let norm = |l: &str| crate::detect::normalise_label(l);
+            if labels.is_empty() {
+                return Err(BuildError::param("labels", "give at least one label"));
+            }
+            if let Some(bad) = labels
+                .iter()
+                .find(|l| !known.iter().any(|k| norm(k) == norm(l)))
+            {
+                return Err(BuildError::param(
+                    "labels",
+                    format!(
+                        "library {} has no label {bad:?} (it has: {})",
+                        s.library.name,
+                        known.join(", ")
+                    ),
+                ));
+            }
+            crate::reward::annotate::detectors_for(&s.library, labels)
+        }
     };
     let mut llm = p.llm.clone().unwrap_or_default();
     if let Some(r) = &llm.replay {
@@ -313,6 +349,7 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         keyframes: at_least("keyframes", p.keyframes, 1, 20)? as usize,
         image_size: at_least("image_size", p.image_size, 64, 1024)? as u32,
         setup,
+        detectors,
         llm,
         prompts: p.prompts.as_ref().map(|d| spec.project_dir.join(d)),
         project: spec.project_dir.clone(),
@@ -395,6 +432,7 @@ impl Stage for BenchmarkStage {
     fn fingerprint_extra(&self) -> Result<Value, StageError> {
         Ok(json!({
             "library": self.setup.as_ref().map(|s| s.library.fingerprint()),
+            "detectors": self.detectors.iter().map(|d| d.label.clone()).collect::<Vec<_>>(),
             "worker": self.setup.as_ref().map(|_| crate::detect::worker_fingerprint()),
             "templates": crate::bench::agent::TEMPLATES.iter().map(|(n, t)| format!("{n}:{}", crate::digest::sha256_hex(t.as_bytes()))).collect::<Vec<_>>(),
             "endpoint": (self.agent == AgentKind::Llm).then(|| self.endpoint_configured()),
@@ -437,15 +475,16 @@ impl Stage for BenchmarkStage {
             image_size: self.image_size,
             seed: self.seed.unwrap_or(ctx.seed()),
             library: library.clone(),
+            patterns: self.detectors.len(),
         };
         let pool = match &self.setup {
             Some(s) => Some(s.pool()?),
             None => None,
         };
         let annotator = match (&pool, &self.setup) {
-            (Some(p), Some(s)) => Some(Annotator {
+            (Some(p), Some(_)) => Some(Annotator {
                 pool: p,
-                detectors: &s.library.detectors,
+                detectors: &self.detectors,
             }),
             _ => None,
         };
