@@ -166,18 +166,19 @@ pub fn play_task(
                             Answer::Iphyre(rs) => rs.iter().map(|x| x.time).fold(0.0, f64::max),
                             _ => 0.0,
                         };
-                        let anns = match (settings.feedback, annotator) {
-                            (FeedbackMode::Annotations, Some(a)) => {
-                                crate::reward::annotate::annotate(
-                                    a.pool,
-                                    a.detectors,
-                                    std::slice::from_ref(&r.trace),
-                                )
-                                .0
-                            }
-                            _ => Vec::new(),
-                        };
+                        // No feedback after the last attempt: nothing would read it.
                         let fb = if n < settings.attempts {
+                            let anns = match (settings.feedback, annotator) {
+                                (FeedbackMode::Annotations, Some(a)) => {
+                                    crate::reward::annotate::annotate(
+                                        a.pool,
+                                        a.detectors,
+                                        std::slice::from_ref(&r.trace),
+                                    )
+                                    .0
+                                }
+                                _ => Vec::new(),
+                            };
                             feedback(
                                 settings.feedback,
                                 sims,
