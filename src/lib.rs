@@ -30,6 +30,7 @@
 // it is built once per failed run, never on a hot path, so its size is not worth boxing.
 #![allow(clippy::result_large_err)]
 
+pub mod bench;
 pub mod builtin;
 pub mod detect;
 pub mod digest;

@@ -20,6 +20,7 @@
 
 mod accuracy;
 mod annotate;
+mod benchmark;
 mod evolve;
 mod export;
 mod import;
@@ -153,6 +154,8 @@ enum Command {
     Accuracy(accuracy::Args),
     /// Learn detectors for labels by evolutionary search over a run's traces (resumable).
     Evolve(evolve::Args),
+    /// Play DeepPHY-style physics-reasoning tasks with an agent (random, search or an LLM) and feedback.
+    Benchmark(benchmark::Args),
     /// Print a trace with its annotations as compact text for language models, with a token count.
     Show(show::Args),
     /// Reward programs: check one, evaluate it on a trace, or synthesise one from a goal sentence.
@@ -183,6 +186,7 @@ pub fn main() -> ExitCode {
         Command::Annotate(a) => annotate::run(a, cli.quiet),
         Command::Accuracy(a) => accuracy::run(a, cli.quiet),
         Command::Evolve(a) => evolve::run(a, cli.quiet),
+        Command::Benchmark(a) => benchmark::run(a, cli.quiet),
         Command::Show(a) => show::run(a),
         Command::Reward(a) => reward::run(a),
         Command::SuggestLabels(a) => suggest_labels::run(a, cli.quiet),

@@ -32,6 +32,13 @@ pub enum Part {
     ImageUrl(String),
 }
 
+impl Part {
+    /// A PNG image as a base64 `data:` URL part.
+    pub fn png(bytes: &[u8]) -> Part {
+        Part::ImageUrl(format!("data:image/png;base64,{}", base64(bytes)))
+    }
+}
+
 /// One message of a conversation.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Message {

@@ -55,6 +55,7 @@ pub static STAGE_KINDS: &[&StageKind] = &[
     &stages::accuracy::KIND,
     &stages::synthesise::KIND,
     &stages::optimise::KIND,
+    &stages::benchmark::KIND,
     &stages::evolve::KIND,
     &stages::sql::KIND,
     &stages::export::KIND,

@@ -3,7 +3,7 @@
 //! tables; `simulate.rs` with `simulate_phyre.rs` and `simulate_iphyre.rs` for the other environments),
 //! `annotate` (a detector library run over the traces), `accuracy` (its event-grounded labels scored
 //! against simulator events), `synthesise` (goal sentences to reward programs through an LLM),
-//! `optimise` (annealing actions for reward programs), `evolve` (the
+//! `optimise` (annealing actions for reward programs), `benchmark` (DeepPHY's agent loop), `evolve` (the
 //! evolutionary search for detectors), `sql` (a query over the run stored as a table) and `export` (a
 //! table or query written to `exports/`).
 //!
@@ -14,6 +14,7 @@
 
 pub mod accuracy;
 pub mod annotate;
+pub mod benchmark;
 pub mod detector_setup;
 pub mod evolve;
 pub mod export;
