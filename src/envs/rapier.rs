@@ -72,7 +72,16 @@ impl Physics {
 
     /// Advances one `integration.dt` and passes each collision event of the step, in rapier's order, to
     /// `on_collision` together with the collider set (to map handles to objects).
-    pub fn step(&mut self, mut on_collision: impl FnMut(&ColliderSet, CollisionEvent)) {
+    pub fn step(&mut self, on_collision: impl FnMut(&ColliderSet, CollisionEvent)) {
+        self.step_with_hooks(&(), on_collision);
+    }
+
+    /// [`step`](Self::step) with `hooks` called for the colliders that ask for them (`ActiveHooks`).
+    pub fn step_with_hooks(
+        &mut self,
+        hooks: &dyn PhysicsHooks,
+        mut on_collision: impl FnMut(&ColliderSet, CollisionEvent),
+    ) {
         self.pipeline.step(
             self.gravity,
             &self.integration,
@@ -85,7 +94,7 @@ impl Physics {
             &mut self.multibody_joints,
             &mut self.soft_bodies,
             &mut self.ccd,
-            &(),
+            hooks,
             &self.events,
         );
         while self.force_rx.try_recv().is_ok() {}

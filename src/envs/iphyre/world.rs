@@ -84,6 +84,7 @@ impl World {
             dt: params.dt() as f32,
             num_solver_iterations: params.solver_iterations,
             num_internal_stabilization_iterations: params.stabilization_iterations,
+            num_internal_pgs_iterations: params.pgs_iterations,
             length_unit: params.length_unit as f32,
             ..IntegrationParameters::default()
         };

@@ -6,7 +6,8 @@
 //! the physics constants ([`PhysicsParams`]), actions and their validity ([`BallAction`], [`Placement`],
 //! DeepPHY's [`deepphy_action`]), the rapier2d world ([`World`]), the episode loop with PHYRE's success rule
 //! ([`episode::run`]), traces ([`trace_of`]), the evaluation folds ([`folds`]), seeded random actions
-//! ([`random_valid_action`]) and pictures ([`render`]).
+//! ([`random_valid_action`]), pictures ([`render`]) and outcome agreement with the original on balanced
+//! outcome sets made offline ([`reference`](mod@reference)).
 //! **Does not:** write Parquet or run stages (`pipeline/stages/simulate_phyre.rs`), read argv, or call
 //! Python. rapier handles never leave this module: the boundary speaks in PHYRE body indices.
 //!
@@ -28,6 +29,7 @@ pub mod episode;
 mod error;
 pub mod folds;
 mod params;
+pub mod reference;
 pub mod render;
 mod sample;
 mod task;

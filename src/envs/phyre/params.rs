@@ -35,6 +35,21 @@ pub struct PhysicsParams {
     pub solver_iterations: usize,
     /// rapier internal stabilisation iterations per solver iteration.
     pub stabilization_iterations: usize,
+    /// rapier projected Gauss–Seidel iterations per solver iteration (substep).
+    pub pgs_iterations: usize,
+    /// rapier's contact prediction distance (m): contacts are built for shapes closer than this, so
+    /// a body moving less than it per step is stopped at the surface instead of sinking in.
+    pub prediction_distance: f64,
+    /// Whether dynamic bodies use rapier's continuous collision detection (motion clamping).
+    pub ccd: bool,
+    /// Contact skin of every polygon (m), rapier's `contact_skin`: Box2D's `b2_polygonRadius` is 0.01.
+    pub polygon_skin: f64,
+    /// Box2D's `b2_velocityThreshold` (m/s): contacts approaching slower than this do not bounce
+    /// (restitution 0); 0 turns the rule off (rapier bounces every new contact).
+    pub restitution_threshold: f64,
+    /// Whether rapier may reuse a pair's contact points while the pair has moved little
+    /// (`IntegrationParameters::contact_recycling`).
+    pub contact_recycling: bool,
     /// Whether resting bodies may sleep (Box2D's default world allows sleeping).
     pub sleeping: bool,
     /// A body may sleep once its furthest point has moved slower than this (m/s) for `sleep_time`:
@@ -64,6 +79,12 @@ impl Default for PhysicsParams {
             touch_distance: 0.02,
             solver_iterations: 4,
             stabilization_iterations: 1,
+            pgs_iterations: 1,
+            prediction_distance: 0.02,
+            ccd: false,
+            polygon_skin: 0.0,
+            restitution_threshold: 0.0,
+            contact_recycling: true,
             sleeping: true,
             sleep_linear: 0.05,
             sleep_time: 0.5,
@@ -88,6 +109,9 @@ impl PhysicsParams {
             ("linear_damping", self.linear_damping),
             ("ball_touch_threshold_px", self.ball_touch_threshold_px),
             ("touch_distance", self.touch_distance),
+            ("prediction_distance", self.prediction_distance),
+            ("polygon_skin", self.polygon_skin),
+            ("restitution_threshold", self.restitution_threshold),
             ("sleep_linear", self.sleep_linear),
             ("sleep_time", self.sleep_time),
         ];
@@ -109,6 +133,7 @@ impl PhysicsParams {
             ("max_steps", self.max_steps),
             ("steps_for_solution", self.steps_for_solution),
             ("solver_iterations", self.solver_iterations),
+            ("pgs_iterations", self.pgs_iterations),
         ] {
             if v == 0 {
                 return Err(PhyreError::InvalidParams {

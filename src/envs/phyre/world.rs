@@ -70,7 +70,38 @@ pub struct World {
     ball_threshold: f32,
     touch_distance: f32,
     active_pairs: HashMap<[usize; 2], u32>,
+    bounce: BounceThreshold,
     physics: Physics,
+}
+
+/// Box2D's restitution rule: a contact bounces only when its bodies approach faster than the
+/// threshold (`b2_velocityThreshold`, 1 m/s); slower contacts are inelastic. rapier bounces every new
+/// contact, so this hook zeroes the restitution of slow ones.
+struct BounceThreshold {
+    threshold: f32,
+}
+
+impl PhysicsHooks for BounceThreshold {
+    fn modify_solver_contacts(&self, context: &mut ContactModificationContext) {
+        let (b1, b2) = (context.rigid_body1, context.rigid_body2);
+        let bodies = context.bodies;
+        let Some(m) = context.rigid_mut() else {
+            return;
+        };
+        let n = *m.normal;
+        let velocity_at = |h: Option<RigidBodyHandle>, p: Vector| {
+            h.and_then(|h| bodies.get(h))
+                .map_or(Vector::ZERO, |b| b.velocity_at_point(p))
+        };
+        let fastest = m
+            .solver_contacts
+            .iter()
+            .map(|c| (velocity_at(b1, c.anchor1) - velocity_at(b2, c.anchor2)).dot(n))
+            .fold(f32::NEG_INFINITY, f32::max);
+        if fastest < self.threshold {
+            *m.restitution = 0.0;
+        }
+    }
 }
 
 impl std::fmt::Debug for World {
@@ -94,6 +125,9 @@ impl World {
             dt: params.dt() as f32,
             num_solver_iterations: params.solver_iterations,
             num_internal_stabilization_iterations: params.stabilization_iterations,
+            num_internal_pgs_iterations: params.pgs_iterations,
+            contact_recycling: params.contact_recycling,
+            normalized_prediction_distance: params.prediction_distance as f32,
             length_unit: 1.0,
             ..IntegrationParameters::default()
         };
@@ -136,6 +170,7 @@ impl World {
                 .angular_damping(params.angular_damping as f32)
                 .linear_damping(params.linear_damping as f32)
                 .can_sleep(params.sleeping)
+                .ccd_enabled(params.ccd && is_dynamic)
                 .user_data(index as u128)
                 .build();
             let a = body.activation_mut();
@@ -158,7 +193,19 @@ impl World {
                             })?
                     }
                 };
+                let builder = match shape {
+                    Shape::Polygon(_) if params.polygon_skin > 0.0 => {
+                        builder.contact_skin(params.polygon_skin as f32)
+                    }
+                    _ => builder,
+                };
+                let hooks = if params.restitution_threshold > 0.0 {
+                    ActiveHooks::MODIFY_SOLVER_CONTACTS
+                } else {
+                    ActiveHooks::empty()
+                };
                 let collider = builder
+                    .active_hooks(hooks)
                     .density(if is_dynamic {
                         params.density as f32
                     } else {
@@ -193,6 +240,9 @@ impl World {
             ball_threshold: m(params.ball_touch_threshold_px),
             touch_distance: params.touch_distance as f32,
             active_pairs: HashMap::new(),
+            bounce: BounceThreshold {
+                threshold: params.restitution_threshold as f32,
+            },
             physics: Physics::new(
                 Vector::new(0.0, -params.gravity as f32),
                 integration,
@@ -217,34 +267,36 @@ impl World {
     /// a ball with two of its parts is one contact: it begins with the first part and ends with the last.
     pub fn step(&mut self, out: &mut Vec<ContactChange>) {
         let active_pairs = &mut self.active_pairs;
-        self.physics.step(|colliders, event| {
-            let index = |h: ColliderHandle| colliders.get(h).map(|c| c.user_data as usize);
-            let (Some(a), Some(b)) = (index(event.collider1()), index(event.collider2())) else {
-                return;
-            };
-            if a == b {
-                return;
-            }
-            let key = [a.min(b), a.max(b)];
-            let count = active_pairs.entry(key).or_insert(0);
-            if event.started() {
-                *count += 1;
-                if *count == 1 {
-                    out.push(ContactChange {
-                        began: true,
-                        objects: key,
-                    });
+        self.physics
+            .step_with_hooks(&self.bounce, |colliders, event| {
+                let index = |h: ColliderHandle| colliders.get(h).map(|c| c.user_data as usize);
+                let (Some(a), Some(b)) = (index(event.collider1()), index(event.collider2()))
+                else {
+                    return;
+                };
+                if a == b {
+                    return;
                 }
-            } else if *count > 0 {
-                *count -= 1;
-                if *count == 0 {
-                    out.push(ContactChange {
-                        began: false,
-                        objects: key,
-                    });
+                let key = [a.min(b), a.max(b)];
+                let count = active_pairs.entry(key).or_insert(0);
+                if event.started() {
+                    *count += 1;
+                    if *count == 1 {
+                        out.push(ContactChange {
+                            began: true,
+                            objects: key,
+                        });
+                    }
+                } else if *count > 0 {
+                    *count -= 1;
+                    if *count == 0 {
+                        out.push(ContactChange {
+                            began: false,
+                            objects: key,
+                        });
+                    }
                 }
-            }
-        });
+            });
     }
 
     /// PHYRE's goal test: the two goal balls' centres closer than r₁ + r₂ + 0.1 px, or else a contact
