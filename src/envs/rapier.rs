@@ -1,6 +1,7 @@
 //! [`Physics`]: the rapier2d sets, pipeline and event channels that the PHYRE and I-PHYRE worlds share.
 //!
-//! **Owns:** building the rapier state around given bodies, colliders and joints, one pipeline step, and
+//! **Owns:** building the rapier state around given bodies, colliders and joints, one pipeline step (with
+//! optional physics hooks supplied by the world), and
 //! draining the step's collision events (contact-force and soft-body events are discarded).
 //! **Does not:** know environments: what bodies exist, their materials and what a contact means belong to
 //! `phyre/world.rs` and `iphyre/world.rs`.

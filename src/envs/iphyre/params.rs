@@ -47,6 +47,14 @@ pub struct PhysicsParams {
     /// With one substep this is Chipmunk's step structure; it raised the balanced held-out agreement
     /// from 91.5 % to 92.8 % at both 60 and 10 fps (`docs/fidelity.md`).
     pub pgs_iterations: usize,
+    /// Contact softness (rapier `SpringCoefficients`) for every contact, static or not: natural
+    /// frequency (Hz); 0 keeps rapier's defaults (30 Hz between dynamic bodies, 60 Hz against fixed ones).
+    pub contact_frequency: f64,
+    /// Contact softness damping ratio (rapier's default: 10), used when `contact_frequency` > 0.
+    pub contact_damping_ratio: f64,
+    /// Largest velocity (px/s) rapier may use to push a penetration apart; 0 keeps rapier's default
+    /// (3 · `length_unit`).
+    pub max_corrective_velocity: f64,
     /// rapier's `length_unit`, which scales its tolerances (allowed penetration 0.001·unit, prediction
     /// distance 0.002·unit, maximum corrective velocity 10·unit per s): 1, i.e. tolerances in pixels.
     /// Chosen by measurement against the original (`docs/fidelity.md`): outcome agreement on 640
@@ -73,6 +81,9 @@ impl Default for PhysicsParams {
             solver_iterations: 1,
             stabilization_iterations: 0,
             pgs_iterations: 10,
+            contact_frequency: 0.0,
+            contact_damping_ratio: 10.0,
+            max_corrective_velocity: 0.0,
             length_unit: 1.0,
         }
     }
