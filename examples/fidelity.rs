@@ -36,6 +36,11 @@ fn phyre_params(sets: &[(String, String)]) -> Result<phyre::PhysicsParams, Strin
     let mut p = phyre::PhysicsParams::default();
     for (k, v) in sets {
         match k.as_str() {
+            "engine" => {
+                p.engine = phyre::Engine::from_name(v)
+                    .ok_or_else(|| format!("--set engine={v}: expected box2d or rapier"))?
+            }
+            "box2d_phyre_compat" => p.box2d_phyre_compat = parse(k, v)?,
             "solver_iterations" => p.solver_iterations = parse(k, v)?,
             "stabilization_iterations" => p.stabilization_iterations = parse(k, v)?,
             "pgs_iterations" => p.pgs_iterations = parse(k, v)?,
@@ -113,6 +118,12 @@ fn run_phyre(files: &[String], sets: &[(String, String)], list: bool) -> Result<
             .map(|(t, (n, k))| format!("{t} {}", n - k))
             .collect();
         println!("  disagreements per template: {}", per.join(", "));
+        println!(
+            "  solved by both: {}, at the same step: {} ({})",
+            a.both_solved,
+            a.same_solving_step,
+            pct(a.same_solving_step, a.both_solved)
+        );
         if list {
             for &i in &a.disagreements {
                 let p = &set.pairs[i];

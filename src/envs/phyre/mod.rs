@@ -24,11 +24,14 @@
 //! ```
 
 pub mod action;
+mod box2d_compat;
+mod box2d_world;
 mod env;
 pub mod episode;
 mod error;
 pub mod folds;
 mod params;
+mod rapier_world;
 pub mod reference;
 pub mod render;
 mod sample;
@@ -42,7 +45,7 @@ pub use env::{PhyreEnv, dataset_tasks};
 pub use episode::{DEFAULT_STRIDE, EpisodeEvent, EpisodeResult, Frame, RecordOptions, Status};
 pub use error::{PhyreError, Result};
 pub use folds::{EvalSetup, Fold, fold};
-pub use params::{PIXELS_PER_METRE, PhysicsParams};
+pub use params::{Engine, PIXELS_PER_METRE, PhysicsParams};
 pub use sample::{MAX_DRAWS, action_rng, random_valid_action};
 pub use task::{Body, Color, Shape, Task};
 pub use tasks::{DEFAULT_TASKS_GZ, TaskSet};

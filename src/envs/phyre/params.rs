@@ -2,11 +2,48 @@
 
 use super::error::{PhyreError, Result};
 
-/// PHYRE's physics (Box2D 2.3 in PHYRE 0.2.2) as rapier2d settings. The world runs in metres with
-/// [`PIXELS_PER_METRE`] = 6, like PHYRE's Box2D world; everything the user sees (tasks, actions, traces)
-/// stays in scene pixels.
+/// The physics engine a PHYRE world runs on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Engine {
+    /// Box2D (the `box2d-rs` port of Box2D 2.4.1), PHYRE's own engine: reproduces PHYRE's outcomes
+    /// far more often than rapier2d (docs/fidelity.md). The rapier-only fields of [`PhysicsParams`]
+    /// do not apply; Box2D runs PHYRE's 15 velocity and 20 position iterations.
+    #[default]
+    Box2d,
+    /// rapier2d with the tuning knobs of [`PhysicsParams`].
+    Rapier,
+}
+
+impl Engine {
+    /// The name used in parameters and reports: `box2d` or `rapier`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Engine::Box2d => "box2d",
+            Engine::Rapier => "rapier",
+        }
+    }
+
+    /// Parses [`name`](Self::name).
+    pub fn from_name(name: &str) -> Option<Engine> {
+        match name {
+            "box2d" => Some(Engine::Box2d),
+            "rapier" => Some(Engine::Rapier),
+            _ => None,
+        }
+    }
+}
+
+/// PHYRE's physics (Box2D 2.3 in PHYRE 0.2.2): the engine, PHYRE's constants, and rapier2d's settings
+/// when the engine is rapier. The world runs in metres with [`PIXELS_PER_METRE`] = 6, like PHYRE's
+/// Box2D world; everything the user sees (tasks, actions, traces) stays in scene pixels.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PhysicsParams {
+    /// The engine: Box2D (default) or rapier2d.
+    pub engine: Engine,
+    /// Box2D only: give dynamic bodies the mass data and gravity scale with which box2d-rs (Box2D 2.4.1)
+    /// computes what PHYRE's 2018 Box2D computes (polygon mass about the vertex average, `h·g` per
+    /// step; `box2d_compat.rs`). On by default; off is plain Box2D 2.4.1.
+    pub box2d_phyre_compat: bool,
     /// Gravity (m/s², downwards): 9.8.
     pub gravity: f64,
     /// Density of dynamic bodies (kg/m²): 0.25. Static bodies have none.
@@ -66,6 +103,8 @@ pub const PIXELS_PER_METRE: f64 = 6.0;
 impl Default for PhysicsParams {
     fn default() -> Self {
         PhysicsParams {
+            engine: Engine::default(),
+            box2d_phyre_compat: true,
             gravity: 9.8,
             density: 0.25,
             friction: 0.5,

@@ -134,6 +134,11 @@ pub struct Agreement {
     pub disagreements: Vec<usize>,
     /// annotrace's status for every pair, in set order.
     pub ours: Vec<Status>,
+    /// Pairs both simulators solve (with the original's step count known).
+    pub both_solved: usize,
+    /// Of those, the pairs solved at the same physics step (the original's `steps_simulated` is the
+    /// step count minus one): a trajectory-level check, since the step moves with any divergence.
+    pub same_solving_step: usize,
 }
 
 impl Agreement {
@@ -178,7 +183,20 @@ pub fn agreement(set: &OutcomeSet, tasks: &TaskSet, params: &PhysicsParams) -> R
     let mut a = Agreement::default();
     for (i, pair) in set.pairs.iter().enumerate() {
         let task = tasks.get(&pair.task_id)?;
-        let ours = episode::status(&task, &pair.action, params)?;
+        let run = episode::run(
+            &task,
+            &pair.action,
+            params,
+            &episode::RecordOptions {
+                stride: 0,
+                record: false,
+            },
+        )?;
+        let ours = run.status;
+        if let (Status::Solved, Status::Solved, Some(steps)) = (pair.status, ours, pair.steps) {
+            a.both_solved += 1;
+            a.same_solving_step += usize::from(run.steps == steps + 1);
+        }
         a.by_status[status_slot(pair.status)][status_slot(ours)] += 1;
         let same = ours == pair.status;
         let t = a
