@@ -2,8 +2,19 @@
 
 use super::error::{PhyreError, Result};
 
-/// The physics engine a PHYRE world runs on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// The physics engine a PHYRE world runs on (`engine = "box2d" | "rapier"` in a pipeline).
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+)]
+#[serde(rename_all = "lowercase")]
 pub enum Engine {
     /// Box2D (the `box2d-rs` port of Box2D 2.4.1), PHYRE's own engine: reproduces PHYRE's outcomes
     /// far more often than rapier2d (docs/fidelity.md). The rapier-only fields of [`PhysicsParams`]
