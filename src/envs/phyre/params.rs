@@ -1,4 +1,5 @@
-//! [`PhysicsParams`]: PHYRE's physics constants and annotrace's tuning knobs for rapier2d (docs/envs/phyre.md §R5).
+//! [`PhysicsParams`] and [`Engine`]: the physics engine, PHYRE's physics constants and annotrace's tuning
+//! knobs for rapier2d (docs/envs/phyre.md §R5).
 
 use super::error::{PhyreError, Result};
 
