@@ -87,6 +87,9 @@ pub struct Args {
     /// [default: 6].
     #[arg(long)]
     stride: Option<u64>,
+    /// phyre: the physics engine, box2d (PHYRE's own, the default) or rapier.
+    #[arg(long, value_parser = ["box2d", "rapier"])]
+    engine: Option<String>,
 }
 
 /// Fails when a flag of another environment was given.
@@ -125,6 +128,7 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
         ("--tasks", args.tasks.is_some()),
         ("--task/--action", args.task.is_some()),
         ("--stride", args.stride.is_some()),
+        ("--engine", args.engine.is_some()),
     ];
     let iphyre_flags = [
         ("--games", args.games.is_some()),
@@ -148,6 +152,10 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
                 task: args.task.clone(),
                 action: args.action.clone(),
                 stride: Some(args.stride.unwrap_or(6)),
+                engine: args
+                    .engine
+                    .as_deref()
+                    .and_then(annotrace::envs::phyre::Engine::from_name),
             })
         }
         Env::Iphyre => {

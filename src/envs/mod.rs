@@ -2,7 +2,7 @@
 //!
 //! **Owns:** the [`Environment`] trait (scenes, action validation, simulate → [`Trace`], success,
 //! rendering) and its implementations: [`pool`] (billiards, pooltool 0.6.0 physics) and [`iphyre`]
-//! (I-PHYRE on rapier2d) and [`phyre`] (PHYRE's ball tier on rapier2d), which share the rapier state of
+//! (I-PHYRE on rapier2d) and [`phyre`] (PHYRE's ball tier on Box2D by default, or rapier2d), which share the rapier state of
 //! [`rapier`]. Their renderers share the pixmap, PNG and strip plumbing of the private `draw` module.
 //! **Does not:** write run folders or order stages (`pipeline/`), parse command lines (`cli/`). It uses
 //! only [`crate::trace`], [`crate::rng`] and [`crate::digest`] below it. The physics each simulator

@@ -1,6 +1,7 @@
 //! [`Physics`]: the rapier2d sets, pipeline and event channels that the PHYRE and I-PHYRE worlds share.
 //!
-//! **Owns:** building the rapier state around given bodies, colliders and joints, one pipeline step, and
+//! **Owns:** building the rapier state around given bodies, colliders and joints, one pipeline step (with
+//! optional physics hooks supplied by the world), and
 //! draining the step's collision events (contact-force and soft-body events are discarded).
 //! **Does not:** know environments: what bodies exist, their materials and what a contact means belong to
 //! `phyre/world.rs` and `iphyre/world.rs`.
@@ -72,7 +73,16 @@ impl Physics {
 
     /// Advances one `integration.dt` and passes each collision event of the step, in rapier's order, to
     /// `on_collision` together with the collider set (to map handles to objects).
-    pub fn step(&mut self, mut on_collision: impl FnMut(&ColliderSet, CollisionEvent)) {
+    pub fn step(&mut self, on_collision: impl FnMut(&ColliderSet, CollisionEvent)) {
+        self.step_with_hooks(&(), on_collision);
+    }
+
+    /// [`step`](Self::step) with `hooks` called for the colliders that ask for them (`ActiveHooks`).
+    pub fn step_with_hooks(
+        &mut self,
+        hooks: &dyn PhysicsHooks,
+        mut on_collision: impl FnMut(&ColliderSet, CollisionEvent),
+    ) {
         self.pipeline.step(
             self.gravity,
             &self.integration,
@@ -85,7 +95,7 @@ impl Physics {
             &mut self.multibody_joints,
             &mut self.soft_bodies,
             &mut self.ccd,
-            &(),
+            hooks,
             &self.events,
         );
         while self.force_rx.try_recv().is_ok() {}

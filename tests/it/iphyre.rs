@@ -353,3 +353,59 @@ fn outcomes_agree_with_the_original_on_the_reference_set() {
         assert!(a.eliminations_agree * 10 >= a.pairs * 9, "{a:?}");
     }
 }
+
+/// The balanced outcome sets (docs/fidelity.md "Balanced outcome sets"): `iphyre_gen.py outcomes` with
+/// seeds 1503 (tuning) and 1504 (held-out), 10 click lists per game (5 solved by the original at 60 fps
+/// where its search found them), each scored at 60 and 10 fps. The floors are the agreement measured
+/// when the sets were committed minus 2 pairs per 100 (platform float differences); a change that
+/// loses solutions fails here.
+// (successes reproduced, overall, eliminations) floors at 60 and 10 fps. Measured 2026-11-23
+// (docs/fidelity.md): tuning 60 fps 178/194 (0.918), 378/400 (0.945), eliminations 399; 10 fps 140/154
+// (0.909), 371/400 (0.928), 400. Held-out 60 fps 173/196 (0.883), 371/400 (0.928), 398; 10 fps 136/156
+// (0.872), 371/400 (0.928), 398.
+const TUNE_FLOORS: [(f64, f64, f64); 2] = [(0.898, 0.925, 0.97), (0.889, 0.908, 0.97)];
+const HOLDOUT_FLOORS: [(f64, f64, f64); 2] = [(0.863, 0.908, 0.97), (0.852, 0.908, 0.97)];
+
+fn check_balanced(file: &str, floors: [(f64, f64, f64); 2]) {
+    let bytes = std::fs::read(repo().join("tests/data/iphyre").join(file)).unwrap();
+    let set = ReferenceSet::from_outcomes_bytes(&bytes).unwrap();
+    assert_eq!(set.pairs.len(), 800, "{file}");
+    let games = Games::default_games().unwrap();
+    for (fps, (succ_floor, overall_floor, elim_floor)) in [60.0, 10.0].into_iter().zip(floors) {
+        let a = agreement(&set.at_fps(fps), &games, &PhysicsParams::default()).unwrap();
+        let elim = a.eliminations_agree as f64 / a.pairs as f64;
+        eprintln!(
+            "{file} @ {fps} fps: successes reproduced {}/{} ({:.3}), failures {}/{}, overall {:.3}, eliminations {elim:.3}",
+            a.solved_both,
+            a.solved.0,
+            a.successes_reproduced(),
+            a.failed_both(),
+            a.pairs - a.solved.0,
+            a.success_rate()
+        );
+        assert!(
+            a.successes_reproduced() >= succ_floor,
+            "{file} @ {fps} fps: successes reproduced {:.3} < {succ_floor}",
+            a.successes_reproduced()
+        );
+        assert!(
+            a.success_rate() >= overall_floor,
+            "{file} @ {fps} fps: overall {:.3} < {overall_floor}",
+            a.success_rate()
+        );
+        assert!(
+            elim >= elim_floor,
+            "{file} @ {fps} fps: eliminations {elim:.3}"
+        );
+    }
+}
+
+#[test]
+fn balanced_tuning_set_agrees_with_the_original() {
+    check_balanced("balanced_tune.jsonl.gz", TUNE_FLOORS);
+}
+
+#[test]
+fn balanced_held_out_set_agrees_with_the_original() {
+    check_balanced("balanced_holdout.jsonl.gz", HOLDOUT_FLOORS);
+}

@@ -47,6 +47,14 @@ pub enum IphyreError {
         /// What is wrong with it.
         message: String,
     },
+    /// An outcome set (pairs with the original's outcome, `reference.rs`) is malformed.
+    #[error("invalid I-PHYRE outcome set: {field}: {message}")]
+    InvalidReference {
+        /// Where (`line 17 results[1]`, `gzip`, …).
+        field: String,
+        /// What is wrong with it.
+        message: String,
+    },
     /// A JSON document could not be parsed.
     #[error("json: {0}")]
     Json(#[from] serde_json::Error),

@@ -32,16 +32,29 @@ pub struct PhysicsParams {
     pub spring_stiffness: f64,
     /// Spring damping (force per px/s): 0.3.
     pub spring_damping: f64,
-    /// rapier solver iterations (substeps) per step: 3. Chipmunk's default `Space.iterations` is 10,
-    /// but the measured outcome agreement with the original is the same from 3 to 20 (`docs/fidelity.md`:
-    /// 2 solves fewer games than the original, 1 loses eliminations at 10 fps) and the solver is most of
-    /// a step's cost (`docs/performance.md`).
+    /// rapier solver iterations, i.e. substeps, per step: 1. Chipmunk takes one step per frame (positions
+    /// from the previous velocities, then 10 velocity iterations); rapier's substeps integrate gravity in
+    /// pieces, so with 3 a falling body already differs from Chipmunk's after one step and lags its
+    /// one-frame-shifted trajectory by a third of a step. With one substep a free fall is Chipmunk's,
+    /// one frame earlier (`docs/fidelity.md`, "I-PHYRE: where trajectories part").
     pub solver_iterations: usize,
     /// rapier's unbiased (relaxation) passes per solver iteration, which remove the velocity added to
     /// push penetrations apart: 0 (rapier's default is 1). Without them friction is solved in the biased
     /// pass; measured against the original this agrees better (`docs/fidelity.md`) and saves about a
     /// third of the solver's work.
     pub stabilization_iterations: usize,
+    /// rapier projected Gauss–Seidel iterations per substep: 10, Chipmunk's default `Space.iterations`.
+    /// With one substep this is Chipmunk's step structure; it raised the balanced held-out agreement
+    /// from 91.5 % to 92.8 % at both 60 and 10 fps (`docs/fidelity.md`).
+    pub pgs_iterations: usize,
+    /// Contact softness (rapier `SpringCoefficients`) for every contact, static or not: natural
+    /// frequency (Hz); 0 keeps rapier's defaults (30 Hz between dynamic bodies, 60 Hz against fixed ones).
+    pub contact_frequency: f64,
+    /// Contact softness damping ratio (rapier's default: 10), used when `contact_frequency` > 0.
+    pub contact_damping_ratio: f64,
+    /// Largest velocity (px/s) rapier may use to push a penetration apart; 0 keeps rapier's default
+    /// (3 · `length_unit`).
+    pub max_corrective_velocity: f64,
     /// rapier's `length_unit`, which scales its tolerances (allowed penetration 0.001·unit, prediction
     /// distance 0.002·unit, maximum corrective velocity 10·unit per s): 1, i.e. tolerances in pixels.
     /// Chosen by measurement against the original (`docs/fidelity.md`): outcome agreement on 640
@@ -65,8 +78,12 @@ impl Default for PhysicsParams {
             spring_rest_length: 20.0,
             spring_stiffness: 1.0,
             spring_damping: 0.3,
-            solver_iterations: 3,
+            solver_iterations: 1,
             stabilization_iterations: 0,
+            pgs_iterations: 10,
+            contact_frequency: 0.0,
+            contact_damping_ratio: 10.0,
+            max_corrective_velocity: 0.0,
             length_unit: 1.0,
         }
     }
@@ -121,11 +138,16 @@ impl PhysicsParams {
                 });
             }
         }
-        if self.solver_iterations == 0 {
-            return Err(IphyreError::InvalidParams {
-                field: "solver_iterations",
-                message: "must be at least 1".into(),
-            });
+        for (field, v) in [
+            ("solver_iterations", self.solver_iterations),
+            ("pgs_iterations", self.pgs_iterations),
+        ] {
+            if v == 0 {
+                return Err(IphyreError::InvalidParams {
+                    field,
+                    message: "must be at least 1".into(),
+                });
+            }
         }
         Ok(())
     }

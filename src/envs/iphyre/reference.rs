@@ -1,19 +1,22 @@
 //! Outcome agreement with the original I-PHYRE (iphyre 0.2.3 on pymunk 6.11.1): a reference set of
 //! (game, click list, frame rate) pairs with the original's outcome, written by
-//! `tools/iphyre_reference.py`, replayed here and scored.
+//! `tools/iphyre_reference.py` (one JSON document) or by the balanced generator `iphyre_gen.py outcomes`
+//! (JSON Lines, optionally gzipped, each line one click list with its 60 and 10 fps results), replayed
+//! here and scored separately for the pairs the original solved and those it did not.
 //!
-//! **Owns:** the reference-set format ([`ReferenceSet`]) and the replay and scoring ([`agreement`]).
+//! **Owns:** the reference-set formats ([`ReferenceSet`]) and the replay and scoring ([`agreement`]).
 //! **Does not:** run Python (the set is made offline) or decide thresholds (the tests do).
 //!
 //! Rapier is not Chipmunk, so trajectories differ; what is compared is whether every ball fell out
 //! (success) and, as a secondary figure, the number of effective eliminations.
 
 use std::collections::BTreeMap;
+use std::io::Read;
 
 use serde::Deserialize;
 
 use super::action::Click;
-use super::error::Result;
+use super::error::{IphyreError, Result};
 use super::game::Games;
 use super::params::PhysicsParams;
 use super::step::Episode;
@@ -42,10 +45,88 @@ pub struct ReferenceSet {
     pub pairs: Vec<ReferencePair>,
 }
 
+#[derive(Deserialize)]
+struct OutcomeLine {
+    game: String,
+    actions: Vec<[f64; 3]>,
+    results: Vec<OutcomeResult>,
+}
+
+#[derive(Deserialize)]
+struct OutcomeResult {
+    fps: f64,
+    success: bool,
+    eliminations: usize,
+    time: f64,
+}
+
+fn bad(field: String, message: impl Into<String>) -> IphyreError {
+    IphyreError::InvalidReference {
+        field,
+        message: message.into(),
+    }
+}
+
 impl ReferenceSet {
     /// Parses the JSON document.
     pub fn from_json(text: &str) -> Result<ReferenceSet> {
         Ok(serde_json::from_str(text)?)
+    }
+
+    /// Parses `iphyre_gen.py outcomes` JSON Lines: per line `game`, `actions` (`[x, y, t]` clicks) and
+    /// `results` (one per frame rate: `fps`, `success`, `eliminations`, `time`); other fields are
+    /// ignored. Each result becomes one pair, in file order. Blank lines are skipped.
+    pub fn from_outcomes_jsonl(text: &str) -> Result<ReferenceSet> {
+        let mut pairs = Vec::new();
+        for (n, line) in text.lines().enumerate() {
+            if line.trim().is_empty() {
+                continue;
+            }
+            let l: OutcomeLine = serde_json::from_str(line)
+                .map_err(|e| bad(format!("line {}", n + 1), e.to_string()))?;
+            if l.results.is_empty() {
+                return Err(bad(format!("line {} results", n + 1), "no results"));
+            }
+            for r in l.results {
+                pairs.push(ReferencePair {
+                    game: l.game.clone(),
+                    fps: r.fps,
+                    clicks: l.actions.clone(),
+                    success: r.success,
+                    eliminations: r.eliminations,
+                    time: r.time,
+                });
+            }
+        }
+        Ok(ReferenceSet { pairs })
+    }
+
+    /// [`from_outcomes_jsonl`](Self::from_outcomes_jsonl) from bytes that are gzipped when they start
+    /// with gzip's magic.
+    pub fn from_outcomes_bytes(bytes: &[u8]) -> Result<ReferenceSet> {
+        if bytes.starts_with(&[0x1f, 0x8b]) {
+            let mut text = String::new();
+            flate2::read::GzDecoder::new(bytes)
+                .read_to_string(&mut text)
+                .map_err(|e| bad("gzip".into(), e.to_string()))?;
+            ReferenceSet::from_outcomes_jsonl(&text)
+        } else {
+            let text =
+                std::str::from_utf8(bytes).map_err(|e| bad("utf-8".into(), e.to_string()))?;
+            ReferenceSet::from_outcomes_jsonl(text)
+        }
+    }
+
+    /// The pairs at frame rate `fps`.
+    pub fn at_fps(&self, fps: f64) -> ReferenceSet {
+        ReferenceSet {
+            pairs: self
+                .pairs
+                .iter()
+                .filter(|p| p.fps == fps)
+                .cloned()
+                .collect(),
+        }
     }
 }
 
@@ -60,6 +141,8 @@ pub struct Agreement {
     pub eliminations_agree: usize,
     /// Pairs the original solved / annotrace solved.
     pub solved: (usize, usize),
+    /// Pairs both solved (the original's successes reproduced).
+    pub solved_both: usize,
     /// Per game: (pairs, success agreements).
     pub per_game: BTreeMap<String, (usize, usize)>,
     /// The pairs (by position) whose success disagrees.
@@ -74,6 +157,20 @@ impl Agreement {
         } else {
             self.success_agree as f64 / self.pairs as f64
         }
+    }
+
+    /// Share of the original's successes that annotrace also solves (1 when there are none).
+    pub fn successes_reproduced(&self) -> f64 {
+        if self.solved.0 == 0 {
+            1.0
+        } else {
+            self.solved_both as f64 / self.solved.0 as f64
+        }
+    }
+
+    /// Pairs neither solved (the original's failures reproduced).
+    pub fn failed_both(&self) -> usize {
+        self.success_agree - self.solved_both
     }
 }
 
@@ -103,6 +200,7 @@ pub fn agreement(set: &ReferenceSet, games: &Games, params: &PhysicsParams) -> R
         a.eliminations_agree += usize::from(r.eliminations == pair.eliminations);
         a.solved.0 += usize::from(pair.success);
         a.solved.1 += usize::from(r.success);
+        a.solved_both += usize::from(r.success && pair.success);
         let g = a.per_game.entry(pair.game.clone()).or_default();
         g.0 += 1;
         g.1 += usize::from(agree);

@@ -80,13 +80,26 @@ impl World {
     /// Builds the bodies, colliders and constraints of `game` in its initial state.
     pub fn new(game: &Game, params: &PhysicsParams) -> Result<World> {
         params.validate()?;
-        let integration = IntegrationParameters {
+        let mut integration = IntegrationParameters {
             dt: params.dt() as f32,
             num_solver_iterations: params.solver_iterations,
             num_internal_stabilization_iterations: params.stabilization_iterations,
+            num_internal_pgs_iterations: params.pgs_iterations,
             length_unit: params.length_unit as f32,
             ..IntegrationParameters::default()
         };
+        if params.contact_frequency > 0.0 {
+            let soft = SpringCoefficients::new(
+                params.contact_frequency as f32,
+                params.contact_damping_ratio as f32,
+            );
+            integration.contact_softness = soft;
+            integration.static_contact_softness = soft;
+        }
+        if params.max_corrective_velocity > 0.0 {
+            integration.normalized_max_corrective_velocity =
+                (params.max_corrective_velocity / params.length_unit) as f32;
+        }
 
         let mut bodies = RigidBodySet::new();
         let mut colliders = ColliderSet::new();

@@ -3,13 +3,13 @@
 //! relation → stop as soon as it has held for 180 consecutive steps. Frames are kept every `stride` steps
 //! (step 0, the initial scene with the red ball, always; the last step always).
 //!
-//! When every dynamic body sleeps, nothing can move again, so the loop stops stepping rapier and
+//! When every dynamic body sleeps, nothing can move again, so the loop stops stepping the engine and
 //! replays the frozen state for the remaining steps: the outcome, frames and events are the same as
 //! stepping, only faster.
 
 use super::action::{BallAction, Placement, UserBall};
 use super::error::{PhyreError, Result};
-use super::params::PhysicsParams;
+use super::params::{Engine, PhysicsParams};
 use super::task::Task;
 use super::world::{BodyState, ContactChange, World};
 
@@ -135,7 +135,8 @@ pub struct EpisodeResult {
     pub status: Status,
     /// Physics steps done (0 for `INVALID_INPUT`).
     pub steps: usize,
-    /// Of those, the steps rapier actually computed (the rest replayed a state where everything slept).
+    /// Of those, the steps the engine actually computed (the rest replayed a state where everything
+    /// slept).
     pub computed_steps: usize,
     /// The step at which the goal relation started its final (winning) run, when solved.
     pub goal_first_step: Option<usize>,
@@ -147,6 +148,8 @@ pub struct EpisodeResult {
     pub dt: f64,
     /// The frame stride used.
     pub stride: usize,
+    /// The physics engine that ran the episode.
+    pub engine: Engine,
 }
 
 impl EpisodeResult {
@@ -270,6 +273,7 @@ pub fn run(
         events: Vec::new(),
         dt: params.dt(),
         stride: opts.stride,
+        engine: params.engine,
     };
     let ball = match placement {
         Placement::Valid(b) => b,

@@ -49,6 +49,14 @@ pub enum PhyreError {
         /// The fold seed asked for.
         seed: u64,
     },
+    /// An outcome set (pairs with the original's status, `reference.rs`) is malformed.
+    #[error("invalid PHYRE outcome set: {field}: {message}")]
+    InvalidReference {
+        /// Where (`line 17 status`, `gzip`, …).
+        field: String,
+        /// What is wrong with it.
+        message: String,
+    },
 }
 
 /// `Result` with [`PhyreError`].

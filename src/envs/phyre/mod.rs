@@ -1,14 +1,16 @@
 //! PHYRE (Bakhtin et al., NeurIPS 2019), ball tier: 2,500 tasks in 25 templates where one red ball, placed
-//! by the agent, must make the green body touch the blue or purple one for 3 s. Re-implemented on
-//! rapier2d after PHYRE 0.2.2 (Box2D), following `docs/envs/phyre.md` §R1–§R7.
+//! by the agent, must make the green body touch the blue or purple one for 3 s. Re-implemented after
+//! PHYRE 0.2.2 on Box2D (box2d-rs, PHYRE's own engine; the default) or rapier2d, following
+//! `docs/envs/phyre.md` §R1–§R7.
 //!
 //! **Owns:** the task set ([`TaskSet`], lazily indexed from the committed `data/tasks/phyre_ball_tasks.jsonl.gz`),
 //! the physics constants ([`PhysicsParams`]), actions and their validity ([`BallAction`], [`Placement`],
-//! DeepPHY's [`deepphy_action`]), the rapier2d world ([`World`]), the episode loop with PHYRE's success rule
+//! DeepPHY's [`deepphy_action`]), the physics world ([`World`] over the Box2D and rapier2d backends), the episode loop with PHYRE's success rule
 //! ([`episode::run`]), traces ([`trace_of`]), the evaluation folds ([`folds`]), seeded random actions
-//! ([`random_valid_action`]) and pictures ([`render`]).
+//! ([`random_valid_action`]), pictures ([`render`]) and outcome agreement with the original on balanced
+//! outcome sets made offline ([`reference`](mod@reference)).
 //! **Does not:** write Parquet or run stages (`pipeline/stages/simulate_phyre.rs`), read argv, or call
-//! Python. rapier handles never leave this module: the boundary speaks in PHYRE body indices.
+//! Python. Engine handles never leave this module: the boundary speaks in PHYRE body indices.
 //!
 //! **Entry point:** [`PhyreEnv`] (the [`Environment`](super::Environment) implementation), or an episode:
 //!
@@ -23,11 +25,15 @@
 //! ```
 
 pub mod action;
+mod box2d_compat;
+mod box2d_world;
 mod env;
 pub mod episode;
 mod error;
 pub mod folds;
 mod params;
+mod rapier_world;
+pub mod reference;
 pub mod render;
 mod sample;
 mod task;
@@ -40,7 +46,7 @@ pub use env::{PhyreEnv, dataset_tasks};
 pub use episode::{DEFAULT_STRIDE, EpisodeEvent, EpisodeResult, Frame, RecordOptions, Status};
 pub use error::{PhyreError, Result};
 pub use folds::{EvalSetup, Fold, fold};
-pub use params::{PIXELS_PER_METRE, PhysicsParams};
+pub use params::{Engine, PIXELS_PER_METRE, PhysicsParams};
 pub use sample::{MAX_DRAWS, action_rng, random_valid_action};
 pub use task::{Body, Color, Shape, Task};
 pub use tasks::{DEFAULT_TASKS_GZ, TaskSet};

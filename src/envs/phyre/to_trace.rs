@@ -12,7 +12,7 @@
 use serde_json::json;
 
 use super::episode::{EpisodeEvent, EpisodeResult, Status};
-use super::params::PIXELS_PER_METRE;
+use super::params::{Engine, PIXELS_PER_METRE};
 use super::task::{Color, Task};
 use crate::trace::{
     Body, Env, Event, JsonMap, Object, Outcome, PhyreObject, Timestep, Trace, json_map,
@@ -48,11 +48,19 @@ pub fn trace_of(result: &EpisodeResult, task: &Task, trace_id: &str) -> Trace {
             "action": {"x": a.x, "y": a.y, "r": a.r},
             "user_ball": ball,
             "simulator": {
-                "engine": "rapier2d", "fps": 1.0 / result.dt, "stride": result.stride,
+                "engine": engine_name(result.engine), "fps": 1.0 / result.dt, "stride": result.stride,
                 "pixels_per_metre": PIXELS_PER_METRE, "scene": [task.width, task.height],
                 "coordinates": "pixels, origin bottom-left, y up",
             },
         })),
+    }
+}
+
+/// The engine as traces name it.
+fn engine_name(engine: Engine) -> &'static str {
+    match engine {
+        Engine::Box2d => "box2d-rs 0.0.4 (Box2D 2.4.1)",
+        Engine::Rapier => "rapier2d",
     }
 }
 

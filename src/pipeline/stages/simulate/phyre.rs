@@ -1,4 +1,4 @@
-//! The `simulate` stage with `env = "phyre"`: PHYRE ball-tier episodes (rapier2d, `envs::phyre`) into the
+//! The `simulate` stage with `env = "phyre"`: PHYRE ball-tier episodes (Box2D or rapier2d, `envs::phyre`) into the
 //! trace tables, sharded and resumable like the other environments.
 //!
 //! **Owns:** the PHYRE half of the `simulate` stage: reading its parameters, choosing the (task, action)
@@ -28,7 +28,7 @@ use super::shards::{ShardSinks, ShardTotals, replay_pair};
 use super::{ShardParams, SimulateSummary, Simulation};
 use crate::digest::hex;
 use crate::envs::phyre::{
-    BallAction, DEFAULT_STRIDE, DEFAULT_TASKS_GZ, EvalSetup, PhyreEnv, PhysicsParams,
+    BallAction, DEFAULT_STRIDE, DEFAULT_TASKS_GZ, Engine, EvalSetup, PhyreEnv, PhysicsParams,
     RecordOptions, Status, Task, TaskSet, action_rng, dataset_tasks, episode, fold,
     random_valid_action, trace_of,
 };
@@ -62,6 +62,10 @@ pub struct PhyreSimParams {
     /// step).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub stride: Option<u64>,
+    /// Physics engine: `box2d` (default; PHYRE's own engine, reproduces 97 % of its solving actions)
+    /// or `rapier` (rapier2d, 62 %; docs/fidelity.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub engine: Option<Engine>,
 }
 
 impl Default for PhyreSimParams {
@@ -73,6 +77,7 @@ impl Default for PhyreSimParams {
             task: None,
             action: None,
             stride: None,
+            engine: None,
         }
     }
 }
@@ -137,7 +142,10 @@ pub(super) fn build(
         }
     };
     Ok(PhyreSimulation {
-        params: PhysicsParams::default(),
+        params: PhysicsParams {
+            engine: p.engine.unwrap_or_default(),
+            ..PhysicsParams::default()
+        },
         record: RecordOptions {
             stride,
             record: true,
@@ -243,7 +251,8 @@ impl PhyreSimulation {
 }
 
 impl Simulation for PhyreSimulation {
-    /// The resolved seed, the tasks, the stride and the task data: a changed pipeline seed reruns.
+    /// The resolved seed, the tasks, the stride, the engine and the task data: a changed pipeline seed
+    /// or engine reruns.
     fn fingerprint_extra(&self) -> Result<Value, StageError> {
         let work = match &self.work {
             Work::Dataset {
@@ -262,7 +271,7 @@ impl Simulation for PhyreSimulation {
         };
         let data = hex(&Sha256::digest(DEFAULT_TASKS_GZ));
         Ok(
-            json!({"env": "phyre", "stride": self.record.stride, "tasks_data": &data[..16], "work": work}),
+            json!({"env": "phyre", "engine": self.params.engine.name(), "stride": self.record.stride, "tasks_data": &data[..16], "work": work}),
         )
     }
 
