@@ -165,7 +165,8 @@ fn the_iphyre_library_runs_clean_and_scores_its_grounded_labels() {
         assert!(s.f1() >= 0.95, "{label}: {s:?}");
     }
     // Every grounded label with a few truth events scores F1 >= 0.9 (docs/accuracy.md); at 10 fps a
-    // swing of the 40 games' joints is too slow to count, so one label may have none.
+    // swing of the 40 games' joints is too slow to count, so one label may have none, and with the
+    // one-substep physics (docs/fidelity.md) these clicks launch a lever once (three times before).
     let mut seen = 0;
     for label in grounded(Env::Iphyre) {
         let s = &scores[*label];
@@ -174,7 +175,7 @@ fn the_iphyre_library_runs_clean_and_scores_its_grounded_labels() {
             assert!(s.f1() >= 0.9, "{label}: {s:?}");
         }
     }
-    assert!(seen >= 10, "{seen} labels with events");
+    assert!(seen >= 9, "{seen} labels with events");
     // The geometric labels fire somewhere in the 40 games (each is calibrated in docs/accuracy.md).
     for label in [
         "support contact",
@@ -315,7 +316,7 @@ fn the_phyre_library_runs_clean_and_scores_its_grounded_labels() {
             assert!(s.f1() >= want, "{label}: {s:?}");
         }
     }
-    assert!(seen >= 10, "{seen} labels with events");
+    assert!(seen >= 9, "{seen} labels with events");
     for label in [
         "support relationship",
         "falling object",
