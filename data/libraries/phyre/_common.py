@@ -114,7 +114,8 @@ def _runs(ks, ts, flags, min_s, gap=MERGE_S):
             out[-1][1] = i
         else:
             out.append([i, i])
-    return [(a, b) for a, b in out if ts[ks[b]] - ts[ks[a]] >= min_s]
+    # Frame times carry rounding error (8.3 - 8.2 < 0.1): a run of exactly min_s must count.
+    return [(a, b) for a, b in out if ts[ks[b]] - ts[ks[a]] >= min_s - 1e-9]
 
 
 def _obj_at(trace, k, oid):
