@@ -11,6 +11,7 @@
 
 use std::collections::BTreeMap;
 
+use super::kin::{P, dot, nearest_on, sub};
 use crate::envs::phyre::{Shape, Task, TaskSet};
 use crate::trace::{Body, Trace};
 
@@ -65,26 +66,9 @@ fn sorted_pair(a: String, b: String) -> Vec<String> {
     v
 }
 
-type P = [f64; 2];
-
-fn sub(a: P, b: P) -> P {
-    [a[0] - b[0], a[1] - b[1]]
-}
-
-fn dot(a: P, b: P) -> f64 {
-    a[0] * b[0] + a[1] * b[1]
-}
-
 /// Distance from point `p` to segment `a`–`b`.
 fn point_segment(p: P, a: P, b: P) -> f64 {
-    let d = sub(b, a);
-    let l2 = dot(d, d);
-    let u = if l2 > 0.0 {
-        (dot(sub(p, a), d) / l2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let q = [a[0] + u * d[0] - p[0], a[1] + u * d[1] - p[1]];
+    let q = sub(nearest_on(p, a, b), p);
     dot(q, q).sqrt()
 }
 

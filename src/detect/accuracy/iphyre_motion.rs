@@ -13,7 +13,9 @@ use std::collections::BTreeMap;
 use std::f64::consts::PI;
 
 use super::TruthEvent;
-use super::kin::{Episode, P, Sample, Track, episodes, frame_at, norm, runs, tracks};
+use super::kin::{
+    Episode, P, Sample, Track, dot, episodes, frame_at, nearest_on, norm, runs, sub, tracks,
+};
 use crate::trace::{Env, Trace};
 
 /// falling object: downward speed (px/s), shortest fall (s), least drop (px).
@@ -35,26 +37,6 @@ pub const LEVER: (f64, f64) = (0.3, 40.0);
 
 /// I-PHYRE's screen side (px).
 const SCREEN: f64 = 600.0;
-
-fn sub(a: P, b: P) -> P {
-    [a[0] - b[0], a[1] - b[1]]
-}
-
-fn dot(a: P, b: P) -> f64 {
-    a[0] * b[0] + a[1] * b[1]
-}
-
-/// The point of segment `a`–`b` nearest to `p`.
-fn nearest_on(p: P, a: P, b: P) -> P {
-    let d = sub(b, a);
-    let l2 = dot(d, d);
-    let u = if l2 > 0.0 {
-        (dot(sub(p, a), d) / l2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    [a[0] + u * d[0], a[1] + u * d[1]]
-}
 
 /// Unit contact normal from capsule `a` towards capsule `b`: along the nearest points of their
 /// segments, or centre to centre when the segments cross or touch.

@@ -353,6 +353,28 @@ pub fn norm(v: P) -> f64 {
     v[0].hypot(v[1])
 }
 
+/// `a − b`.
+pub fn sub(a: P, b: P) -> P {
+    [a[0] - b[0], a[1] - b[1]]
+}
+
+/// The dot product of `a` and `b`.
+pub fn dot(a: P, b: P) -> f64 {
+    a[0] * b[0] + a[1] * b[1]
+}
+
+/// The point of segment `a`–`b` nearest to `p`.
+pub fn nearest_on(p: P, a: P, b: P) -> P {
+    let d = sub(b, a);
+    let l2 = dot(d, d);
+    let u = if l2 > 0.0 {
+        (dot(sub(p, a), d) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    [a[0] + u * d[0], a[1] + u * d[1]]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
