@@ -3,8 +3,9 @@
 
 use annotrace::pipeline::stages::accuracy::{AccuracyParams, AccuracySummary, KIND};
 
+use super::CliResult;
 use super::annotate::SandboxArgs;
-use super::{CliError, CliResult};
+use super::one_stage::summary;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -33,8 +34,7 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
         .sandbox
         .one_stage("accuracy", &params.sandbox)?
         .run(&KIND, &params, quiet)?;
-    let s: AccuracySummary = serde_json::from_value(stage.summary.clone())
-        .map_err(|e| CliError::failed(anyhow::anyhow!("internal error: accuracy summary: {e}")))?;
+    let s: AccuracySummary = summary(&stage, "accuracy")?;
     println!("{}", s.markdown);
     println!(
         "{} trace(s), tolerance {} s, contacts merged within {} s{}",

@@ -13,7 +13,7 @@ use annotrace::query::{Format, RenderOptions, render_string};
 use annotrace::trace::Env;
 use sha2::{Digest, Sha256};
 
-use super::one_stage::{OneStage, absolute, existing_run};
+use super::one_stage::{OneStage, absolute, existing_run, summary};
 use super::{CliError, CliResult, open_query};
 
 /// The flags of the commands that run detectors (`annotate`, `accuracy`).
@@ -88,8 +88,7 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
     let stage = args
         .one_stage("annotate", &params)?
         .run(&KIND, &params, quiet)?;
-    let s: AnnotateSummary = serde_json::from_value(stage.summary.clone())
-        .map_err(|e| CliError::failed(anyhow::anyhow!("internal error: annotate summary: {e}")))?;
+    let s: AnnotateSummary = summary(&stage, "annotate")?;
     println!(
         "annotated {} {} trace(s) with {} detector(s) of {}: {} annotation(s); calls: {}",
         s.traces,

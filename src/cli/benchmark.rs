@@ -8,12 +8,11 @@ use std::path::PathBuf;
 use annotrace::bench::agent::AgentKind;
 use annotrace::bench::{FeedbackMode, PoolAction};
 use annotrace::llm::LlmSettings;
-use annotrace::pipeline::ErrorCategory;
 use annotrace::pipeline::stages::benchmark::{BenchmarkParams, BenchmarkSummary, KIND, PhyreSetup};
 use annotrace::trace::Env;
 
 use super::llm_args::LlmArgs;
-use super::one_stage::{OneStage, absolute, params_id};
+use super::one_stage::{OneStage, absolute, params_id, summary};
 use super::{CliError, CliResult};
 
 #[derive(clap::Args, Debug)]
@@ -150,12 +149,7 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
         remove_new_run_on_failure: false,
     }
     .run(&KIND, &params, quiet)?;
-    let s: BenchmarkSummary = serde_json::from_value(stage.summary.clone()).map_err(|e| {
-        CliError::new(
-            ErrorCategory::Internal,
-            anyhow::anyhow!("internal error: benchmark summary: {e}"),
-        )
-    })?;
+    let s: BenchmarkSummary = summary(&stage, "benchmark")?;
     println!(
         "benchmark {id}{}: {}",
         if stage.cached {

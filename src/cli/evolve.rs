@@ -10,13 +10,12 @@ use std::path::PathBuf;
 
 use annotrace::fitness::Dp;
 use annotrace::llm::LlmSettings;
-use annotrace::pipeline::ErrorCategory;
 use annotrace::pipeline::stages::evolve::{EvolveParams, EvolveSummary, KIND, ProposerChoice};
 use annotrace::search::Strategy;
 use annotrace::trace::Env;
 
 use super::llm_args::LlmArgs;
-use super::one_stage::{OneStage, absolute, existing_run, params_id};
+use super::one_stage::{OneStage, absolute, existing_run, params_id, summary};
 use super::{CliError, CliResult};
 
 /// The stage's defaults, shown by `--help`.
@@ -182,12 +181,7 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
         remove_new_run_on_failure: false,
     }
     .run(&KIND, &params, quiet)?;
-    let s: EvolveSummary = serde_json::from_value(stage.summary.clone()).map_err(|e| {
-        CliError::new(
-            ErrorCategory::Internal,
-            anyhow::anyhow!("internal error: evolve summary: {e}"),
-        )
-    })?;
+    let s: EvolveSummary = summary(&stage, "evolve")?;
     println!(
         "evolve {} ({} strategy, {} proposer, d_p {}, seed {}, budget {} per label){}: {} training / {} held-out trace(s)",
         id,

@@ -13,7 +13,7 @@ use arrow::array::{RecordBatch, StringArray};
 use arrow::datatypes::{DataType, Field, Schema};
 use sha2::{Digest, Sha256};
 
-use super::one_stage::{OneStage, absolute};
+use super::one_stage::{OneStage, absolute, summary};
 use super::{CliError, CliResult};
 
 #[derive(clap::Args, Debug)]
@@ -75,8 +75,7 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
         remove_new_run_on_failure: true,
     }
     .run(&KIND, &params, quiet)?;
-    let s: ImportSummary = serde_json::from_value(stage.summary.clone())
-        .map_err(|e| CliError::failed(anyhow::anyhow!("internal error: import summary: {e}")))?;
+    let s: ImportSummary = summary(&stage, "import")?;
     let traces = s.traces;
     let frames = stage.rows.get("frames").copied().unwrap_or(0);
     let rejected = s.rejected_count;

@@ -60,6 +60,20 @@ impl OneStage<'_> {
     }
 }
 
+/// The stage's typed summary (the struct its kind writes into the report). One that does not read
+/// back is a bug of annotrace, exit 70.
+pub(crate) fn summary<T: serde::de::DeserializeOwned>(
+    stage: &StageReport,
+    kind: &str,
+) -> Result<T, CliError> {
+    serde_json::from_value(stage.summary.clone()).map_err(|e| {
+        CliError::new(
+            ErrorCategory::Internal,
+            anyhow::anyhow!("internal error: {kind} summary: {e}"),
+        )
+    })
+}
+
 /// `<kind>-<10 hex digits>` of the canonical parameters: the same command gives the same stage (a
 /// rerun is a no-op, an interrupted one resumes), another command another stage.
 pub(crate) fn params_id<P: StageParams>(kind: &str, params: &P) -> String {

@@ -16,7 +16,7 @@ use annotrace::pipeline::stages::simulate::{
 };
 use annotrace::trace::Env;
 
-use super::one_stage::{OneStage, absolute, params_id};
+use super::one_stage::{OneStage, absolute, params_id, summary};
 use super::{CliError, CliResult};
 
 #[derive(clap::Args, Debug)]
@@ -220,10 +220,7 @@ fn run_stage(params: SimulateParams, args: &Args, quiet: bool) -> CliResult {
         remove_new_run_on_failure: false,
     }
     .run(&KIND, &params, quiet)?;
-    let s: annotrace::pipeline::stages::simulate::SimulateSummary =
-        serde_json::from_value(stage.summary.clone()).map_err(|e| {
-            CliError::failed(anyhow::anyhow!("internal error: simulate summary: {e}"))
-        })?;
+    let s: annotrace::pipeline::stages::simulate::SimulateSummary = summary(&stage, "simulate")?;
     let detail = match args.env {
         Env::Phyre => format!("{} invalid input", s.invalid.unwrap_or(0)),
         Env::Iphyre => format!("mean reward {:.1}", s.mean_reward.unwrap_or(0.0)),
