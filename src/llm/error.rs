@@ -129,4 +129,17 @@ impl LlmError {
                 | LlmError::GaveUp { .. }
         )
     }
+
+    /// True when the request itself is refused, whatever the endpoint's health: the configuration
+    /// (no model, a template, a replay that does not hold the call) or a 4xx other than 408 and 429
+    /// (credentials, a wrong URL or model name, a prompt too long for the model). Retrying cannot help.
+    pub fn is_refusal(&self) -> bool {
+        match self {
+            LlmError::Config(_) | LlmError::ReplayMiss { .. } | LlmError::Template { .. } => true,
+            LlmError::Status { status, .. } => {
+                (400..500).contains(status) && !matches!(status, 408 | 429)
+            }
+            _ => false,
+        }
+    }
 }

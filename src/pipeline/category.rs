@@ -198,16 +198,8 @@ impl Categorize for LibraryError {
 impl Categorize for LlmError {
     fn category(&self) -> ErrorCategory {
         match self {
-            LlmError::Config(_) | LlmError::ReplayMiss { .. } | LlmError::Template { .. } => {
-                ErrorCategory::Input
-            }
-            // A 4xx other than 408 and 429 refuses the request itself (credentials, a wrong URL or
-            // model name, a prompt too long for the model): the configuration's fault.
-            LlmError::Status { status, .. }
-                if (400..500).contains(status) && !matches!(status, 408 | 429) =>
-            {
-                ErrorCategory::Input
-            }
+            // The request itself is refused (configuration, replay, a 4xx other than 408/429).
+            e if e.is_refusal() => ErrorCategory::Input,
             e if e.is_unavailable() => ErrorCategory::Service,
             LlmError::Store(e) => e.category(),
             // A bad answer, an exhausted budget, a damaged `llm_calls` file: the call did not succeed.
@@ -220,6 +212,7 @@ impl Categorize for ProposeError {
     fn category(&self) -> ErrorCategory {
         match self {
             ProposeError::Unavailable(_) => ErrorCategory::Service,
+            ProposeError::Refused(_) => ErrorCategory::Input,
             _ => ErrorCategory::Failed,
         }
     }

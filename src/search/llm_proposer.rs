@@ -109,12 +109,14 @@ fn unavailable(e: LlmError) -> ProposeError {
     ProposeError::Unavailable(e.to_string())
 }
 
-/// Budget → ends the label's search; a bad answer → one failed step; everything else (unreachable
-/// endpoint after retries, strict-replay miss, configuration, templates, recording) → ends the run.
+/// Budget → ends the label's search; a bad answer → one failed step; a refused request (configuration,
+/// strict-replay miss, templates, a 4xx) → ends the run as the configuration's fault; everything else
+/// (unreachable endpoint after retries, recording) → ends the run as the service's.
 fn map_error(e: LlmError) -> ProposeError {
     match e {
         LlmError::BudgetExhausted { what } => ProposeError::BudgetExhausted(what),
         e @ LlmError::BadResponse { .. } => ProposeError::Other(e.to_string()),
+        e if e.is_refusal() => ProposeError::Refused(e.to_string()),
         e => unavailable(e),
     }
 }
@@ -237,6 +239,21 @@ mod tests {
                 message: "refused".into(),
                 attempts: 3
             }),
+            ProposeError::Unavailable(_)
+        ));
+        let status = |status| LlmError::Status {
+            status,
+            url: "u".into(),
+            body_excerpt: String::new(),
+            attempts: 1,
+        };
+        assert!(matches!(map_error(status(401)), ProposeError::Refused(_)));
+        assert!(matches!(
+            map_error(status(429)),
+            ProposeError::Unavailable(_)
+        ));
+        assert!(matches!(
+            map_error(status(503)),
             ProposeError::Unavailable(_)
         ));
     }

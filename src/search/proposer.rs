@@ -58,14 +58,20 @@ pub struct Proposal {
 }
 
 /// Why a proposer produced nothing. The search records the failed step and goes on, except for
-/// [`ProposeError::BudgetExhausted`] (ends the label's search) and [`ProposeError::Unavailable`]
-/// (ends the run with an error after retries inside the proposer).
+/// [`ProposeError::BudgetExhausted`] (ends the label's search), [`ProposeError::Unavailable`] (ends
+/// the run with an error after retries inside the proposer) and [`ProposeError::Refused`] (ends the
+/// run as a configuration error).
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum ProposeError {
     /// The backend cannot be reached or refuses service (after the proposer's own retries).
     #[error("proposer unavailable: {0}")]
     Unavailable(String),
+    /// The backend refuses the request itself (credentials, a wrong URL or model name, a replay that
+    /// does not hold the call): the configuration's fault, and retrying cannot help. Ends the run like
+    /// [`ProposeError::Unavailable`].
+    #[error("proposer refused: {0}")]
+    Refused(String),
     /// The token or call budget is used up.
     #[error("proposer budget exhausted: {0}")]
     BudgetExhausted(String),

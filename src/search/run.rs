@@ -417,15 +417,18 @@ impl LabelSearch<'_> {
         propose_s: &mut f64,
     ) -> Result<CandidateRecord, SearchError> {
         let cfg = self.config;
-        let unavailable = |m: String| SearchError::Proposer {
+        // An unreachable or refusing backend ends the run.
+        let fatal = |source: ProposeError| SearchError::Proposer {
             label: self.evaluator.label.clone(),
-            source: ProposeError::Unavailable(m),
+            source,
         };
         let mut rec = self.base_record(island as i64, step as i64);
         rec.parents = parents.iter().map(|p| p.hash.clone()).collect();
         rec.propose_s = took;
         let p = match proposal {
-            Err(ProposeError::Unavailable(m)) => return Err(unavailable(m)),
+            Err(e @ (ProposeError::Unavailable(_) | ProposeError::Refused(_))) => {
+                return Err(fatal(e));
+            }
             Err(e) => {
                 rec.status = if matches!(e, ProposeError::BudgetExhausted(_)) {
                     "budget_exhausted".into()
@@ -461,7 +464,9 @@ impl LabelSearch<'_> {
                     failure = self.score_into(&mut rec, p.code, state);
                 }
                 Ok(None) => break,
-                Err(ProposeError::Unavailable(m)) => return Err(unavailable(m)),
+                Err(e @ (ProposeError::Unavailable(_) | ProposeError::Refused(_))) => {
+                    return Err(fatal(e));
+                }
                 Err(_) => break,
             }
         }

@@ -493,3 +493,31 @@ fn a_search_whose_every_llm_proposal_failed_is_a_failure_and_partial_failures_ar
         .stdout_has("proposals: 1 of 4 proposal(s) failed (1 without a program, 0 whose program did not run)")
         .stdout_has("it starts: sorry, I cannot help");
 }
+
+/// An endpoint that refuses the request itself (401: bad credentials) is a configuration error, exit 2
+/// as in `suggest-labels`, not an unreachable service (3); it is not retried.
+#[test]
+fn an_endpoint_refusing_the_request_ends_evolve_as_bad_configuration() {
+    use crate::common::chat_server::{ChatServer, Reply};
+
+    let t = TestRun::new();
+    t.run(&[
+        "simulate", "--run", "r", "--scenes", "8", "--seed", "4", "--dt", "0.1", "-q",
+    ])
+    .ok();
+    let refusing = ChatServer::responder(|_| Reply::Status {
+        code: 401,
+        retry_after: None,
+        body: "{\"error\":\"invalid api key\"}".into(),
+    });
+    evolve_with(&t, &refusing)
+        .code(2)
+        .stderr_has("proposer refused")
+        .stderr_has("401");
+    // `evolve_with` runs two proposals in parallel: each asked once, neither retried.
+    assert!(
+        refusing.seen().len() <= 2,
+        "{} requests",
+        refusing.seen().len()
+    );
+}
