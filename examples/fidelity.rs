@@ -148,8 +148,15 @@ fn run_iphyre(files: &[String], sets: &[(String, String)], list: bool) -> Result
     let games = iphyre::Games::default_games().map_err(|e| e.to_string())?;
     for f in files {
         let bytes = std::fs::read(f).map_err(|e| format!("{f}: {e}"))?;
-        let set = iphyre::reference::ReferenceSet::from_outcomes_bytes(&bytes)
-            .map_err(|e| format!("{f}: {e}"))?;
+        // The generator's outcome sets (JSON Lines, gzipped or not), or the older
+        // `tools/iphyre_reference.py` JSON file.
+        let set = match iphyre::reference::ReferenceSet::from_outcomes_bytes(&bytes) {
+            Ok(set) => set,
+            Err(e) => std::str::from_utf8(&bytes)
+                .ok()
+                .and_then(|text| iphyre::reference::ReferenceSet::from_json(text).ok())
+                .ok_or_else(|| format!("{f}: {e}"))?,
+        };
         for fps in [60.0, 10.0] {
             let sub = set.at_fps(fps);
             let a = iphyre::reference::agreement(&sub, &games, &params)
