@@ -28,10 +28,12 @@
 //! ```
 
 pub mod action;
+mod box2d_world;
 mod env;
 mod error;
 mod game;
 mod params;
+mod rapier_world;
 pub mod reference;
 pub mod render;
 mod sample;
@@ -44,7 +46,7 @@ pub use action::{Click, ClickSchedule, Due, SCREEN, click_block, hits_block, val
 pub use env::IphyreEnv;
 pub use error::{IphyreError, Result};
 pub use game::{DEFAULT_GAMES_JSON, FOLDS, Game, GameObject, Games, ObjectKind};
-pub use params::PhysicsParams;
+pub use params::{Engine, PhysicsParams};
 pub use sample::{MAX_TENTHS, SKIP_PROBABILITY, clicks_rng, random_clicks};
 pub use step::{Episode, EpisodeEvent, EpisodeResult, Frame, play};
 pub use to_trace::trace_of;
