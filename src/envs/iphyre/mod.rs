@@ -1,10 +1,11 @@
 //! I-PHYRE (interactive physical reasoning, Li et al. ICLR 2024): 40 games of capsule blocks and balls on
 //! a 600×600 screen, where an agent removes eliminable blocks at chosen times so that every ball falls out
-//! of the bottom. Re-implemented on rapier2d after iphyre 0.2.3 (pymunk 6.11.1), following
-//! `docs/envs/iphyre.md` §R1–§R9.
+//! of the bottom. Re-implemented on rapier2d (and, as `engine = "box2d"`, on box2d-rs set to Chipmunk's
+//! semantics) after iphyre 0.2.3 (pymunk 6.11.1), following `docs/envs/iphyre.md` §R1–§R9.
 //!
 //! **Owns:** the games as data ([`Games`], default `data/games/iphyre_games.json`), the physics constants
-//! ([`PhysicsParams`]), the rapier2d world ([`World`]: bodies, capsules, rods, springs, contact events),
+//! ([`PhysicsParams`], [`Engine`]), the world in either engine ([`World`]: bodies, capsules, rods, springs,
+//! contact events),
 //! clicks and their quirks ([`Click`], [`ClickSchedule`], the discrete adapter [`click_block`], seeded
 //! random click sets [`random_clicks`]), the episode loop ([`Episode`] in `step.rs`), success and
 //! reward ([`success`]), the conversion into an annotrace [`Trace`](crate::trace::Trace)
