@@ -4,7 +4,7 @@
 //! optional physics hooks supplied by the world), and
 //! draining the step's collision events (contact-force and soft-body events are discarded).
 //! **Does not:** know environments: what bodies exist, their materials and what a contact means belong to
-//! `phyre/world.rs` and `iphyre/world.rs`.
+//! `phyre/rapier_world.rs` and `iphyre/rapier_world.rs`.
 
 use std::sync::mpsc;
 

@@ -1,10 +1,11 @@
 //! I-PHYRE (interactive physical reasoning, Li et al. ICLR 2024): 40 games of capsule blocks and balls on
 //! a 600×600 screen, where an agent removes eliminable blocks at chosen times so that every ball falls out
-//! of the bottom. Re-implemented on rapier2d after iphyre 0.2.3 (pymunk 6.11.1), following
-//! `docs/envs/iphyre.md` §R1–§R9.
+//! of the bottom. Re-implemented on rapier2d (and, as `engine = "box2d"`, on box2d-rs set to Chipmunk's
+//! semantics) after iphyre 0.2.3 (pymunk 6.11.1), following `docs/envs/iphyre.md` §R1–§R9.
 //!
 //! **Owns:** the games as data ([`Games`], default `data/games/iphyre_games.json`), the physics constants
-//! ([`PhysicsParams`]), the rapier2d world ([`World`]: bodies, capsules, rods, springs, contact events),
+//! ([`PhysicsParams`], [`Engine`]), the world in either engine ([`World`]: bodies, capsules, rods, springs,
+//! contact events),
 //! clicks and their quirks ([`Click`], [`ClickSchedule`], the discrete adapter [`click_block`], seeded
 //! random click sets [`random_clicks`]), the episode loop ([`Episode`] in `step.rs`), success and
 //! reward ([`success`]), the conversion into an annotrace [`Trace`](crate::trace::Trace)
@@ -28,10 +29,12 @@
 //! ```
 
 pub mod action;
+mod box2d_world;
 mod env;
 mod error;
 mod game;
 mod params;
+mod rapier_world;
 pub mod reference;
 pub mod render;
 mod sample;
@@ -44,7 +47,7 @@ pub use action::{Click, ClickSchedule, Due, SCREEN, click_block, hits_block, val
 pub use env::IphyreEnv;
 pub use error::{IphyreError, Result};
 pub use game::{DEFAULT_GAMES_JSON, FOLDS, Game, GameObject, Games, ObjectKind};
-pub use params::PhysicsParams;
+pub use params::{Engine, PhysicsParams};
 pub use sample::{MAX_TENTHS, SKIP_PROBABILITY, clicks_rng, random_clicks};
 pub use step::{Episode, EpisodeEvent, EpisodeResult, Frame, play};
 pub use to_trace::trace_of;

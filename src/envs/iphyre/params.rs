@@ -2,10 +2,45 @@
 
 use super::error::{IphyreError, Result};
 
+/// The physics engine an I-PHYRE world runs on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Engine {
+    /// Box2D (the `box2d-rs` port of Box2D 2.4.1), set up with Chipmunk's semantics: hard contacts
+    /// solved by sequential impulses with accumulated impulses and warm starting, no continuous
+    /// collision, no sleeping (`box2d_world.rs`). The rapier-only fields of [`PhysicsParams`] do not
+    /// apply; the `box2d_*` ones do. Measured against the original it is not better than rapier2d
+    /// overall (docs/fidelity.md, "I-PHYRE on Box2D"), so it is not the default.
+    Box2d,
+    /// rapier2d with the tuning knobs of [`PhysicsParams`] (`rapier_world.rs`); the default.
+    #[default]
+    Rapier,
+}
+
+impl Engine {
+    /// The name used in parameters and reports: `box2d` or `rapier`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Engine::Box2d => "box2d",
+            Engine::Rapier => "rapier",
+        }
+    }
+
+    /// Parses [`name`](Self::name).
+    pub fn from_name(name: &str) -> Option<Engine> {
+        match name {
+            "box2d" => Some(Engine::Box2d),
+            "rapier" => Some(Engine::Rapier),
+            _ => None,
+        }
+    }
+}
+
 /// I-PHYRE's physics constants. [`Default`] gives iphyre 0.2.3's values (pymunk 6.11.1 / Chipmunk 7.0.3),
 /// in screen pixels (600×600, y down) and seconds.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PhysicsParams {
+    /// The engine: rapier2d (default) or Box2D with Chipmunk's semantics.
+    pub engine: Engine,
     /// Downward gravity (px/s²): 100.
     pub gravity: f64,
     /// Physics steps per second; one step per frame, no substeps: 60 (the gym wrappers and DeepPHY use 10).
@@ -61,11 +96,23 @@ pub struct PhysicsParams {
     /// held-out pairs is 96.6 % (60 fps) and 92.5 % (10 fps) with 1, against 93.4 % and 90.3 % with
     /// 100 (the "metre-sized objects" reading of docs/envs/iphyre.md §R9); 0.1 breaks contacts (78 %).
     pub length_unit: f64,
+    /// Box2D: screen pixels per Box2D metre, 20. Box2D's tolerances are fixed in metres (linear slop
+    /// 0.005 m, largest position correction 0.2 m, largest move 2 m per step); at 20 px per metre the
+    /// slop is Chipmunk's collision slop, 0.1 px.
+    pub box2d_pixels_per_metre: f64,
+    /// Box2D velocity iterations per step: 10, Chipmunk's `Space.iterations`.
+    pub box2d_velocity_iterations: usize,
+    /// Box2D position (overlap correction) iterations per step: 3.
+    pub box2d_position_iterations: usize,
+    /// Box2D: the polygon radius (px) of the box in a block's capsule (a box plus two end discs): 0.2,
+    /// Box2D's own `b2_polygonRadius` (0.01 m) at 20 px per metre. The box is made thinner by it.
+    pub box2d_polygon_skin: f64,
 }
 
 impl Default for PhysicsParams {
     fn default() -> Self {
         PhysicsParams {
+            engine: Engine::Rapier,
             gravity: 100.0,
             fps: 60.0,
             max_time: 15.0,
@@ -85,6 +132,10 @@ impl Default for PhysicsParams {
             contact_damping_ratio: 10.0,
             max_corrective_velocity: 0.0,
             length_unit: 1.0,
+            box2d_pixels_per_metre: 20.0,
+            box2d_velocity_iterations: 10,
+            box2d_position_iterations: 3,
+            box2d_polygon_skin: 0.2,
         }
     }
 }
@@ -113,6 +164,7 @@ impl PhysicsParams {
             ("block_mass", self.block_mass),
             ("block_inertia", self.block_inertia),
             ("length_unit", self.length_unit),
+            ("box2d_pixels_per_metre", self.box2d_pixels_per_metre),
         ];
         let non_negative = [
             ("gravity", self.gravity.abs()),
@@ -141,6 +193,7 @@ impl PhysicsParams {
         for (field, v) in [
             ("solver_iterations", self.solver_iterations),
             ("pgs_iterations", self.pgs_iterations),
+            ("box2d_velocity_iterations", self.box2d_velocity_iterations),
         ] {
             if v == 0 {
                 return Err(IphyreError::InvalidParams {
@@ -148,6 +201,15 @@ impl PhysicsParams {
                     message: "must be at least 1".into(),
                 });
             }
+        }
+        if !(self.box2d_polygon_skin >= 0.0 && self.box2d_polygon_skin < self.block_radius) {
+            return Err(IphyreError::InvalidParams {
+                field: "box2d_polygon_skin",
+                message: format!(
+                    "{} is not in [0, block_radius {})",
+                    self.box2d_polygon_skin, self.block_radius
+                ),
+            });
         }
         Ok(())
     }
