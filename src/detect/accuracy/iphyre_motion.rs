@@ -392,7 +392,7 @@ fn chains(
             if !used[j]
                 && from == last
                 && *t - tl > 0.0
-                && *t - tl <= gap_s
+                && *t - tl <= gap_s + 1e-9
                 && chain.iter().all(|&c| &links[c].1 != to)
             {
                 used[j] = true;

@@ -117,9 +117,10 @@ pub const SLIDING_FRICTION: f64 = 0.2;
 /// pooltool's gravity in its ball parameters (m/s²), which its sliding motion uses.
 const G_POOLTOOL: f64 = 9.81;
 
-/// "ball curves around ball": least heading turn over a slide (degrees), and how close (in ball radii,
-/// centre to centre) another ball must come.
-pub const CURVE: (f64, f64) = (8.0, 4.0);
+/// "ball curves around ball": least heading turn over a slide (degrees), how close (in ball radii,
+/// centre to centre) another ball must come, and the shortest slide (s): a path, not the few
+/// milliseconds between two contacts of a ball in a cluster (the 50 ms every rule here merges within).
+pub const CURVE: (f64, f64, f64) = (8.0, 4.0, 0.05);
 
 /// "ball slowing": a rolling ball coming to rest, if it rolled at least this fast (m/s) when its roll
 /// began.
@@ -278,14 +279,15 @@ type PoolState<'a> = (f64, [f64; 2], [f64; 2], [f64; 3], &'a str, f64);
 /// sliding in the first frame after the first — whose heading, by pooltool's sliding motion (the
 /// velocity changes at `u_s g` against the constant direction of the cloth contact point's velocity
 /// `v + R ẑ × ω`), turns by more than `CURVE.0` degrees from the first event to the next (or to the
-/// slide's end), while another ball its pair never collides with comes within `CURVE.1` radii.
+/// slide's end, at least `CURVE.2` s after the first), while another ball its pair never collides with
+/// comes within `CURVE.1` radii.
 /// Timed at the middle of the two events; names the curving ball and the closest such ball.
 fn curves(
     trace: &crate::trace::Trace,
     events: &[&crate::trace::Event],
     out: &mut Vec<TruthEvent>,
 ) {
-    let (min_turn, radii) = CURVE;
+    let (min_turn, radii, min_slide) = CURVE;
     let mut states: BTreeMap<&str, Vec<PoolState>> = BTreeMap::new();
     for s in &trace.timesteps {
         for o in &s.objects {
@@ -343,6 +345,9 @@ fn curves(
                 let dt = t.min(slide_end) - ta;
                 [va[0] - decel * dt * ux, va[1] - decel * dt * uy]
             };
+            if t1.min(slide_end) - t0 < min_slide - 1e-9 {
+                continue;
+            }
             let (v0, v1) = (at(t0), at(t1));
             let (n0, n1) = (v0[0].hypot(v0[1]), v1[0].hypot(v1[1]));
             if n0 <= 1e-6 || n1 <= 1e-6 {
