@@ -41,7 +41,9 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
     let s: AccuracySummary = summary(&stage, "accuracy")?;
     println!("{}", s.markdown);
     if !s.misses.is_empty() {
-        println!("| label | trace | kind | t_start | t_end | objects |\n|---|---|---|---:|---:|---|");
+        println!(
+            "| label | trace | kind | t_start | t_end | objects |\n|---|---|---|---:|---:|---|"
+        );
         for m in &s.misses {
             println!(
                 "| {} | {} | {} | {:.3} | {:.3} | {} |",

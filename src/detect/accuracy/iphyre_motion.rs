@@ -338,7 +338,10 @@ fn chains(
         let [a, b] = ids[..] else { continue };
         for (x, y) in [(a, b), (b, a)] {
             for &ty in &onsets[y] {
-                if onsets[x].iter().any(|&tx| ty - tx > 0.0 && ty - tx <= start_s + 1e-9) {
+                if onsets[x]
+                    .iter()
+                    .any(|&tx| ty - tx > 0.0 && ty - tx <= start_s + 1e-9)
+                {
                     links.push((ty, x.clone(), y.clone()));
                 }
             }
@@ -366,9 +369,9 @@ fn chains(
                 continue;
             }
             let other = if pair[0] == gone { &pair[1] } else { &pair[0] };
-            let touching = list
-                .iter()
-                .any(|ep| ep.t0 - 1e-9 <= trace.timesteps[pre].t && trace.timesteps[pre].t <= ep.t1 + 1e-9);
+            let touching = list.iter().any(|ep| {
+                ep.t0 - 1e-9 <= trace.timesteps[pre].t && trace.timesteps[pre].t <= ep.t1 + 1e-9
+            });
             if touching
                 && tr.get(other).is_some_and(|t| t.dynamic)
                 && speed(other.as_str(), pre).is_some_and(|v| v <= rest)

@@ -282,11 +282,7 @@ type PoolState<'a> = (f64, [f64; 2], [f64; 2], [f64; 3], &'a str, f64);
 /// slide's end, at least `CURVE.2` s after the first), while another ball its pair never collides with
 /// comes within `CURVE.1` radii.
 /// Timed at the middle of the two events; names the curving ball and the closest such ball.
-fn curves(
-    trace: &crate::trace::Trace,
-    events: &[&crate::trace::Event],
-    out: &mut Vec<TruthEvent>,
-) {
+fn curves(trace: &crate::trace::Trace, events: &[&crate::trace::Event], out: &mut Vec<TruthEvent>) {
     let (min_turn, radii, min_slide) = CURVE;
     let mut states: BTreeMap<&str, Vec<PoolState>> = BTreeMap::new();
     for s in &trace.timesteps {
@@ -367,7 +363,10 @@ fn curves(
                 if collided.contains(&key) {
                     continue;
                 }
-                for p in mine.iter().filter(|p| p.0 >= ta - 1e-12 && p.0 <= t1 + 1e-12) {
+                for p in mine
+                    .iter()
+                    .filter(|p| p.0 >= ta - 1e-12 && p.0 <= t1 + 1e-12)
+                {
                     let i = theirs.partition_point(|q| q.0 < p.0 - 1e-12);
                     let Some(q) = theirs.get(i).filter(|q| (q.0 - p.0).abs() <= 1e-12) else {
                         continue;
