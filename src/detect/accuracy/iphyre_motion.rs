@@ -1,6 +1,6 @@
 //! I-PHYRE ground truth for the motion labels: falling object, support contact, sliding contact,
-//! bounce, spring pull towards, spring resist movement, swinging object and lever launch. Owns these
-//! rules (stated in `docs/accuracy.md`, thresholds below); the tracks and contact episodes they read are
+//! bounce, spring pull towards, spring resist movement, swinging object, lever launch and chain movement.
+//! Owns these rules (stated in `docs/accuracy.md`, thresholds below); the tracks and contact episodes they read are
 //! `kin.rs`. Not the scoring (`mod.rs`), not collision / removal (`iphyre.rs`) nor airborne motion
 //! (`airborne.rs`).
 //!

@@ -1,6 +1,6 @@
 //! PHYRE ground truth for the motion labels: falling object, grid cell transition, tip over, bounce,
-//! support relationship, lose support, rolling object, sliding contact and near collision. Owns these
-//! rules (stated in `docs/accuracy.md`, thresholds below); the tracks and contact episodes they read are
+//! support relationship, lose support, rolling object, sliding contact, near collision and wedged (its
+//! pushes from the exact outlines of `geometry.rs`). Owns these rules (stated in `docs/accuracy.md`, thresholds below); the tracks and contact episodes they read are
 //! `kin.rs`. Not the scoring (`mod.rs`), not the hit (`phyre.rs`) nor airborne motion (`airborne.rs`).
 //!
 //! Each rule reads the simulator's state (positions, velocities, angles, angular velocities; which

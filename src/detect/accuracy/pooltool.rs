@@ -1,5 +1,6 @@
-//! Billiards ground truth from pooltool's event log. Owns the mapping of event kinds to labels and
-//! pooltool's id conventions for `payload.agents`; not the scoring (`mod.rs`).
+//! Billiards ground truth from pooltool's event log (and, for spin shot, high angle collision, gentle
+//! touch and ball curves around ball, the states and pooltool's motion laws). Owns the mapping of event
+//! kinds to labels and pooltool's id conventions for `payload.agents`; not the scoring (`mod.rs`).
 //!
 //! The balls of an event come from `payload.agents`, the one field pooltool itself records, read by
 //! the position pooltool gives each id for the event's kind — never by what an id looks like (cushion
