@@ -306,7 +306,7 @@ impl Placed {
             Outline::Circle(c, r) => {
                 let d = sub(p, *c);
                 let n = dot(d, d).sqrt();
-                (n > *r).then(|| [c[0] + d[0] * r / n, c[1] + d[1] * r / n])
+                (n > *r).then_some([c[0] + d[0] * r / n, c[1] + d[1] * r / n])
             }
             Outline::Wall(axis, at) => {
                 let mut q = p;

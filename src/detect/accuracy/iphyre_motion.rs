@@ -369,9 +369,10 @@ fn chains(
                 continue;
             }
             let other = if pair[0] == gone { &pair[1] } else { &pair[0] };
-            let touching = list.iter().any(|ep| {
-                ep.t0 - 1e-9 <= trace.timesteps[pre].t && trace.timesteps[pre].t <= ep.t1 + 1e-9
-            });
+            let at = trace.timesteps[pre].t;
+            let touching = list
+                .iter()
+                .any(|ep| (ep.t0 - 1e-9..=ep.t1 + 1e-9).contains(&at));
             if touching
                 && tr.get(other).is_some_and(|t| t.dynamic)
                 && speed(other.as_str(), pre).is_some_and(|v| v <= rest)
@@ -383,14 +384,13 @@ fn chains(
     }
     links.sort_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
     let mut used = vec![false; links.len()];
-    for i in 0..links.len() {
+    for (i, first) in links.iter().enumerate() {
         if used[i] {
             continue;
         }
         used[i] = true;
         let mut chain = vec![i];
-        for j in i + 1..links.len() {
-            let (t, from, to) = &links[j];
+        for (j, (t, from, to)) in links.iter().enumerate().skip(i + 1) {
             let (tl, _, last) = &links[*chain.last().expect("one link")];
             if !used[j]
                 && from == last
@@ -405,7 +405,6 @@ fn chains(
         if chain.len() < 2 {
             continue;
         }
-        let first = &links[chain[0]];
         let last = &links[*chain.last().expect("two links")];
         let mut ids: Vec<&String> = vec![&first.1];
         ids.extend(chain.iter().map(|&c| &links[c].2));

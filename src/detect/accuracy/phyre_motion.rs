@@ -314,12 +314,12 @@ fn wedged(
                 let bodies = &frames[x.k].1;
                 let pushes: Vec<P> = mine
                     .iter()
-                    .filter(|(_, l)| l.iter().any(|e| e.t0 - 1e-9 <= x.t && x.t <= e.t1 + 1e-9))
+                    .filter(|(_, l)| l.iter().any(|e| (e.t0 - 1e-9..=e.t1 + 1e-9).contains(&x.t)))
                     .filter_map(|(other, _)| {
                         let q = bodies.iter().find(|b| &b.id == *other)?.nearest_to(x.c)?;
                         let d = sub(q, x.c);
                         let n = dot(d, d).sqrt();
-                        (n > 0.0).then(|| [d[0] / n, d[1] / n])
+                        (n > 0.0).then_some([d[0] / n, d[1] / n])
                     })
                     .collect();
                 pushes.iter().enumerate().any(|(i, a)| {

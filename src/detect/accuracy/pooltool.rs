@@ -366,7 +366,7 @@ fn curves(trace: &crate::trace::Trace, events: &[&crate::trace::Event], out: &mu
                 }
                 for p in mine
                     .iter()
-                    .filter(|p| p.0 >= ta - 1e-12 && p.0 <= t1 + 1e-12)
+                    .filter(|p| (ta - 1e-12..=t1 + 1e-12).contains(&p.0))
                 {
                     let i = theirs.partition_point(|q| q.0 < p.0 - 1e-12);
                     let Some(q) = theirs.get(i).filter(|q| (q.0 - p.0).abs() <= 1e-12) else {
