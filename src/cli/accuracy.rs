@@ -20,6 +20,9 @@ pub struct Args {
     /// Give the detectors the traces without their event log (scoring still uses it).
     #[arg(long)]
     hide_events: bool,
+    /// List up to N disagreements per label (missed truth events, false detections).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    list: u64,
 }
 
 pub fn run(args: Args, quiet: bool) -> CliResult {
@@ -28,6 +31,7 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
         tolerance: args.tolerance,
         merge: args.merge,
         hide_events: args.hide_events,
+        list: args.list,
         ..AccuracyParams::default()
     };
     let stage = args
@@ -36,6 +40,23 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
         .run(&KIND, &params, quiet)?;
     let s: AccuracySummary = summary(&stage, "accuracy")?;
     println!("{}", s.markdown);
+    if !s.misses.is_empty() {
+        println!(
+            "| label | trace | kind | t_start | t_end | objects |\n|---|---|---|---:|---:|---|"
+        );
+        for m in &s.misses {
+            println!(
+                "| {} | {} | {} | {:.3} | {:.3} | {} |",
+                m.label,
+                m.trace_id,
+                m.kind,
+                m.t_start,
+                m.t_end,
+                m.objects.join(" ")
+            );
+        }
+        println!();
+    }
     println!(
         "{} trace(s), tolerance {} s, contacts merged within {} s{}",
         s.traces,

@@ -149,14 +149,20 @@ fn phyre_library_on_phyres_own_traces() {
     // PHYRE records no contacts: with or without the rest of its log the detector works from geometry.
     let s = scores(Env::Phyre, true);
     at_least(&s, "moving object hits stationary object", 0.9);
+    // Every label with ten or more truth events here but bounce (docs/accuracy.md: phyre's impacts
+    // resolved inside one step never show touching outlines in its frames, so the truth misses them).
     for label in [
         "falling object",
         "rolling object",
         "sliding contact",
         "grid cell transition",
+        "support relationship",
+        "airborne motion",
     ] {
         at_least(&s, label, 0.9);
     }
+    // The implicit floor and sides support and wedge bodies too.
+    at_least(&s, "wedged", 0.9);
 }
 
 #[test]

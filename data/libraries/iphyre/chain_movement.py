@@ -98,7 +98,7 @@ def find_pattern(trace):
         used.add(i)
         for j in range(i + 1, len(transfers)):
             t, hitter, hit, _ = transfers[j]
-            if j not in used and hitter == chain[-1][2] and 0.0 < t - chain[-1][0] <= GAP_S \
+            if j not in used and hitter == chain[-1][2] and 0.0 < t - chain[-1][0] <= GAP_S + 1e-9 \
                     and hit not in [c[1] for c in chain]:
                 chain.append(transfers[j])
                 used.add(j)

@@ -91,6 +91,20 @@ def _implicit_walls(trace):
             ("-1", ("wall", 0, SCENE))]
 
 
+_IMPLICIT_CENTRES = {"-4": (128.0, -2.5), "-3": (-2.5, 128.0), "-2": (128.0, 258.5), "-1": (258.5, 128.0)}
+
+
+def _body_at(trace, k, oid):
+    """The object dict of body `oid` in timestep k, or for an implicit wall (a trace that omits the
+    walls) a wall object at PHYRE's wall centre, so rules that compare positions see the floor below
+    and the sides beside every body. None when there is no such body."""
+    o = _obj_at(trace, k, oid)
+    if o is None and oid in _IMPLICIT_CENTRES and _implicit_walls(trace):
+        x, y = _IMPLICIT_CENTRES[oid]
+        return {"object_index": int(oid), "shape": "wall", "x": x, "y": y, "diameter": 256.0}
+    return o
+
+
 def _wall_of(o):
     """A listed wall object as a half-plane boundary (axis, coordinate)."""
     wx, wy = float(o["x"]), float(o["y"])

@@ -19,7 +19,7 @@ def find_pattern(trace):
             continue
         x, y = g["pair"]
         a0, b0 = _at(ts, g["t0"]), _at(ts, g["t1"])
-        ox, oy = _obj_at(trace, a0, x), _obj_at(trace, a0, y)
+        ox, oy = _body_at(trace, a0, x), _body_at(trace, a0, y)
         if ox is None or oy is None:
             continue
         top, low = (x, y) if float(ox["y"]) > float(oy["y"]) else (y, x)

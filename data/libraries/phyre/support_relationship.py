@@ -15,11 +15,11 @@ def find_pattern(trace):
     for g in _contacts(trace):
         x, y = g["pair"]
         a0, b0 = _at(ts, g["t0"]), _at(ts, g["t1"])
-        ox, oy = _obj_at(trace, a0, x), _obj_at(trace, a0, y)
+        ox, oy = _body_at(trace, a0, x), _body_at(trace, a0, y)
         if ox is None or oy is None:
             continue
         top, low = (x, y) if float(ox["y"]) > float(oy["y"]) else (y, x)
-        if top not in kin or _is_static(kin, top) or (low == "0" and False):
+        if top not in kin or _is_static(kin, top):
             continue
         ks = list(range(a0, b0 + 1))
         for i, j in _runs(ks, ts, [_speed_at(kin, top, k) <= REST_V for k in ks], MIN_S):

@@ -1,13 +1,25 @@
 """ball curves around ball: a moving ball's path bends (swerve from side spin while it slides) as it
 passes close to another ball without touching it.
 
-Between two consecutive events of a ball (so no collision or cushion inside), its heading — from the
-recorded velocity — must turn by more than 8 degrees, and another ball must come within 4 ball radii of
-its path at the same timesteps while the two never collide."""
+Between two consecutive events of a ball (so no collision or cushion inside) at least MIN_S apart (a
+path, not the milliseconds between two contacts of a ball in a cluster), its heading must turn by more
+than 8 degrees from the first event to the second, and another ball must come within 4 ball radii of
+its path at the same timesteps while the two never collide. The velocities at the two event times are
+carried on from the nearest two frames inside the slide along their change (a sliding ball's velocity
+changes at a constant rate), so the turn is measured over the whole slide, not just between frames."""
 
 
 TURN_COS = 0.990  # cos 8°
 NEAR_RADII = 4.0
+MIN_S = 0.05
+
+
+def _carried(p, q, tp, tq, t):
+    """Velocity at time t, carried on linearly from frames p (time tp) and q (time tq)."""
+    vp, vq = p.get("velocity") or (0.0, 0.0), q.get("velocity") or (0.0, 0.0)
+    f = (t - tp) / (tq - tp) if tq != tp else 0.0
+    return {"velocity": (float(vp[0]) + f * (float(vq[0]) - float(vp[0])),
+                         float(vp[1]) + f * (float(vq[1]) - float(vp[1])))}
 
 
 def _ball_events(trace, bid):
@@ -46,12 +58,18 @@ def find_pattern(trace):
         times = _ball_events(trace, bid) + [ts[-1]]
         for t0, t1 in zip(times, times[1:]):
             a, b = _at(ts, t0) + 1, _at(ts, t1)
-            if b - a < 2:
+            if b - a < 2 or t1 - t0 < MIN_S - 1e-9:
                 continue
             oa, ob = _state(trace, a, bid), _state(trace, b, bid)
             if oa is None or ob is None or oa.get("motion_state") != "sliding":
                 continue
-            ua, ub = _unit(oa), _unit(ob)
+            oa1, ob1 = _state(trace, a + 1, bid), _state(trace, b - 1, bid)
+            if oa1 is not None and ob1 is not None and ob.get("motion_state") == "sliding":
+                va = _carried(oa, oa1, ts[a], ts[a + 1], t0)
+                vb = _carried(ob1, ob, ts[b - 1], ts[b], t1)
+            else:
+                va, vb = oa, ob
+            ua, ub = _unit(va), _unit(vb)
             if ua is None or ub is None or ua[0] * ub[0] + ua[1] * ub[1] > TURN_COS:
                 continue
             r = float(oa.get("radius") or 0.028575)

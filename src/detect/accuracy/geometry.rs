@@ -273,6 +273,66 @@ pub fn phyre_contacts(trace: &Trace, merge_s: f64) -> Vec<(f64, Vec<String>)> {
 /// The pairs touching in each frame of a PHYRE trace, as [`phyre_contacts`] finds them (empty for a
 /// task outside the embedded set).
 pub fn phyre_touching(trace: &Trace) -> Vec<(f64, Vec<Vec<String>>)> {
+    phyre_outlines(trace)
+        .into_iter()
+        .map(|(t, bodies)| {
+            let mut pairs = Vec::new();
+            for (i, a) in bodies.iter().enumerate() {
+                for b in &bodies[i + 1..] {
+                    if (a.dynamic || b.dynamic) && gap(&a.outline, &b.outline) <= PHYRE_TOUCH_PX {
+                        pairs.push(sorted_pair(a.id.clone(), b.id.clone()));
+                    }
+                }
+            }
+            (t, pairs)
+        })
+        .collect()
+}
+
+/// One PHYRE body in one frame: its id, whether it is dynamic, its exact outline.
+pub struct Placed {
+    /// The trace's `object_index` (or an implicit wall's id).
+    pub id: String,
+    /// Moved by the simulator.
+    pub dynamic: bool,
+    outline: Outline,
+}
+
+impl Placed {
+    /// The point of this body's outline nearest to `p` (`None` when `p` is inside it): for a wall,
+    /// `p` moved onto the wall's line.
+    pub fn nearest_to(&self, p: P) -> Option<P> {
+        match &self.outline {
+            Outline::Circle(c, r) => {
+                let d = sub(p, *c);
+                let n = dot(d, d).sqrt();
+                (n > *r).then_some([c[0] + d[0] * r / n, c[1] + d[1] * r / n])
+            }
+            Outline::Wall(axis, at) => {
+                let mut q = p;
+                q[*axis] = *at;
+                Some(q)
+            }
+            Outline::Polygons(ps) => {
+                if ps.iter().any(|poly| inside(p, poly)) {
+                    return None;
+                }
+                ps.iter()
+                    .flat_map(|poly| edges(poly).map(|(a, b)| nearest_on(p, a, b)))
+                    .min_by(|a, b| {
+                        let (da, db) = (sub(*a, p), sub(*b, p));
+                        dot(da, da)
+                            .partial_cmp(&dot(db, db))
+                            .unwrap_or(std::cmp::Ordering::Equal)
+                    })
+            }
+        }
+    }
+}
+
+/// Every body of each frame of a PHYRE trace placed with the task's exact outline (empty for a task
+/// outside the embedded set): the trace's objects, and the implicit walls when it omits them.
+pub fn phyre_outlines(trace: &Trace) -> Vec<(f64, Vec<Placed>)> {
     let Some(task) = phyre_task(trace) else {
         return Vec::new();
     };
@@ -296,7 +356,7 @@ pub fn phyre_touching(trace: &Trace) -> Vec<(f64, Vec<Vec<String>>)> {
         .timesteps
         .iter()
         .map(|s| {
-            let mut bodies: Vec<(String, bool, Outline)> = s
+            let mut bodies: Vec<Placed> = s
                 .objects
                 .iter()
                 .filter_map(|o| match &o.body {
@@ -309,7 +369,11 @@ pub fn phyre_touching(trace: &Trace) -> Vec<(f64, Vec<Vec<String>>)> {
                         let circle = [Shape::Circle {
                             radius: p.diameter / 2.0,
                         }];
-                        return Some((id, true, place(&circle, p.x, p.y, p.angle)));
+                        return Some(Placed {
+                            id,
+                            dynamic: true,
+                            outline: place(&circle, p.x, p.y, p.angle),
+                        });
                     }
                     let body = usize::try_from(p.object_index + offset)
                         .ok()
@@ -321,25 +385,25 @@ pub fn phyre_touching(trace: &Trace) -> Vec<(f64, Vec<Vec<String>>)> {
                             2 => Outline::Wall(1, SCENE),
                             _ => Outline::Wall(0, SCENE),
                         };
-                        return Some((id, false, o));
+                        return Some(Placed {
+                            id,
+                            dynamic: false,
+                            outline: o,
+                        });
                     }
-                    Some((id, body.dynamic, place(&body.shapes, p.x, p.y, p.angle)))
+                    Some(Placed {
+                        id,
+                        dynamic: body.dynamic,
+                        outline: place(&body.shapes, p.x, p.y, p.angle),
+                    })
                 })
                 .collect();
-            bodies.extend(
-                walls
-                    .iter()
-                    .map(|(id, d, o)| (id.clone(), *d, copy_wall(o))),
-            );
-            let mut pairs = Vec::new();
-            for (i, (ia, da, a)) in bodies.iter().enumerate() {
-                for (ib, db, b) in &bodies[i + 1..] {
-                    if (*da || *db) && gap(a, b) <= PHYRE_TOUCH_PX {
-                        pairs.push(sorted_pair(ia.clone(), ib.clone()));
-                    }
-                }
-            }
-            (s.t, pairs)
+            bodies.extend(walls.iter().map(|(id, d, o)| Placed {
+                id: id.clone(),
+                dynamic: *d,
+                outline: copy_wall(o),
+            }));
+            (s.t, bodies)
         })
         .collect()
 }

@@ -1,6 +1,6 @@
 //! I-PHYRE ground truth for the motion labels: falling object, support contact, sliding contact,
-//! bounce, spring pull towards, spring resist movement, swinging object and lever launch. Owns these
-//! rules (stated in `docs/accuracy.md`, thresholds below); the tracks and contact episodes they read are
+//! bounce, spring pull towards, spring resist movement, swinging object, lever launch and chain movement.
+//! Owns these rules (stated in `docs/accuracy.md`, thresholds below); the tracks and contact episodes they read are
 //! `kin.rs`. Not the scoring (`mod.rs`), not collision / removal (`iphyre.rs`) nor airborne motion
 //! (`airborne.rs`).
 //!
@@ -34,6 +34,10 @@ pub const SPRING: (f64, f64, f64, f64) = (10.0, 0.1, 3.0, 5.0);
 pub const SWING: (f64, f64, f64, f64) = (0.2, 0.3, 0.4, 10.0);
 /// lever launch: lever turning rate (rad/s), object's upward speed (px/s).
 pub const LEVER: (f64, f64) = (0.3, 40.0);
+
+/// chain movement: moving speed (px/s), resting speed (px/s), time for a struck or pulled body to start
+/// (s), for a released one (s), longest wait between two links (s).
+pub const CHAIN: (f64, f64, f64, f64, f64) = (15.0, 2.0, 0.2, 0.5, 2.0);
 
 /// I-PHYRE's screen side (px).
 const SCREEN: f64 = 600.0;
@@ -113,6 +117,7 @@ pub fn iphyre_motion_truth(trace: &Trace, merge_s: f64) -> Vec<TruthEvent> {
         }
     }
     springs_and_swings(&tr, merge_s, &mut out);
+    chains(trace, &tr, &eps, &mut out);
     out.sort_by(|a, b| a.t.partial_cmp(&b.t).unwrap_or(std::cmp::Ordering::Equal));
     out
 }
@@ -253,6 +258,160 @@ fn lever(
 }
 
 /// The frames two tracks share: (t, sample of a, sample of b).
+/// One link of a chain: (time, the body passing the motion on, the body set moving).
+type Link = (f64, String, String);
+
+/// chain movement: motion passed along at least three bodies, each set moving by the one before.
+/// A link is a collision (a contact episode begins while, in the frame strictly before, one body
+/// moves at ≥ 15 px/s and the other, dynamic, rests at ≤ 2 px/s and then reaches 15 px/s within
+/// 0.2 s), a pull (two bodies sharing a joint or spring group: one starts moving — its first frame at
+/// ≥ 15 px/s after one at ≤ 2 px/s — within 0.2 s after the other did), or a release (an effective
+/// removal of a block a resting dynamic body is in contact with, that body reaching 15 px/s within
+/// 0.5 s). Links in time order chain when the body one sets moving passes the motion on within 2 s,
+/// no body twice. Timed at the middle of the first and last link; names every body of the chain.
+fn chains(
+    trace: &Trace,
+    tr: &BTreeMap<String, Track>,
+    eps: &BTreeMap<Vec<String>, Vec<Episode>>,
+    out: &mut Vec<TruthEvent>,
+) {
+    let (moving, rest, start_s, release_s, gap_s) = CHAIN;
+    if trace.timesteps.is_empty() {
+        return;
+    }
+    let speed = |id: &str, k: usize| tr.get(id).and_then(|t| t.at(k)).map(|s| norm(s.v));
+    let starts_by = |id: &str, from: usize, until: f64| {
+        tr.get(id).is_some_and(|t| {
+            t.samples
+                .iter()
+                .any(|s| s.k >= from && s.t <= until + 1e-9 && norm(s.v) >= moving)
+        })
+    };
+    let mut links: Vec<Link> = Vec::new();
+    for (p, list) in eps {
+        for ep in list {
+            let pre = frame_at(trace, ep.t0 - 1e-6);
+            if trace.timesteps.get(pre).is_none_or(|s| s.t >= ep.t0) {
+                continue;
+            }
+            for (a, b) in [(&p[0], &p[1]), (&p[1], &p[0])] {
+                if !tr.get(b).is_some_and(|t| t.dynamic) {
+                    continue;
+                }
+                let (Some(va), Some(vb)) = (speed(a.as_str(), pre), speed(b.as_str(), pre)) else {
+                    continue;
+                };
+                if va >= moving && vb <= rest && starts_by(b.as_str(), pre + 1, ep.t0 + start_s) {
+                    links.push((ep.t0, a.clone(), b.clone()));
+                }
+            }
+        }
+    }
+    // Motion onsets, for pulls through joints and springs.
+    let onsets: BTreeMap<&String, Vec<f64>> = tr
+        .iter()
+        .map(|(id, t)| {
+            let mut at_rest = false;
+            let mut v = Vec::new();
+            for s in &t.samples {
+                let sp = norm(s.v);
+                if sp <= rest {
+                    at_rest = true;
+                } else if at_rest && sp >= moving {
+                    v.push(s.t);
+                    at_rest = false;
+                }
+            }
+            (id, v)
+        })
+        .collect();
+    let mut groups: BTreeMap<(bool, i64), Vec<&String>> = BTreeMap::new();
+    for (id, t) in tr {
+        if t.spring != 0 {
+            groups.entry((true, t.spring)).or_default().push(id);
+        }
+        if t.joint != 0 {
+            groups.entry((false, t.joint)).or_default().push(id);
+        }
+    }
+    for ids in groups.values() {
+        let [a, b] = ids[..] else { continue };
+        for (x, y) in [(a, b), (b, a)] {
+            for &ty in &onsets[y] {
+                if onsets[x]
+                    .iter()
+                    .any(|&tx| ty - tx > 0.0 && ty - tx <= start_s + 1e-9)
+                {
+                    links.push((ty, x.clone(), y.clone()));
+                }
+            }
+        }
+    }
+    // Releases: an effective removal of a block a resting body touches.
+    for e in &trace.events {
+        let (Some(t), Some(p)) = (e.t, e.payload.as_ref()) else {
+            continue;
+        };
+        if e.kind != "action_applied" || p.get("effective") != Some(&serde_json::Value::Bool(true))
+        {
+            continue;
+        }
+        let Some(gone) = p.get("eliminated_object").map(|o| {
+            o.as_str()
+                .map(str::to_string)
+                .unwrap_or_else(|| o.to_string())
+        }) else {
+            continue;
+        };
+        let pre = frame_at(trace, t - 1e-6);
+        for (pair, list) in eps {
+            if !pair.contains(&gone) {
+                continue;
+            }
+            let other = if pair[0] == gone { &pair[1] } else { &pair[0] };
+            let at = trace.timesteps[pre].t;
+            let touching = list
+                .iter()
+                .any(|ep| (ep.t0 - 1e-9..=ep.t1 + 1e-9).contains(&at));
+            if touching
+                && tr.get(other).is_some_and(|t| t.dynamic)
+                && speed(other.as_str(), pre).is_some_and(|v| v <= rest)
+                && starts_by(other.as_str(), pre, t + release_s)
+            {
+                links.push((t, gone.clone(), other.clone()));
+            }
+        }
+    }
+    links.sort_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
+    let mut used = vec![false; links.len()];
+    for (i, first) in links.iter().enumerate() {
+        if used[i] {
+            continue;
+        }
+        used[i] = true;
+        let mut chain = vec![i];
+        for (j, (t, from, to)) in links.iter().enumerate().skip(i + 1) {
+            let (tl, _, last) = &links[*chain.last().expect("one link")];
+            if !used[j]
+                && from == last
+                && *t - tl > 0.0
+                && *t - tl <= gap_s + 1e-9
+                && chain.iter().all(|&c| &links[c].1 != to)
+            {
+                used[j] = true;
+                chain.push(j);
+            }
+        }
+        if chain.len() < 2 {
+            continue;
+        }
+        let last = &links[*chain.last().expect("two links")];
+        let mut ids: Vec<&String> = vec![&first.1];
+        ids.extend(chain.iter().map(|&c| &links[c].2));
+        out.push(event("chain movement", (first.0 + last.0) / 2.0, &ids));
+    }
+}
+
 fn together<'a>(a: &'a Track, b: &'a Track) -> Vec<(f64, &'a Sample, &'a Sample)> {
     a.samples
         .iter()

@@ -113,6 +113,7 @@ pub const POOLTOOL_GROUNDED: &[&str] = &[
     "spinning ball",
     "ball slowing",
     "spin shot",
+    "ball curves around ball",
     "high angle collision",
     "gentle touch",
 ];
@@ -127,6 +128,7 @@ pub const IPHYRE_GROUNDED: &[&str] = &[
     "sliding contact",
     "airborne motion",
     "bounce",
+    "chain movement",
     "spring pull towards",
     "spring resist movement",
     "lever launch",
@@ -144,6 +146,7 @@ pub const PHYRE_GROUNDED: &[&str] = &[
     "airborne motion",
     "bounce",
     "grid cell transition",
+    "wedged",
     "tip over",
 ];
 
@@ -207,6 +210,24 @@ pub fn scorable(env: Env, trace: &Trace) -> bool {
     }
 }
 
+/// A disagreement between detections and ground truth: an unmatched truth event (a false negative) or
+/// an unmatched detection (a false positive).
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
+pub struct Miss {
+    /// The label.
+    pub label: String,
+    /// The trace.
+    pub trace_id: String,
+    /// `"missed"` (a truth event no detection matched) or `"false"` (a detection matching no event).
+    pub kind: String,
+    /// The truth event's time, or the detection's span start (s).
+    pub t_start: f64,
+    /// The truth event's time, or the detection's span end (s).
+    pub t_end: f64,
+    /// The objects the event involves, or the detection names.
+    pub objects: Vec<String>,
+}
+
 /// Scores the annotations of one trace against its truth events, adding to `scores` (by label) for
 /// the `grounded` labels; annotations of other labels are ignored.
 pub fn score_trace(
@@ -216,6 +237,20 @@ pub fn score_trace(
     tolerance: f64,
     scores: &mut BTreeMap<String, LabelScore>,
 ) {
+    score_trace_listing("", grounded, truth, annotations, tolerance, scores);
+}
+
+/// [`score_trace`] of trace `trace_id`, also returning every disagreement (unmatched events and
+/// detections of grounded labels) by label and time.
+pub fn score_trace_listing(
+    trace_id: &str,
+    grounded: &[&str],
+    truth: &[TruthEvent],
+    annotations: &[&Annotation],
+    tolerance: f64,
+    scores: &mut BTreeMap<String, LabelScore>,
+) -> Vec<Miss> {
+    let mut misses = Vec::new();
     for label in grounded
         .iter()
         .copied()
@@ -266,7 +301,17 @@ pub fn score_trace(
                 used[i] = true;
                 s.true_positives += 1;
             }
-            None => s.false_negatives += 1,
+            None => {
+                s.false_negatives += 1;
+                misses.push(Miss {
+                    label: ev.label.to_string(),
+                    trace_id: trace_id.to_string(),
+                    kind: "missed".into(),
+                    t_start: ev.t,
+                    t_end: ev.t,
+                    objects: ev.balls.clone(),
+                });
+            }
         }
     }
     for (i, label) in labels.iter().enumerate() {
@@ -277,8 +322,23 @@ pub fn score_trace(
         s.detections += 1;
         if !used[i] {
             s.false_positives += 1;
+            let a = annotations[i];
+            misses.push(Miss {
+                label: key.clone(),
+                trace_id: a.trace_id.clone(),
+                kind: "false".into(),
+                t_start: a.t_start,
+                t_end: a.t_end,
+                objects: a.objects.clone(),
+            });
         }
     }
+    misses.sort_by(|a, b| {
+        (a.label.as_str(), a.t_start)
+            .partial_cmp(&(b.label.as_str(), b.t_start))
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
+    misses
 }
 
 /// A Markdown table of scores (label, events, detections, precision, recall, F1).

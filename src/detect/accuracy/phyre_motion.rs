@@ -1,6 +1,6 @@
 //! PHYRE ground truth for the motion labels: falling object, grid cell transition, tip over, bounce,
-//! support relationship, lose support, rolling object, sliding contact and near collision. Owns these
-//! rules (stated in `docs/accuracy.md`, thresholds below); the tracks and contact episodes they read are
+//! support relationship, lose support, rolling object, sliding contact, near collision and wedged (its
+//! pushes from the exact outlines of `geometry.rs`). Owns these rules (stated in `docs/accuracy.md`, thresholds below); the tracks and contact episodes they read are
 //! `kin.rs`. Not the scoring (`mod.rs`), not the hit (`phyre.rs`) nor airborne motion (`airborne.rs`).
 //!
 //! Each rule reads the simulator's state (positions, velocities, angles, angular velocities; which
@@ -11,7 +11,8 @@
 use std::collections::BTreeMap;
 
 use super::TruthEvent;
-use super::kin::{Episode, Track, episodes, frame_at, intervals, norm, runs, tracks};
+use super::geometry::phyre_outlines;
+use super::kin::{Episode, P, Track, dot, episodes, frame_at, intervals, norm, runs, sub, tracks};
 use crate::trace::{Env, Trace};
 
 /// falling object: downward speed (px/s), shortest fall (s), least drop (px).
@@ -31,6 +32,9 @@ pub const LOSE: (f64, f64, f64, f64) = (5.0, 0.3, 20.0, 1.0);
 pub const ROLL: (f64, f64, f64, f64) = (10.0, 0.25, 0.3, 0.2);
 /// near collision: moving speed (px/s), largest gap (px), smallest gap (px), contact-free margin (s).
 pub const NEAR: (f64, f64, f64, f64) = (20.0, 8.0, 1.5, 0.2);
+/// wedged: resting speed (px/s), resting spin (rad/s), shortest wedge (s), cosine of the least angle
+/// between two pushes (120°), least horizontal part of each push's direction.
+pub const WEDGED: (f64, f64, f64, f64, f64) = (2.0, 0.1, 0.5, -0.5, 0.3);
 
 fn event(label: &'static str, t: f64, ids: &[&String]) -> TruthEvent {
     let mut balls: Vec<String> = ids.iter().map(|s| s.to_string()).collect();
@@ -62,6 +66,7 @@ pub fn phyre_motion_truth(trace: &Trace, merge_s: f64) -> Vec<TruthEvent> {
         }
     }
     near(&tr, &eps, merge_s, &mut out);
+    wedged(trace, &tr, &eps, merge_s, &mut out);
     out.sort_by(|a, b| a.t.partial_cmp(&b.t).unwrap_or(std::cmp::Ordering::Equal));
     out
 }
@@ -265,6 +270,71 @@ fn near(
                     .unwrap_or(x);
                 out.push(event("near collision", times[closest], &[a, b]));
             }
+        }
+    }
+}
+
+/// wedged: a dynamic body other than a jar at rest (speed and spin) for long enough while two bodies
+/// it is in contact with push from opposed sides. A push's direction runs from the body's centre to
+/// the point of the other body's exact outline nearest to that centre (a wall: straight at it); two
+/// pushes are opposed when at least 120° apart and on opposite sides horizontally, each direction's
+/// horizontal part at least 0.3. Timed at the resting run's middle; names the wedged body.
+fn wedged(
+    trace: &Trace,
+    tr: &BTreeMap<String, Track>,
+    eps: &BTreeMap<Vec<String>, Vec<Episode>>,
+    merge_s: f64,
+    out: &mut Vec<TruthEvent>,
+) {
+    let (rest_v, rest_w, min_s, opposed_cos, side) = WEDGED;
+    let mut frames = None;
+    for (id, track) in tr {
+        if !track.dynamic || track.shape == "jar" || track.shape == "wall" {
+            continue;
+        }
+        let mine: Vec<(&String, &Vec<Episode>)> = eps
+            .iter()
+            .filter(|(p, _)| p.contains(id))
+            .map(|(p, l)| (if &p[0] == id { &p[1] } else { &p[0] }, l))
+            .collect();
+        if mine.len() < 2 {
+            continue;
+        }
+        let frames = frames.get_or_insert_with(|| phyre_outlines(trace));
+        if frames.is_empty() {
+            return;
+        }
+        let s = &track.samples;
+        let flags: Vec<bool> = s
+            .iter()
+            .map(|x| {
+                if norm(x.v) > rest_v || x.w.abs() > rest_w {
+                    return false;
+                }
+                let bodies = &frames[x.k].1;
+                let pushes: Vec<P> = mine
+                    .iter()
+                    .filter(|(_, l)| l.iter().any(|e| (e.t0 - 1e-9..=e.t1 + 1e-9).contains(&x.t)))
+                    .filter_map(|(other, _)| {
+                        let q = bodies.iter().find(|b| &b.id == *other)?.nearest_to(x.c)?;
+                        let d = sub(q, x.c);
+                        let n = dot(d, d).sqrt();
+                        (n > 0.0).then_some([d[0] / n, d[1] / n])
+                    })
+                    .collect();
+                pushes.iter().enumerate().any(|(i, a)| {
+                    pushes[i + 1..].iter().any(|b| {
+                        dot(*a, *b) <= opposed_cos
+                            && a[0] * b[0] < 0.0
+                            && a[0].abs() >= side
+                            && b[0].abs() >= side
+                    })
+                })
+            })
+            .collect();
+        let times: Vec<f64> = s.iter().map(|x| x.t).collect();
+        for (i, j) in runs(&times, &flags, merge_s, min_s) {
+            out.push(event("wedged", (times[i] + times[j]) / 2.0, &[id]));
         }
     }
 }

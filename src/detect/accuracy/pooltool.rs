@@ -1,5 +1,6 @@
-//! Billiards ground truth from pooltool's event log. Owns the mapping of event kinds to labels and
-//! pooltool's id conventions for `payload.agents`; not the scoring (`mod.rs`).
+//! Billiards ground truth from pooltool's event log (and, for spin shot, high angle collision, gentle
+//! touch and ball curves around ball, the states and pooltool's motion laws). Owns the mapping of event
+//! kinds to labels and pooltool's id conventions for `payload.agents`; not the scoring (`mod.rs`).
 //!
 //! The balls of an event come from `payload.agents`, the one field pooltool itself records, read by
 //! the position pooltool gives each id for the event's kind — never by what an id looks like (cushion
@@ -110,6 +111,17 @@ pub const ROLLING_FRICTION: f64 = 0.01;
 
 /// Standard gravity (m/s²), as pooltool's `g`.
 const G: f64 = 9.8;
+
+/// pooltool's default sliding-friction coefficient `u_s`.
+pub const SLIDING_FRICTION: f64 = 0.2;
+
+/// pooltool's gravity in its ball parameters (m/s²), which its sliding motion uses.
+const G_POOLTOOL: f64 = 9.81;
+
+/// "ball curves around ball": least heading turn over a slide (degrees), how close (in ball radii,
+/// centre to centre) another ball must come, and the shortest slide (s): a path, not the few
+/// milliseconds between two contacts of a ball in a cluster (the 50 ms every rule here merges within).
+pub const CURVE: (f64, f64, f64) = (8.0, 4.0, 0.05);
 
 /// "ball slowing": a rolling ball coming to rest, if it rolled at least this fast (m/s) when its roll
 /// began.
@@ -256,6 +268,126 @@ pub fn pooltool_state_truth(trace: &crate::trace::Trace, merge_s: f64) -> Vec<Tr
             }
         }
     }
+    curves(trace, &events, &mut out);
     out.sort_by(|a, b| a.t.partial_cmp(&b.t).unwrap_or(std::cmp::Ordering::Equal));
     out
+}
+
+/// One ball in one frame: (t, position, velocity, angular velocity, motion state, radius).
+type PoolState<'a> = (f64, [f64; 2], [f64; 2], [f64; 3], &'a str, f64);
+
+/// "ball curves around ball" (rule in `docs/accuracy.md`): a ball's slide between two of its events —
+/// sliding in the first frame after the first — whose heading, by pooltool's sliding motion (the
+/// velocity changes at `u_s g` against the constant direction of the cloth contact point's velocity
+/// `v + R ẑ × ω`), turns by more than `CURVE.0` degrees from the first event to the next (or to the
+/// slide's end, at least `CURVE.2` s after the first), while another ball its pair never collides with
+/// comes within `CURVE.1` radii.
+/// Timed at the middle of the two events; names the curving ball and the closest such ball.
+fn curves(trace: &crate::trace::Trace, events: &[&crate::trace::Event], out: &mut Vec<TruthEvent>) {
+    let (min_turn, radii, min_slide) = CURVE;
+    let mut states: BTreeMap<&str, Vec<PoolState>> = BTreeMap::new();
+    for s in &trace.timesteps {
+        for o in &s.objects {
+            if let crate::trace::Body::Pool(b) = &o.body {
+                states.entry(b.ball_id.as_str()).or_default().push((
+                    s.t,
+                    [b.position[0], b.position[1]],
+                    [b.velocity[0], b.velocity[1]],
+                    b.angular_velocity,
+                    b.motion_state.as_str(),
+                    b.radius,
+                ));
+            }
+        }
+    }
+    let mut times: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    let mut collided: std::collections::BTreeSet<Vec<String>> = Default::default();
+    for e in events.iter().filter(|e| e.kind.starts_with("physics_")) {
+        let balls = event_balls(&e.kind, e.payload.as_ref());
+        if e.kind == "physics_ball_ball"
+            && let Some(p) = pair(e.payload.as_ref())
+        {
+            collided.insert(p);
+        }
+        for b in balls {
+            times.entry(b).or_default().push(e.t.unwrap_or(0.0));
+        }
+    }
+    let last = trace.timesteps.last().map_or(0.0, |s| s.t);
+    for (id, ts) in &times {
+        let Some(mine) = states.get(id.as_str()) else {
+            continue;
+        };
+        let ends = ts.iter().skip(1).copied().chain([last]);
+        for (t0, t1) in ts.iter().copied().zip(ends) {
+            if t1 <= t0 {
+                continue;
+            }
+            // The first frame after the event: the state the slide starts from.
+            let Some(&(ta, _, va, w, state, r)) = mine.iter().find(|x| x.0 > t0 + 1e-12) else {
+                continue;
+            };
+            if state != "sliding" || ta >= t1 {
+                continue;
+            }
+            let u = [va[0] - r * w[1], va[1] + r * w[0]];
+            let un = u[0].hypot(u[1]);
+            if un <= 1e-9 {
+                continue;
+            }
+            let (ux, uy) = (u[0] / un, u[1] / un);
+            let decel = SLIDING_FRICTION * G_POOLTOOL;
+            let slide_end = ta + 2.0 * un / (7.0 * decel);
+            let at = |t: f64| {
+                let dt = t.min(slide_end) - ta;
+                [va[0] - decel * dt * ux, va[1] - decel * dt * uy]
+            };
+            if t1.min(slide_end) - t0 < min_slide - 1e-9 {
+                continue;
+            }
+            let (v0, v1) = (at(t0), at(t1));
+            let (n0, n1) = (v0[0].hypot(v0[1]), v1[0].hypot(v1[1]));
+            if n0 <= 1e-6 || n1 <= 1e-6 {
+                continue;
+            }
+            let cos = ((v0[0] * v1[0] + v0[1] * v1[1]) / (n0 * n1)).clamp(-1.0, 1.0);
+            if cos.acos().to_degrees() <= min_turn {
+                continue;
+            }
+            let mut best: Option<(f64, &str)> = None;
+            for (other, theirs) in &states {
+                if *other == id.as_str() {
+                    continue;
+                }
+                let mut key = vec![id.clone(), other.to_string()];
+                key.sort();
+                if collided.contains(&key) {
+                    continue;
+                }
+                for p in mine
+                    .iter()
+                    .filter(|p| (ta - 1e-12..=t1 + 1e-12).contains(&p.0))
+                {
+                    let i = theirs.partition_point(|q| q.0 < p.0 - 1e-12);
+                    let Some(q) = theirs.get(i).filter(|q| (q.0 - p.0).abs() <= 1e-12) else {
+                        continue;
+                    };
+                    if q.4 == "pocketed" {
+                        continue;
+                    }
+                    let d = (p.1[0] - q.1[0]).hypot(p.1[1] - q.1[1]);
+                    if d < radii * r && best.is_none_or(|(bd, _)| d < bd) {
+                        best = Some((d, *other));
+                    }
+                }
+            }
+            if let Some((_, other)) = best {
+                out.push(TruthEvent {
+                    label: "ball curves around ball",
+                    t: (t0 + t1) / 2.0,
+                    balls: vec![id.clone(), other.to_string()],
+                });
+            }
+        }
+    }
 }

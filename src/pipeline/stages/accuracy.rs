@@ -15,7 +15,9 @@ use serde_json::{Value, json};
 use super::annotate::{annotations_of, status_counts};
 use super::detector_setup::{DetectorSetup, SandboxParams};
 use super::trace_files::{read_traces, trace_file_sets};
-use crate::detect::accuracy::{LabelScore, grounded, markdown, scorable, score_trace, truth};
+use crate::detect::accuracy::{
+    LabelScore, Miss, grounded, markdown, scorable, score_trace_listing, truth,
+};
 use crate::detect::tables::read_annotations;
 use crate::detect::{Annotation, WorkerPool};
 use crate::pipeline::params::ParamsOf;
@@ -42,6 +44,9 @@ pub struct AccuracyParams {
     /// Score the run's annotations table (rows of this library's detectors, written by an annotate
     /// stage listed in `inputs`) instead of running the detectors again.
     pub use_annotations: bool,
+    /// List up to this many disagreements per label (truth events no detection matched, detections
+    /// matching no event) in the stage's summary, to see why a label scores what it does; 0 lists none.
+    pub list: u64,
 }
 
 impl Default for AccuracyParams {
@@ -52,6 +57,7 @@ impl Default for AccuracyParams {
             merge: 0.05,
             hide_events: false,
             use_annotations: false,
+            list: 0,
         }
     }
 }
@@ -96,6 +102,9 @@ pub struct AccuracySummary {
     pub scores: Vec<ScoreSummary>,
     /// The scores as a Markdown table.
     pub markdown: String,
+    /// Up to `list` disagreements per label (the `list` parameter), by label, trace and time.
+    #[serde(default)]
+    pub misses: Vec<Miss>,
 }
 
 /// One label's score.
@@ -123,6 +132,7 @@ pub struct AccuracyStage {
     hide_events: bool,
     tolerance: f64,
     merge: f64,
+    list: u64,
 }
 
 fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
@@ -143,6 +153,7 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         hide_events: p.hide_events,
         tolerance: num("tolerance", p.tolerance)?,
         merge: num("merge", p.merge)?,
+        list: p.list,
         setup,
     }))
 }
@@ -210,6 +221,7 @@ impl Stage for AccuracyStage {
         };
         let mut scores: BTreeMap<String, LabelScore> = BTreeMap::new();
         let mut statuses: BTreeMap<String, u64> = BTreeMap::new();
+        let mut misses: Vec<Miss> = Vec::new();
         let mut n_traces = 0usize;
         let mut unscored = 0usize;
         for set in &sets {
@@ -252,13 +264,20 @@ impl Stage for AccuracyStage {
                     .filter(|a| a.trace_id == trace.trace_id)
                     .collect();
                 let truth = truth(self.setup.env, trace, self.merge);
-                score_trace(
+                let found = score_trace_listing(
+                    &trace.trace_id,
                     grounded(self.setup.env),
                     &truth,
                     &mine,
                     self.tolerance,
                     &mut scores,
                 );
+                for m in found {
+                    let listed = misses.iter().filter(|x| x.label == m.label).count() as u64;
+                    if listed < self.list {
+                        misses.push(m);
+                    }
+                }
             }
             n_traces += traces.len();
             ctx.progress().advance(ctx.stage_id(), 1);
@@ -295,6 +314,7 @@ impl Stage for AccuracyStage {
                     })
                     .collect(),
                 markdown: markdown(&ordered),
+                misses,
             })
             .unwrap_or(Value::Null),
             line: format!(
