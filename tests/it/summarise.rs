@@ -65,7 +65,7 @@ fn offline_summaries_and_identification() {
     simulate(&t, "run", "10");
     let r = t.run(&summarise_args("run", &[]));
     r.ok()
-        .stdout_has("8 offline summaries of pooltool annotations (12 patterns)")
+        .stdout_has("8 offline summaries of pooltool-human annotations (12 patterns)")
         .stdout_has("identification by offline");
     let csv = t.csv(
         "run",
@@ -106,9 +106,9 @@ fn offline_summaries_and_identification() {
         .ok()
         .stdout_has("[recorded result]");
     // Too few traces for 8 options is the user's error.
-    t.run(&summarise_args("run", &["--traces", "5"]))
+    t.run(&summarise_args("run", &["--options", "9"]))
         .code(2)
-        .stderr_has("at least 8 traces");
+        .stderr_has("at least 9 traces");
     t.run(&summarise_args("run", &["--labels", "no such label"]))
         .code(2)
         .stderr_has("no label");
@@ -157,7 +157,7 @@ fn llm_summaries_identification_and_replay() {
     ];
     t.run(&summarise_args("run", &llm))
         .ok()
-        .stdout_has("8 annotations summaries (vlm) of pooltool annotations");
+        .stdout_has("8 annotations summaries (vlm) of pooltool-human annotations");
     let seen = server.seen();
     assert_eq!(seen.len(), 16);
     // Summaries: the initial image and the annotated trace.
@@ -198,7 +198,7 @@ fn llm_summaries_identification_and_replay() {
     );
     // Replay into a fresh run with the same traces: no endpoint, the same tables.
     simulate(&t, "again", "8");
-    let mut replay: Vec<&str> = summarise_args("again", &llm[..8]);
+    let mut replay: Vec<&str> = summarise_args("again", &llm[..10]);
     replay.extend_from_slice(&["--replay", "run"]);
     t.run(&replay).ok();
     assert_eq!(server.seen().len(), 16, "the replay asked the endpoint");
@@ -278,12 +278,12 @@ fn summaries_pipeline_runs_offline() {
     }
     t.run(&["run", "pipelines/s.toml", "--run-dir", "out"])
         .ok()
-        .stdout_has("skipped: an LLM summariser");
+        .stderr_has("skipped: an LLM summariser");
     let cost = std::fs::read_to_string(t.path("out/exports/summary_cost.md")).unwrap();
     assert!(cost.contains("| offline "), "{cost}");
     let ident = t.csv(
         "out",
-        "SELECT env, trials, options FROM identification ORDER BY env",
+        "SELECT env, trials, options FROM identification_accuracy ORDER BY env",
     );
     assert_eq!(
         ident, "env,trials,options\niphyre,8,8\nphyre,8,8\npooltool,8,8\n",
