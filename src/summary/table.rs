@@ -62,7 +62,7 @@ pub fn summaries_schema() -> SchemaRef {
     ]))
 }
 
-fn strings<'a>(n: usize, v: &'a str) -> Arc<StringArray> {
+fn strings(n: usize, v: &str) -> Arc<StringArray> {
     Arc::new(StringArray::from_iter_values(std::iter::repeat_n(v, n)))
 }
 
