@@ -44,6 +44,7 @@ pub mod reward;
 pub mod rng;
 pub mod search;
 pub mod store;
+pub mod summary;
 pub mod trace;
 
 #[doc(hidden)]

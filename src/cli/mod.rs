@@ -35,6 +35,7 @@ mod show;
 mod simulate;
 mod stages;
 mod suggest_labels;
+mod summarise;
 mod tables;
 mod verify;
 
@@ -156,6 +157,8 @@ enum Command {
     Evolve(evolve::Args),
     /// Play DeepPHY-style physics-reasoning tasks with an agent (random, search or an LLM) and feedback.
     Benchmark(benchmark::Args),
+    /// Summarise traces (offline from annotations, or an LLM), with their cost and the identification task.
+    Summarise(summarise::Args),
     /// Print a trace with its annotations as compact text for language models, with a token count.
     Show(show::Args),
     /// Reward programs: check one, evaluate it on a trace, or synthesise one from a goal sentence.
@@ -187,6 +190,7 @@ pub fn main() -> ExitCode {
         Command::Accuracy(a) => accuracy::run(a, cli.quiet),
         Command::Evolve(a) => evolve::run(a, cli.quiet),
         Command::Benchmark(a) => benchmark::run(a, cli.quiet),
+        Command::Summarise(a) => summarise::run(a, cli.quiet),
         Command::Show(a) => show::run(a),
         Command::Reward(a) => reward::run(a),
         Command::SuggestLabels(a) => suggest_labels::run(a, cli.quiet),

@@ -56,6 +56,7 @@ pub static STAGE_KINDS: &[&StageKind] = &[
     &stages::synthesise::KIND,
     &stages::optimise::KIND,
     &stages::benchmark::KIND,
+    &stages::summarise::KIND,
     &stages::evolve::KIND,
     &stages::sql::KIND,
     &stages::export::KIND,

@@ -25,3 +25,4 @@ mod sandbox;
 mod simulate;
 mod snapshots_cli;
 mod sql_guard;
+mod summarise;

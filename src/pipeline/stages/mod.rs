@@ -3,7 +3,8 @@
 //! tables; `simulate.rs` with `simulate_phyre.rs` and `simulate_iphyre.rs` for the other environments),
 //! `annotate` (a detector library run over the traces), `accuracy` (its event-grounded labels scored
 //! against simulator events), `synthesise` (goal sentences to reward programs through an LLM),
-//! `optimise` (annealing actions for reward programs), `benchmark` (DeepPHY's agent loop), `evolve` (the
+//! `optimise` (annealing actions for reward programs), `benchmark` (DeepPHY's agent loop), `summarise`
+//! (summaries of traces, their cost and the identification task), `evolve` (the
 //! evolutionary search for detectors), `sql` (a query over the run stored as a table) and `export` (a
 //! table or query written to `exports/`).
 //!
@@ -22,6 +23,7 @@ pub mod import;
 pub mod optimise;
 pub mod simulate;
 pub mod sql;
+pub mod summarise;
 pub mod synthesise;
 mod trace_files;
 

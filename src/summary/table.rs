@@ -1,0 +1,180 @@
+//! The `summaries` table (one row per trace and summariser) and the `identification` table (one row
+//! per trial), their Arrow schemas and batches (`docs/schema.md`).
+
+use std::sync::Arc;
+
+use arrow::array::{BooleanArray, Float64Array, Int64Array, RecordBatch, StringArray};
+use arrow::datatypes::{DataType, Field, Schema, SchemaRef};
+use arrow::error::ArrowError;
+
+use super::Summary;
+use super::identify::Trial;
+
+/// The summaries table's name.
+pub const SUMMARIES: &str = "summaries";
+/// The identification table's name.
+pub const IDENTIFICATION: &str = "identification";
+
+/// What every row of both tables says about its setting.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Setting {
+    /// Library of the annotations (empty when the summariser reads none).
+    pub library: String,
+    /// Detectors that annotated.
+    pub patterns: i64,
+    /// Summariser name (`offline`, `frames`, `annotations`).
+    pub summariser: String,
+    /// The summariser's model (empty offline).
+    pub model: String,
+    /// The stage's seed.
+    pub seed: i64,
+}
+
+/// One `summaries` row.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SummaryRow {
+    /// The trace.
+    pub trace_id: String,
+    /// The summary and its cost.
+    pub summary: Summary,
+}
+
+fn field(n: &str, t: DataType, null: bool) -> Field {
+    Field::new(n, t, null)
+}
+
+/// The Arrow schema of `summaries` (the `env` partition is added by the run folder).
+pub fn summaries_schema() -> SchemaRef {
+    Arc::new(Schema::new(vec![
+        field("trace_id", DataType::Utf8, false),
+        field("library", DataType::Utf8, false),
+        field("patterns", DataType::Int64, false),
+        field("summariser", DataType::Utf8, false),
+        field("model", DataType::Utf8, false),
+        field("seed", DataType::Int64, false),
+        field("text", DataType::Utf8, false),
+        field("prompt_tokens", DataType::Int64, false),
+        field("completion_tokens", DataType::Int64, false),
+        field("usage_estimated", DataType::Boolean, false),
+        field("images", DataType::Int64, false),
+        field("seconds", DataType::Float64, false),
+        field("call_id", DataType::Utf8, false),
+    ]))
+}
+
+fn strings(n: usize, v: &str) -> Arc<StringArray> {
+    Arc::new(StringArray::from_iter_values(std::iter::repeat_n(v, n)))
+}
+
+fn ints(n: usize, v: i64) -> Arc<Int64Array> {
+    Arc::new(Int64Array::from_iter_values(std::iter::repeat_n(v, n)))
+}
+
+/// `rows` of `setting` as a `summaries` batch.
+pub fn summaries_batch(setting: &Setting, rows: &[SummaryRow]) -> Result<RecordBatch, ArrowError> {
+    let n = rows.len();
+    let s =
+        |f: fn(&SummaryRow) -> &str| Arc::new(StringArray::from_iter_values(rows.iter().map(f)));
+    let i = |f: fn(&SummaryRow) -> u64| {
+        Arc::new(Int64Array::from_iter_values(
+            rows.iter().map(|r| f(r) as i64),
+        ))
+    };
+    RecordBatch::try_new(
+        summaries_schema(),
+        vec![
+            s(|r| &r.trace_id),
+            strings(n, &setting.library),
+            ints(n, setting.patterns),
+            strings(n, &setting.summariser),
+            strings(n, &setting.model),
+            ints(n, setting.seed),
+            s(|r| &r.summary.text),
+            i(|r| r.summary.tokens_in),
+            i(|r| r.summary.tokens_out),
+            Arc::new(BooleanArray::from(
+                rows.iter()
+                    .map(|r| r.summary.usage_estimated)
+                    .collect::<Vec<_>>(),
+            )),
+            i(|r| r.summary.images),
+            Arc::new(Float64Array::from_iter_values(
+                rows.iter().map(|r| r.summary.seconds),
+            )),
+            s(|r| &r.summary.call_id),
+        ],
+    )
+}
+
+/// The Arrow schema of `identification`.
+pub fn identification_schema() -> SchemaRef {
+    Arc::new(Schema::new(vec![
+        field("trace_id", DataType::Utf8, false),
+        field("library", DataType::Utf8, false),
+        field("patterns", DataType::Int64, false),
+        field("summariser", DataType::Utf8, false),
+        field("model", DataType::Utf8, false),
+        field("seed", DataType::Int64, false),
+        field("chooser", DataType::Utf8, false),
+        field("chooser_model", DataType::Utf8, false),
+        field("options", DataType::Int64, false),
+        field("shown", DataType::Utf8, false),
+        field("correct", DataType::Int64, false),
+        field("chosen", DataType::Int64, true),
+        field("success", DataType::Boolean, false),
+        field("reason", DataType::Utf8, true),
+        field("prompt_tokens", DataType::Int64, false),
+        field("completion_tokens", DataType::Int64, false),
+        field("seconds", DataType::Float64, false),
+        field("call_id", DataType::Utf8, false),
+    ]))
+}
+
+/// `trials` of `setting` with `chooser` (name, model) as an `identification` batch. Positions are
+/// 1-based, as shown to the chooser; `shown` lists the trace ids shown, comma-separated.
+pub fn identification_batch(
+    setting: &Setting,
+    chooser: (&str, &str),
+    trials: &[Trial],
+) -> Result<RecordBatch, ArrowError> {
+    let n = trials.len();
+    let s = |f: fn(&Trial) -> String| Arc::new(StringArray::from_iter_values(trials.iter().map(f)));
+    let i = |f: fn(&Trial) -> i64| Arc::new(Int64Array::from_iter_values(trials.iter().map(f)));
+    RecordBatch::try_new(
+        identification_schema(),
+        vec![
+            s(|t| t.trace_id.clone()),
+            strings(n, &setting.library),
+            ints(n, setting.patterns),
+            strings(n, &setting.summariser),
+            strings(n, &setting.model),
+            ints(n, setting.seed),
+            strings(n, chooser.0),
+            strings(n, chooser.1),
+            i(|t| t.shown.len() as i64),
+            s(|t| t.shown.join(",")),
+            i(|t| t.correct as i64 + 1),
+            Arc::new(Int64Array::from(
+                trials
+                    .iter()
+                    .map(|t| t.chosen.map(|c| c as i64 + 1))
+                    .collect::<Vec<_>>(),
+            )),
+            Arc::new(BooleanArray::from(
+                trials.iter().map(Trial::success).collect::<Vec<_>>(),
+            )),
+            Arc::new(
+                trials
+                    .iter()
+                    .map(|t| t.reason.as_deref())
+                    .collect::<StringArray>(),
+            ),
+            i(|t| t.tokens_in as i64),
+            i(|t| t.tokens_out as i64),
+            Arc::new(Float64Array::from_iter_values(
+                trials.iter().map(|t| t.seconds),
+            )),
+            s(|t| t.call_id.clone()),
+        ],
+    )
+}
