@@ -51,7 +51,12 @@ pub fn create_fixture(body: &BodyPtr<Phyre>, def: &B2fixtureDef<Phyre>) {
 
 /// One `b2World::Step`.
 #[inline(never)]
-pub fn step(world: &B2worldPtr<Phyre>, dt: f32, velocity_iterations: i32, position_iterations: i32) {
+pub fn step(
+    world: &B2worldPtr<Phyre>,
+    dt: f32,
+    velocity_iterations: i32,
+    position_iterations: i32,
+) {
     world
         .borrow_mut()
         .step(dt, velocity_iterations, position_iterations);

@@ -268,7 +268,12 @@ impl Box2dWorld {
 
     /// One Box2D step; appends the step's body-pair contact changes to `out`.
     pub fn step(&mut self, out: &mut Vec<ContactChange>) {
-        box2d_phyre::step(&self.world, self.dt, VELOCITY_ITERATIONS, POSITION_ITERATIONS);
+        box2d_phyre::step(
+            &self.world,
+            self.dt,
+            VELOCITY_ITERATIONS,
+            POSITION_ITERATIONS,
+        );
         out.append(&mut self.listener.borrow_mut().changes);
     }
 
