@@ -20,13 +20,13 @@ use std::cell::RefCell;
 use std::collections::HashMap;
 use std::rc::Rc;
 
-use box2d_rs::b2_body::{B2body, B2bodyDef, B2bodyType, BodyPtr};
+use box2d_phyre::Phyre;
+use box2d_rs::b2_body::{B2bodyDef, B2bodyType, BodyPtr};
 use box2d_rs::b2_contact::B2contactDynTrait;
 use box2d_rs::b2_fixture::B2fixtureDef;
 use box2d_rs::b2_math::B2vec2;
-use box2d_rs::b2_world::{B2world, B2worldPtr};
+use box2d_rs::b2_world::B2worldPtr;
 use box2d_rs::b2_world_callbacks::B2contactListener;
-use box2d_rs::b2rs_common::UserDataType;
 use box2d_rs::shapes::b2_circle_shape::B2circleShape;
 use box2d_rs::shapes::b2_polygon_shape::B2polygonShape;
 
@@ -42,16 +42,6 @@ const POSITION_ITERATIONS: i32 = 20;
 
 /// Box2D's `b2_maxPolygonVertices`.
 const MAX_POLYGON_VERTICES: usize = 8;
-
-/// The user data Box2D carries: every body and fixture holds its PHYRE body index.
-#[derive(Debug, Default, Clone)]
-struct Phyre;
-
-impl UserDataType for Phyre {
-    type Fixture = usize;
-    type Body = usize;
-    type Joint = ();
-}
 
 /// PHYRE's `p2m`: pixels (a double in PHYRE's scene) to metres, in `f32` as PHYRE computes it.
 fn p2m(px: f64) -> f32 {
@@ -134,9 +124,8 @@ impl Drop for Box2dWorld {
     fn drop(&mut self) {
         // box2d-rs links bodies, contacts and the world through reference-counted lists: destroy the
         // bodies (which removes their contacts) so nothing is kept alive by a cycle.
-        let mut world = self.world.borrow_mut();
         for body in self.bodies_of.drain(..) {
-            world.destroy_body(body);
+            box2d_phyre::destroy_body(&self.world, body);
         }
     }
 }
@@ -174,7 +163,7 @@ impl Box2dWorld {
         params: &PhysicsParams,
     ) -> Result<Box2dWorld> {
         let (dt, gravity) = (params.dt() as f32, -(params.gravity as f32));
-        let world = B2world::<Phyre>::new(B2vec2::new(0.0, gravity));
+        let world = box2d_phyre::new_world(B2vec2::new(0.0, gravity));
         let listener = Rc::new(RefCell::new(Listener::default()));
         {
             let mut w = world.borrow_mut();
@@ -211,7 +200,7 @@ impl Box2dWorld {
                 user_data: Some(index),
                 ..B2bodyDef::default()
             };
-            let body = B2world::create_body(world.clone(), &def);
+            let body = box2d_phyre::create_body(&world, &def);
             let mut fixtures = Vec::with_capacity(shapes.len());
             for (k, shape) in shapes.iter().enumerate() {
                 let shape: Rc<RefCell<dyn box2d_rs::b2_shape::B2shapeDynTrait>> = match shape {
@@ -242,7 +231,7 @@ impl Box2dWorld {
                     user_data: Some(index),
                     ..B2fixtureDef::default()
                 };
-                B2body::create_fixture(body.clone(), &fixture);
+                box2d_phyre::create_fixture(&body, &fixture);
             }
             if is_dynamic && params.box2d_phyre_compat {
                 let mut b = body.borrow_mut();
@@ -279,9 +268,12 @@ impl Box2dWorld {
 
     /// One Box2D step; appends the step's body-pair contact changes to `out`.
     pub fn step(&mut self, out: &mut Vec<ContactChange>) {
-        self.world
-            .borrow_mut()
-            .step(self.dt, VELOCITY_ITERATIONS, POSITION_ITERATIONS);
+        box2d_phyre::step(
+            &self.world,
+            self.dt,
+            VELOCITY_ITERATIONS,
+            POSITION_ITERATIONS,
+        );
         out.append(&mut self.listener.borrow_mut().changes);
     }
 
