@@ -415,7 +415,7 @@ pub fn run(args: Args) -> CliResult {
     }
     let cases = cases(&args.cases)?;
     let threads: Vec<usize> = parse_list(&args.threads, "--threads")?;
-    if threads.iter().any(|&t| t == 0) {
+    if threads.contains(&0) {
         return Err(CliError::input(anyhow!(
             "--threads: counts must be at least 1"
         )));

@@ -141,7 +141,7 @@ pub struct PoolFrames {
 
 impl PoolFrames {
     /// Balls `ids` with their radii (m); `state_names[code]` names motion-state code `code`.
-    /// `steps` and `rows` only size the buffers.
+    /// `steps` (the expected number of timesteps) only sizes the buffers.
     pub fn new(
         ids: Vec<String>,
         radius: Vec<f64>,
