@@ -20,6 +20,7 @@
 
 mod accuracy;
 mod annotate;
+mod bench;
 mod benchmark;
 mod evolve;
 mod export;
@@ -173,6 +174,8 @@ enum Command {
     Tables(tables::Args),
     /// Check a run's files against the sizes and SHA-256 sums in its manifest; list foreign files.
     Verify(verify::Args),
+    /// Measure `simulate` end to end (command line to Parquet) for each row of the throughput table.
+    Bench(bench::Args),
 }
 
 /// Parses arguments, runs the command, prints errors and returns the exit code.
@@ -198,6 +201,7 @@ pub fn main() -> ExitCode {
         Command::Query(a) => query::run(a),
         Command::Tables(a) => tables::run(a),
         Command::Verify(a) => verify::run(a),
+        Command::Bench(a) => bench::run(a),
     };
     match result {
         Ok(code) => ExitCode::from(code),

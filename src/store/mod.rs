@@ -42,7 +42,9 @@ use std::time::SystemTime;
 
 pub use self::atomic::{AtomicFile, is_temp_name, sync_dir, write_atomic};
 pub use self::manifest::{Manifest, OutputFile, StageStatus};
-pub use self::parquet::{ParquetSink, ROW_GROUP_ROWS, read_batches, read_file};
+pub use self::parquet::{
+    Codec, ParquetSettings, ParquetSink, ROW_GROUP_ROWS, Stats, read_batches, read_file,
+};
 pub use self::traces::{ReadTraceError, read_trace, trace_ids};
 pub use self::verify::Problem;
 use crate::trace::Env;

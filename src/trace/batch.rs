@@ -58,7 +58,7 @@ fn json_or_null(map: &JsonMap) -> Option<String> {
     (!map.is_empty()).then(|| Value::Object(map.clone()).to_string())
 }
 
-fn constant_dict(value: &str, len: usize) -> ArrayRef {
+pub(super) fn constant_dict(value: &str, len: usize) -> ArrayRef {
     let keys = Int32Array::from(vec![0; len]);
     let values = StringArray::from(vec![value]);
     Arc::new(
@@ -356,32 +356,16 @@ impl TraceBatchBuilder {
 
     /// Finishes the current trace and resets the builder for the next one.
     pub fn finish(&mut self, meta: &TraceMeta<'_>) -> Result<TraceBatches, ArrowError> {
-        let n_objects = self.distinct_objects.len() as i64;
+        let n_objects = self.distinct_objects.len();
         let t_range = self.t_range;
         let taken = self.taken_frames;
         let (timesteps, frames) = self.finish_columns(meta.trace_id)?;
-        let o = meta.outcome;
-        let traces = RecordBatch::try_new(
-            TRACES.clone(),
-            vec![
-                Arc::new(StringArray::from(vec![meta.trace_id])),
-                Arc::new(StringArray::from(vec![meta.scene_id])),
-                Arc::new(StringArray::from(vec![meta.task_id])),
-                Arc::new(Int64Array::from(vec![timesteps.num_rows() as i64])),
-                Arc::new(Int64Array::from(vec![n_objects])),
-                Arc::new(Int64Array::from(vec![(taken + frames.num_rows()) as i64])),
-                Arc::new(Int64Array::from(vec![meta.events.len() as i64])),
-                Arc::new(Float64Array::from(vec![t_range.map(|r| r.0)])),
-                Arc::new(Float64Array::from(vec![t_range.map(|r| r.1)])),
-                Arc::new(BooleanArray::from(vec![o.success])),
-                Arc::new(StringArray::from(vec![o.terminal_status.as_str()])),
-                Arc::new(StringArray::from(vec![
-                    Value::Object(o.metrics.clone()).to_string(),
-                ])),
-                Arc::new(StringArray::from(vec![json_or_null(&o.extra)])),
-                Arc::new(StringArray::from(vec![json_or_null(meta.extra)])),
-                Arc::new(StringArray::from(vec![meta.source])),
-            ],
+        let traces = traces_batch(
+            meta,
+            timesteps.num_rows(),
+            n_objects,
+            taken + frames.num_rows(),
+            t_range,
         )?;
         let events = events_batch(meta.trace_id, meta.events)?;
         Ok(TraceBatches {
@@ -424,6 +408,39 @@ impl TraceBatchBuilder {
     }
 }
 
+/// The one `traces` row of a trace: its metadata and summary counts.
+pub(super) fn traces_batch(
+    meta: &TraceMeta<'_>,
+    n_steps: usize,
+    n_objects: usize,
+    n_frames: usize,
+    t_range: Option<(f64, f64)>,
+) -> Result<RecordBatch, ArrowError> {
+    let o = meta.outcome;
+    RecordBatch::try_new(
+        TRACES.clone(),
+        vec![
+            Arc::new(StringArray::from(vec![meta.trace_id])),
+            Arc::new(StringArray::from(vec![meta.scene_id])),
+            Arc::new(StringArray::from(vec![meta.task_id])),
+            Arc::new(Int64Array::from(vec![n_steps as i64])),
+            Arc::new(Int64Array::from(vec![n_objects as i64])),
+            Arc::new(Int64Array::from(vec![n_frames as i64])),
+            Arc::new(Int64Array::from(vec![meta.events.len() as i64])),
+            Arc::new(Float64Array::from(vec![t_range.map(|r| r.0)])),
+            Arc::new(Float64Array::from(vec![t_range.map(|r| r.1)])),
+            Arc::new(BooleanArray::from(vec![o.success])),
+            Arc::new(StringArray::from(vec![o.terminal_status.as_str()])),
+            Arc::new(StringArray::from(vec![
+                Value::Object(o.metrics.clone()).to_string(),
+            ])),
+            Arc::new(StringArray::from(vec![json_or_null(&o.extra)])),
+            Arc::new(StringArray::from(vec![json_or_null(meta.extra)])),
+            Arc::new(StringArray::from(vec![meta.source])),
+        ],
+    )
+}
+
 /// The same rows with every `trace_id` set to `trace_id` (the column must be the table's first).
 pub fn with_trace_id(batch: &RecordBatch, trace_id: &str) -> Result<RecordBatch, ArrowError> {
     let mut cols = batch.columns().to_vec();
@@ -444,7 +461,7 @@ pub fn event_agents(e: &Event) -> Option<Vec<String>> {
         .collect()
 }
 
-fn events_batch(trace_id: &str, events: &[Event]) -> Result<RecordBatch, ArrowError> {
+pub(super) fn events_batch(trace_id: &str, events: &[Event]) -> Result<RecordBatch, ArrowError> {
     let mut seq = Int32Builder::with_capacity(events.len());
     let mut kind = StringDictionaryBuilder::<Int32Type>::new();
     let mut t = Float64Builder::with_capacity(events.len());

@@ -2,7 +2,8 @@
 //!
 //! **Owns:** the types of a trace ([`Trace`], [`Timestep`], [`Object`], [`Event`], [`Outcome`]), the
 //! environments ([`Env`]), the Arrow schemas of the trace tables ([`schema`]), conversion between traces
-//! and record batches ([`batch`]) and the JSON import/export format ([`json`]).
+//! and record batches ([`batch`]), traces held in columns straight from a simulator ([`frames`]) and the
+//! JSON import/export format ([`json`]).
 //! **Does not:** read or write files of a run directory (`store/`), run SQL (`query/`) or order stages
 //! (`pipeline/`). It imports no other annotrace module.
 //!
@@ -11,12 +12,14 @@
 
 pub mod batch;
 mod env;
+pub mod frames;
 pub mod json;
 mod model;
 pub mod schema;
 
 pub use batch::{TraceBatchBuilder, TraceBatches, TraceMeta, TraceRows, decode_trace};
 pub use env::{Env, UnknownEnv};
+pub use frames::{Frames, TraceColumns};
 pub use model::{
     Body, Event, IphyreObject, JsonMap, Object, Outcome, PhyreObject, PoolBall, Timestep, Trace,
     json_map,

@@ -4,6 +4,7 @@ mod common;
 
 mod annotate;
 mod anywhere;
+mod bench;
 mod benchmark;
 mod evolve;
 mod exit_codes;

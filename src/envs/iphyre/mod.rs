@@ -50,7 +50,7 @@ pub use game::{DEFAULT_GAMES_JSON, FOLDS, Game, GameObject, Games, ObjectKind};
 pub use params::{Engine, PhysicsParams};
 pub use sample::{MAX_TENTHS, SKIP_PROBABILITY, clicks_rng, random_clicks};
 pub use step::{Episode, EpisodeEvent, EpisodeResult, Frame, play};
-pub use to_trace::trace_of;
+pub use to_trace::{trace_columns, trace_of};
 pub use world::{ContactChange, ObjectState, World};
 
 /// What code outside `envs/` needs to know about this environment: the I-PHYRE's 600-pixel square screen.

@@ -14,17 +14,14 @@ use serde_json::{Value, json};
 
 use super::game::Game;
 use super::step::{EpisodeEvent, EpisodeResult};
+use crate::trace::frames::{IphyreBody, IphyreFrames};
 use crate::trace::{
-    Body, Env, Event, IphyreObject, JsonMap, Object, Outcome, Timestep, Trace, json_map,
+    Body, Env, Event, IphyreObject, JsonMap, Object, Outcome, Timestep, Trace, TraceColumns,
+    json_map,
 };
 
 /// The trace of `result`, played on `game`, named `trace_id`.
 pub fn trace_of(result: &EpisodeResult, game: &Game, trace_id: &str) -> Trace {
-    let clicks: Vec<Value> = result
-        .clicks
-        .iter()
-        .map(|c| json!({"x": c.x, "y": c.y, "t": c.t}))
-        .collect();
     Trace {
         trace_id: trace_id.to_string(),
         env: Env::Iphyre,
@@ -32,12 +29,54 @@ pub fn trace_of(result: &EpisodeResult, game: &Game, trace_id: &str) -> Trace {
         timesteps: timesteps_of(result, game),
         events: events_of(result, game),
         outcome: outcome_of(result),
-        extra: json_map(json!({
-            "task_index": game.index,
-            "fold": game.fold,
-            "actions": clicks,
-            "simulator": {"engine": "rapier2d", "fps": result.fps, "screen": [600, 600]},
-        })),
+        extra: extra_of(result, game),
+    }
+}
+
+/// The trace's top-level fields: the game, its clicks and the simulator.
+fn extra_of(result: &EpisodeResult, game: &Game) -> JsonMap {
+    let clicks: Vec<Value> = result
+        .clicks
+        .iter()
+        .map(|c| json!({"x": c.x, "y": c.y, "t": c.t}))
+        .collect();
+    json_map(json!({
+        "task_index": game.index,
+        "fold": game.fold,
+        "actions": clicks,
+        "simulator": {"engine": "rapier2d", "fps": result.fps, "screen": [600, 600]},
+    }))
+}
+
+/// The trace of `result` with its frames in columns (what the `simulate` stage writes): the same
+/// trace as [`trace_of`], without an object per body per frame.
+pub fn trace_columns(result: &EpisodeResult, game: &Game, trace_id: &str) -> TraceColumns {
+    let bodies = game
+        .objects
+        .iter()
+        .map(|o| IphyreBody {
+            radius: o.radius,
+            eliminable: if o.eliminable { 1.0 } else { 0.0 },
+            dynamic: if o.dynamic { 1.0 } else { 0.0 },
+            joint: o.joint,
+            spring: o.spring,
+        })
+        .collect();
+    let rows = result.frames.iter().map(|f| f.objects.len()).sum();
+    let mut frames = IphyreFrames::new(bodies, result.frames.len(), rows);
+    for f in &result.frames {
+        frames.begin_step(f.step as i64, f.t);
+        for s in &f.objects {
+            frames.object(s.index, s.p1, s.p2, s.angle, s.velocity, s.angular_velocity);
+        }
+    }
+    TraceColumns {
+        trace_id: trace_id.to_string(),
+        task_id: game.name.clone(),
+        frames: frames.into(),
+        events: events_of(result, game),
+        outcome: outcome_of(result),
+        extra: extra_of(result, game),
     }
 }
 
@@ -208,6 +247,20 @@ mod tests {
         assert_eq!(applied.payload.as_ref().unwrap()["agents"], json!(["0"]));
         assert!(tr.outcome.success);
         assert_eq!(tr.outcome.metrics["effective_eliminations"], json!(2));
+    }
+
+    #[test]
+    fn columns_give_the_same_trace_and_the_same_rows() {
+        // Objects disappear mid-episode here (both blocks removed), so slots and ids shift.
+        let (g, r, tr) = support_episode("support-cols");
+        let cols = trace_columns(&r, &g, "support-cols");
+        assert_eq!(cols.clone().into_trace(), tr);
+        let want = crate::trace::TraceBatchBuilder::from_trace(&tr, "scene", "test").unwrap();
+        let got = cols.batches("scene", "test").unwrap();
+        assert_eq!(got.traces, want.traces);
+        assert_eq!(got.timesteps, want.timesteps);
+        assert_eq!(got.frames, want.frames);
+        assert_eq!(got.events, want.events);
     }
 
     #[test]

@@ -50,7 +50,7 @@ pub use params::{Engine, PIXELS_PER_METRE, PhysicsParams};
 pub use sample::{MAX_DRAWS, action_rng, random_valid_action};
 pub use task::{Body, Color, Shape, Task};
 pub use tasks::{DEFAULT_TASKS_GZ, TaskSet};
-pub use to_trace::trace_of;
+pub use to_trace::{trace_columns, trace_of};
 pub use world::{BodyState, ContactChange, World};
 
 /// What code outside `envs/` needs to know about this environment: the PHYRE's 256-unit square scene.

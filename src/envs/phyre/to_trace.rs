@@ -14,8 +14,10 @@ use serde_json::json;
 use super::episode::{EpisodeEvent, EpisodeResult, Status};
 use super::params::{Engine, PIXELS_PER_METRE};
 use super::task::{Color, Task};
+use crate::trace::frames::{PhyreBody, PhyreFrames};
 use crate::trace::{
-    Body, Env, Event, JsonMap, Object, Outcome, PhyreObject, Timestep, Trace, json_map,
+    Body, Env, Event, JsonMap, Object, Outcome, PhyreObject, Timestep, Trace, TraceColumns,
+    json_map,
 };
 
 /// The trace's shape name of a body: PHYRE's shape type, `wall` for the four walls.
@@ -29,11 +31,6 @@ fn shape_name(task: &Task, index: usize) -> &str {
 
 /// The trace of `result`, played on `task`, named `trace_id`.
 pub fn trace_of(result: &EpisodeResult, task: &Task, trace_id: &str) -> Trace {
-    let a = result.action;
-    let ball = result
-        .placement
-        .ball()
-        .map(|b| json!({"x": b.x, "y": b.y, "radius": b.radius}));
     Trace {
         trace_id: trace_id.to_string(),
         env: Env::Phyre,
@@ -41,18 +38,67 @@ pub fn trace_of(result: &EpisodeResult, task: &Task, trace_id: &str) -> Trace {
         timesteps: timesteps_of(result, task),
         events: events_of(result, task),
         outcome: outcome_of(result),
-        extra: json_map(json!({
-            "template_id": task.template_id,
-            "description": task.description,
-            "goal": {"body1": task.body1, "body2": task.body2, "relationships": task.relationships},
-            "action": {"x": a.x, "y": a.y, "r": a.r},
-            "user_ball": ball,
-            "simulator": {
-                "engine": engine_name(result.engine), "fps": 1.0 / result.dt, "stride": result.stride,
-                "pixels_per_metre": PIXELS_PER_METRE, "scene": [task.width, task.height],
-                "coordinates": "pixels, origin bottom-left, y up",
+        extra: extra_of(result, task),
+    }
+}
+
+/// The trace's top-level fields: the task, goal, action, user ball and simulator.
+fn extra_of(result: &EpisodeResult, task: &Task) -> JsonMap {
+    let a = result.action;
+    let ball = result
+        .placement
+        .ball()
+        .map(|b| json!({"x": b.x, "y": b.y, "radius": b.radius}));
+    json_map(json!({
+        "template_id": task.template_id,
+        "description": task.description,
+        "goal": {"body1": task.body1, "body2": task.body2, "relationships": task.relationships},
+        "action": {"x": a.x, "y": a.y, "r": a.r},
+        "user_ball": ball,
+        "simulator": {
+            "engine": engine_name(result.engine), "fps": 1.0 / result.dt, "stride": result.stride,
+            "pixels_per_metre": PIXELS_PER_METRE, "scene": [task.width, task.height],
+            "coordinates": "pixels, origin bottom-left, y up",
+        },
+    }))
+}
+
+/// The trace of `result` with its frames in columns (what the `simulate` stage writes): the same
+/// trace as [`trace_of`], without an object per body per frame.
+pub fn trace_columns(result: &EpisodeResult, task: &Task, trace_id: &str) -> TraceColumns {
+    let n = task.bodies.len();
+    let user_diameter = result.placement.ball().map_or(0.0, |b| 2.0 * b.radius);
+    let bodies: Vec<PhyreBody> = (0..=n)
+        .map(|i| match task.bodies.get(i) {
+            Some(b) => PhyreBody {
+                shape: shape_name(task, i).to_string(),
+                color: b.color.name(),
+                diameter: b.diameter,
+                is_user_input: false,
             },
-        })),
+            None => PhyreBody {
+                shape: "ball".to_string(),
+                color: Color::Red.name(),
+                diameter: user_diameter,
+                is_user_input: true,
+            },
+        })
+        .collect();
+    let rows = result.frames.iter().map(|f| f.bodies.len()).sum();
+    let mut frames = PhyreFrames::new(bodies, result.frames.len(), rows);
+    for f in &result.frames {
+        frames.begin_step(f.step as i64, f.step as f64 * result.dt);
+        for s in &f.bodies {
+            frames.body(s.index, [s.x, s.y, s.angle, s.vx, s.vy, s.angular_velocity]);
+        }
+    }
+    TraceColumns {
+        trace_id: trace_id.to_string(),
+        task_id: task.task_id.clone(),
+        frames: frames.into(),
+        events: events_of(result, task),
+        outcome: outcome_of(result),
+        extra: extra_of(result, task),
     }
 }
 
@@ -225,6 +271,15 @@ mod tests {
         assert_eq!((user.x, user.y, user.diameter), (51.0, 229.0, 22.0));
         assert_eq!(tr.events[0].kind, "user_ball_placed");
         assert_eq!(tr.outcome.metrics["steps_simulated"], json!(r.steps));
+        // The columnar path gives the same trace and the same rows.
+        let cols = trace_columns(&r, &task, "t");
+        assert_eq!(cols.clone().into_trace(), tr);
+        let want = crate::trace::TraceBatchBuilder::from_trace(&tr, "scene", "test").unwrap();
+        let got = cols.batches("scene", "test").unwrap();
+        assert_eq!(
+            (got.traces, got.timesteps, got.frames, got.events),
+            (want.traces, want.timesteps, want.frames, want.events)
+        );
         let b = crate::trace::TraceBatchBuilder::from_trace(&tr, &tr.task_id, "test").unwrap();
         assert_eq!(b.frames.num_rows(), tr.frame_rows());
         assert_eq!(b.events.num_rows(), tr.events.len());

@@ -58,7 +58,7 @@ pub use simulate::{SimOptions, Simulation, Status, simulate, state_at};
 pub use state::{Ball, BallState, MotionState};
 pub use system::System;
 pub use table::{CircularCushion, CushionDirection, LinearCushion, Pocket, Table};
-pub use to_trace::{TraceOptions, dataset_trace, outcome, trace_of};
+pub use to_trace::{TraceOptions, dataset_trace, outcome, trace_columns, trace_of};
 pub use vec3::V3;
 
 /// What code outside `envs/` needs to know about this environment: the long side of pooltool's default 7-ft table (1.9812 m); positions are table metres.

@@ -22,9 +22,8 @@ use super::sample::resample;
 use super::scene::Scene;
 use super::shot::Shot;
 use super::simulate::{SimOptions, Simulation, Status, simulate};
-use crate::trace::{
-    Body, Env, Event, JsonMap, Object, Outcome, PoolBall, Timestep, Trace, json_map,
-};
+use crate::trace::frames::PoolFrames;
+use crate::trace::{Event, JsonMap, Outcome, Trace, TraceColumns, json_map};
 
 /// Options of the conversion.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -66,7 +65,11 @@ pub fn dataset_trace(
     Ok(trace_of(&sim, &scene, &shot, &id, opts))
 }
 
+/// The names of the motion-state codes 0..=4, as the trace format spells them.
+pub const STATE_NAMES: [&str; 5] = ["stationary", "spinning", "sliding", "rolling", "pocketed"];
+
 /// The trace of `sim`, which simulated `shot` on `scene`. `trace_id` names it; `task_id` is the scene id.
+/// The paper-layout form of [`trace_columns`].
 pub fn trace_of(
     sim: &Simulation,
     scene: &Scene,
@@ -74,40 +77,53 @@ pub fn trace_of(
     trace_id: &str,
     opts: &TraceOptions,
 ) -> Trace {
+    trace_columns(sim, scene, shot, trace_id, opts).into_trace()
+}
+
+/// The trace of `sim` with its frames in columns (what the `simulate` stage writes): every ball's
+/// state on the resampling grid goes straight into column vectors.
+pub fn trace_columns(
+    sim: &Simulation,
+    scene: &Scene,
+    shot: &Shot,
+    trace_id: &str,
+    opts: &TraceOptions,
+) -> TraceColumns {
     let mut samples = resample(sim, opts.dt);
     // The final sample is the last event's time; drop it when it repeats the grid (t_end = k·dt, or
     // a shot without events), so that times stay strictly increasing.
     samples.dedup_by(|later, earlier| later.t <= earlier.t);
-    let kind = String::from("ball");
-    let timesteps = samples
-        .into_iter()
-        .enumerate()
-        .map(|(index, sample)| Timestep {
-            index: index as i64,
-            t: sample.t,
-            objects: sample
-                .balls
-                .iter()
-                .enumerate()
-                .map(|(b, s)| Object {
-                    body: Body::Pool(PoolBall {
-                        kind: kind.clone(),
-                        ball_id: sim.ball_ids[b].clone(),
-                        position: s.r,
-                        velocity: s.v,
-                        angular_velocity: s.w,
-                        motion_state_code: i64::from(s.s.as_int()),
-                        motion_state: s.s.name().into(),
-                        radius: sim.ball_params[b].r,
-                    }),
-                    extra: JsonMap::new(),
-                })
-                .collect(),
-            extra: JsonMap::new(),
-        })
-        .collect();
+    let mut frames = PoolFrames::new(
+        sim.ball_ids.clone(),
+        sim.ball_params.iter().map(|p| p.r).collect(),
+        &STATE_NAMES,
+        samples.len(),
+    );
+    for (index, sample) in samples.iter().enumerate() {
+        frames.begin_step(index as i64, sample.t);
+        for (b, s) in sample.balls.iter().enumerate() {
+            frames.ball(b, &s.r, &s.v, &s.w, s.s.as_int());
+        }
+    }
+    let (events, outcome) = events_and_outcome(sim, scene, shot, opts.dt);
+    TraceColumns {
+        trace_id: trace_id.to_string(),
+        task_id: scene.scene_id.clone(),
+        frames: frames.into(),
+        events,
+        outcome,
+        extra: JsonMap::new(),
+    }
+}
 
-    let out = outcome(sim, scene, shot, opts.dt);
+/// The event log (`shot_prepared`, the physics events, `shot_outcome`) and the outcome of a shot.
+fn events_and_outcome(
+    sim: &Simulation,
+    scene: &Scene,
+    shot: &Shot,
+    dt: f64,
+) -> (Vec<Event>, Outcome) {
+    let out = outcome(sim, scene, shot, dt);
     let mut events = Vec::with_capacity(sim.events.len() + 2);
     let mut prepared =
         json!({"agents": [scene.cue_ball], "cue_ball": scene.cue_ball, "goal": scene.goal});
@@ -176,15 +192,7 @@ pub fn trace_of(
         extra: JsonMap::new(),
     });
 
-    Trace {
-        trace_id: trace_id.to_string(),
-        env: Env::Pooltool,
-        task_id: scene.scene_id.clone(),
-        timesteps,
-        events,
-        outcome: out,
-        extra: JsonMap::new(),
-    }
+    (events, out)
 }
 
 /// The outcome of a shot.
@@ -274,6 +282,7 @@ pub fn outcome(sim: &Simulation, scene: &Scene, shot: &Shot, dt: f64) -> Outcome
 mod tests {
     use super::*;
     use crate::envs::pool::{PoolConfig, SimOptions, simulate};
+    use crate::trace::{Body, Object, PoolBall};
 
     fn straight_pot() -> (Scene, Shot) {
         // The 9-ball 0.3 m in front of the right-top pocket's line, the cue ball behind it.
@@ -335,6 +344,69 @@ mod tests {
             (nine.motion_state_code, nine.motion_state.as_str()),
             (4, "pocketed")
         );
+    }
+
+    #[test]
+    fn state_names_follow_the_motion_state_codes() {
+        use crate::envs::pool::MotionState;
+        for code in 0..5 {
+            let s = MotionState::from_int(code).unwrap();
+            assert_eq!(STATE_NAMES[usize::from(s.as_int())], s.name());
+        }
+    }
+
+    #[test]
+    fn columns_give_the_rows_of_the_paper_layout() {
+        // A 9-ball break: balls change motion state, some are pocketed, every ball at every step.
+        let c = PoolConfig::default_7ft();
+        for index in 0..3 {
+            let tr = dataset_trace(&c, 7, index, &TraceOptions { dt: 0.05 }).unwrap();
+            let mut scene = Scene::nine_ball(&c, rack::scene_seed(7, index));
+            scene.scene_id = format!("pool-7-{index:06}");
+            let shot = rack::dataset_shot(&scene, &mut rack::shot_rng(7, index, 0));
+            let sim = simulate(&scene.system(&c).unwrap(), &shot, &SimOptions::default()).unwrap();
+            let cols = trace_columns(
+                &sim,
+                &scene,
+                &shot,
+                &tr.trace_id,
+                &TraceOptions { dt: 0.05 },
+            );
+            assert_eq!(cols.frames.first_non_finite(), None);
+            // The paper layout built object by object from the resampled states, as trace_of did
+            // before the columns: the same timesteps.
+            let mut samples = resample(&sim, 0.05);
+            samples.dedup_by(|later, earlier| later.t <= earlier.t);
+            assert_eq!(tr.timesteps.len(), samples.len());
+            for (k, (ts, sample)) in tr.timesteps.iter().zip(&samples).enumerate() {
+                assert_eq!((ts.index, ts.t), (k as i64, sample.t));
+                let objects: Vec<Object> = sample
+                    .balls
+                    .iter()
+                    .enumerate()
+                    .map(|(b, s)| Object {
+                        body: Body::Pool(PoolBall {
+                            kind: "ball".into(),
+                            ball_id: sim.ball_ids[b].clone(),
+                            position: s.r,
+                            velocity: s.v,
+                            angular_velocity: s.w,
+                            motion_state_code: i64::from(s.s.as_int()),
+                            motion_state: s.s.name().into(),
+                            radius: sim.ball_params[b].r,
+                        }),
+                        extra: JsonMap::new(),
+                    })
+                    .collect();
+                assert_eq!(ts.objects, objects);
+            }
+            let want = crate::trace::TraceBatchBuilder::from_trace(&tr, "s", "test").unwrap();
+            let got = cols.batches("s", "test").unwrap();
+            assert_eq!(got.traces, want.traces);
+            assert_eq!(got.timesteps, want.timesteps);
+            assert_eq!(got.frames, want.frames);
+            assert_eq!(got.events, want.events);
+        }
     }
 
     #[test]

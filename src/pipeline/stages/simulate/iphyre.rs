@@ -28,8 +28,8 @@ use super::shards::{ShardSinks, ShardTotals, replay_pair};
 use super::{ShardParams, SimulateSummary, Simulation};
 use crate::digest::hex;
 use crate::envs::iphyre::{
-    Click, Episode, Game, Games, PhysicsParams, click_block, clicks_rng, random_clicks, trace_of,
-    validate_clicks,
+    Click, Episode, Game, Games, PhysicsParams, click_block, clicks_rng, random_clicks,
+    trace_columns, validate_clicks,
 };
 use crate::pipeline::registry::BuildError;
 use crate::pipeline::spec::PipelineSpec;
@@ -302,12 +302,12 @@ impl Simulation for IphyreSimulation {
                     source: e.into(),
                 })?
                 .run();
-            let trace = trace_of(&result, game, &trace_id);
+            let trace = trace_columns(&result, game, &trace_id);
             traces += 1;
             successes += u64::from(result.success);
             eliminations += result.eliminations as u64;
             reward += result.reward;
-            sinks.write_trace(&trace, &scene_id, i == lo)?;
+            sinks.write_columns(trace, &scene_id, i == lo)?;
             ctx.progress().advance(ctx.stage_id(), 1);
         }
         Ok(json!({

@@ -30,7 +30,7 @@ use crate::digest::hex;
 use crate::envs::phyre::{
     BallAction, DEFAULT_STRIDE, DEFAULT_TASKS_GZ, Engine, EvalSetup, PhyreEnv, PhysicsParams,
     RecordOptions, Status, Task, TaskSet, action_rng, dataset_tasks, episode, fold,
-    random_valid_action, trace_of,
+    random_valid_action, trace_columns,
 };
 use crate::pipeline::registry::BuildError;
 use crate::pipeline::spec::PipelineSpec;
@@ -329,12 +329,12 @@ impl Simulation for PhyreSimulation {
                     source: e.into(),
                 }
             })?;
-            let trace = trace_of(&result, task, &trace_id);
+            let trace = trace_columns(&result, task, &trace_id);
             traces += 1;
             successes += u64::from(result.status == Status::Solved);
             invalid += u64::from(result.status == Status::InvalidInput);
             steps += result.steps as u64;
-            sinks.write_trace(&trace, &scene_id, i == lo)?;
+            sinks.write_columns(trace, &scene_id, i == lo)?;
             ctx.progress().advance(ctx.stage_id(), 1);
         }
         Ok(json!({

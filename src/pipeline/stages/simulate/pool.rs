@@ -23,7 +23,7 @@ use super::shards::{ShardSinks, ShardTotals, replay_pair};
 use super::{ShardParams, SimulateSummary, Simulation};
 use crate::digest::hex;
 use crate::envs::pool::{
-    PoolConfig, Scene, Shot, SimOptions, TraceOptions, rack, simulate, trace_of,
+    PoolConfig, Scene, Shot, SimOptions, TraceOptions, rack, simulate, trace_columns,
 };
 use crate::pipeline::registry::BuildError;
 use crate::pipeline::spec::PipelineSpec;
@@ -293,7 +293,7 @@ impl Simulation for PoolSimulation {
                         item: format!("trace {trace_id}"),
                         source: e.into(),
                     })?;
-                let trace = trace_of(&sim, &scene, shot, trace_id, &self.trace);
+                let trace = trace_columns(&sim, &scene, shot, trace_id, &self.trace);
                 traces += 1;
                 successes += u64::from(trace.outcome.success);
                 capped += u64::from(matches!(
@@ -301,7 +301,7 @@ impl Simulation for PoolSimulation {
                     "max_events" | "max_time"
                 ));
                 events += sim.events.len() as u64;
-                sinks.write_trace(&trace, &scene.scene_id, index == lo)?;
+                sinks.write_columns(trace, &scene.scene_id, index == lo)?;
             }
             ctx.progress().advance(ctx.stage_id(), 1);
         }

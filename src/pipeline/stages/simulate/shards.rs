@@ -16,7 +16,7 @@ use serde_json::{Value, json};
 use crate::pipeline::registry::BuildError;
 use crate::pipeline::stage::{StageContext, StageError};
 use crate::store::ParquetSink;
-use crate::trace::{Env, Trace, TraceBatchBuilder, schema};
+use crate::trace::{Env, TraceBatches, TraceColumns, schema};
 
 /// The sums of a stage's shard records: each numeric field (`traces`, `successes`, …) and the rows
 /// written per table.
@@ -142,7 +142,6 @@ pub(crate) struct ShardSinks<'a, 'c> {
     /// This shard's start order in the run, for the mid-shard fault point.
     ordinal: usize,
     sinks: BTreeMap<&'static str, ParquetSink>,
-    builder: TraceBatchBuilder,
 }
 
 impl<'a, 'c> ShardSinks<'a, 'c> {
@@ -156,7 +155,6 @@ impl<'a, 'c> ShardSinks<'a, 'c> {
             source: format!("simulate:{}", ctx.stage_id()),
             ordinal,
             sinks: BTreeMap::new(),
-            builder: TraceBatchBuilder::new(),
         }
     }
 
@@ -165,17 +163,18 @@ impl<'a, 'c> ShardSinks<'a, 'c> {
         &self.source
     }
 
-    /// Appends one trace's rows to the `traces`, `timesteps`, `frames` and `events` files; a trace with
-    /// a non-finite state (a simulator that blew up) is an error naming it, never NaN in a table. For the
-    /// shard's first trace (`first`) the mid-shard fault point fires between the frames and the events,
-    /// so a crash test finds some of the shard's files half written.
-    pub(crate) fn write_trace(
+    /// Appends one trace's rows to the `traces`, `timesteps`, `frames` and `events` files, straight
+    /// from its columns (no paper-layout objects are built); a trace with a non-finite state (a
+    /// simulator that blew up) is an error naming it, never NaN in a table. For the shard's first trace
+    /// (`first`) the mid-shard fault point fires between the frames and the events, so a crash test
+    /// finds some of the shard's files half written.
+    pub(crate) fn write_columns(
         &mut self,
-        trace: &Trace,
+        trace: TraceColumns,
         scene_id: &str,
         first: bool,
     ) -> Result<(), StageError> {
-        if let Some((step, object, field)) = trace.first_non_finite() {
+        if let Some((step, object, field)) = trace.frames.first_non_finite() {
             return Err(StageError::NonFinite {
                 trace: trace.trace_id.clone(),
                 step,
@@ -183,7 +182,11 @@ impl<'a, 'c> ShardSinks<'a, 'c> {
                 field,
             });
         }
-        let b = self.builder.push_trace(trace, scene_id, &self.source)?;
+        let b = trace.batches(scene_id, &self.source)?;
+        self.write_batches(&b, first)
+    }
+
+    fn write_batches(&mut self, b: &TraceBatches, first: bool) -> Result<(), StageError> {
         self.write("traces", &b.traces)?;
         self.write("timesteps", &b.timesteps)?;
         self.write("frames", &b.frames)?;

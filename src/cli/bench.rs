@@ -1,0 +1,490 @@
+//! `annotrace bench`: end-to-end speed as a user meets it — `annotrace simulate` from the command line
+//! into Parquet — for each row of the throughput table (docs/performance.md, "End to end").
+//!
+//! Each case runs this same binary's `simulate` command as a child process (`RAYON_NUM_THREADS` set to
+//! the thread count) into a fresh run folder, times the whole process, then reads the Parquet footers
+//! for the trace and frame-row counts and sums the file sizes. Nothing here is simulated in-process, so
+//! the figures include start-up, sharding, the manifest and the commit, exactly as `simulate` pays them.
+//! `--scale` shrinks every case in proportion (the side-by-side script uses it to fit a time budget).
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use anyhow::{Context, anyhow};
+use parquet::file::reader::{FileReader, SerializedFileReader};
+
+use annotrace::store::{Codec, ParquetSettings, ParquetSink, Stats};
+
+use super::{CliError, CliResult};
+
+/// One row of the throughput table.
+#[derive(Clone, Copy, Debug)]
+struct Case {
+    name: &'static str,
+    what: &'static str,
+    /// `simulate` arguments before scaling; `{n}` is replaced by the scaled count.
+    args: &'static [&'static str],
+    /// The count `--scale` multiplies.
+    count: u64,
+    /// What the count counts.
+    unit: &'static str,
+}
+
+const CASES: &[Case] = &[
+    Case {
+        name: "pool",
+        what: "billiards, racks x 1 shot, dt 0.01",
+        args: &[
+            "--env", "pooltool", "--scenes", "{n}", "--shots", "1", "--dt", "0.01",
+        ],
+        count: 2000,
+        unit: "shots",
+    },
+    Case {
+        name: "phyre-1",
+        what: "PHYRE, tasks x 1 action, every step",
+        args: &[
+            "--env", "phyre", "--scenes", "{n}", "--shots", "1", "--stride", "1",
+        ],
+        count: 500,
+        unit: "episodes",
+    },
+    Case {
+        name: "phyre-6",
+        what: "PHYRE, tasks x 1 action, stride 6",
+        args: &[
+            "--env", "phyre", "--scenes", "{n}", "--shots", "1", "--stride", "6",
+        ],
+        count: 500,
+        unit: "episodes",
+    },
+    Case {
+        name: "iphyre",
+        what: "I-PHYRE 60 fps, 40 games x click sets",
+        args: &[
+            "--env", "iphyre", "--games", "all", "--shots", "{n}", "--fps", "60",
+        ],
+        count: 25,
+        unit: "episodes",
+    },
+];
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Cases to run, comma-separated: pool, phyre-1, phyre-6, iphyre, or all.
+    #[arg(long, default_value = "all")]
+    cases: String,
+    /// Thread counts, comma-separated (each case runs once per count).
+    #[arg(long, default_value = "1,2")]
+    threads: String,
+    /// Multiplies every case's size (racks, tasks, click sets per game); 1 = the table.
+    #[arg(long, default_value_t = 1.0)]
+    scale: f64,
+    /// Seed of the simulated datasets.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Folder for the run folders (default: a fresh folder in the system's temporary folder,
+    /// removed afterwards); kept when given.
+    #[arg(long)]
+    dir: Option<PathBuf>,
+    /// Also write the results as JSON Lines to this file.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Instead of the cases: re-encode the trace tables of this run folder with each Parquet setting
+    /// annotrace considered (codec and level, float dictionaries, statistics, row-group size) and
+    /// print time and size per setting.
+    #[arg(long, conflicts_with_all = ["cases", "threads", "scale"])]
+    settings: Option<PathBuf>,
+}
+
+/// The Parquet settings `--settings` compares, the default first.
+fn candidate_settings() -> Vec<(&'static str, ParquetSettings)> {
+    let nodict = ParquetSettings::default();
+    let d = ParquetSettings {
+        float_dictionary: true,
+        ..nodict
+    };
+    vec![
+        (
+            "zstd 3, dictionary everywhere, page stats, 64 Ki rows (the default before 2026-11-24)",
+            d,
+        ),
+        (
+            "zstd 1",
+            ParquetSettings {
+                codec: Codec::Zstd(1),
+                ..d
+            },
+        ),
+        (
+            "zstd 9",
+            ParquetSettings {
+                codec: Codec::Zstd(9),
+                ..d
+            },
+        ),
+        (
+            "snappy",
+            ParquetSettings {
+                codec: Codec::Snappy,
+                ..d
+            },
+        ),
+        (
+            "uncompressed",
+            ParquetSettings {
+                codec: Codec::None,
+                ..d
+            },
+        ),
+        ("zstd 3, no float dictionary (the default)", nodict),
+        (
+            "zstd 1, no float dictionary",
+            ParquetSettings {
+                codec: Codec::Zstd(1),
+                ..nodict
+            },
+        ),
+        (
+            "zstd 3, chunk stats only",
+            ParquetSettings {
+                stats: Stats::Chunk,
+                ..d
+            },
+        ),
+        (
+            "zstd 3, 1 Mi-row row groups",
+            ParquetSettings {
+                row_group_rows: 1 << 20,
+                ..d
+            },
+        ),
+        (
+            "zstd 3, 8 Ki-row row groups",
+            ParquetSettings {
+                row_group_rows: 1 << 13,
+                ..d
+            },
+        ),
+        (
+            "zstd 3, no float dictionary, chunk stats",
+            ParquetSettings {
+                stats: Stats::Chunk,
+                ..nodict
+            },
+        ),
+    ]
+}
+
+/// `--settings RUN`: every trace table file of the run re-encoded with each candidate setting.
+fn compare_settings(run: &Path) -> anyhow::Result<()> {
+    let run_dir = annotrace::store::RunDir::new(run);
+    let mut files = Vec::new();
+    let mut traces = 0u64;
+    for table in annotrace::trace::schema::TRACE_TABLES {
+        let schema = annotrace::trace::schema::table_schema(table).expect("a trace table");
+        for f in run_dir.table(table)?.files {
+            let batches = annotrace::store::read_file(&f.path)?;
+            if table == "traces" {
+                traces += batches.iter().map(|b| b.num_rows() as u64).sum::<u64>();
+            }
+            files.push((table, schema.clone(), batches, f.bytes));
+        }
+    }
+    if files.is_empty() {
+        return Err(anyhow!("{}: no trace tables to re-encode", run.display()));
+    }
+    let rows: u64 = files
+        .iter()
+        .flat_map(|(_, _, b, _)| b.iter().map(|b| b.num_rows() as u64))
+        .sum();
+    let on_disk: u64 = files.iter().map(|f| f.3).sum();
+    let scratch = std::env::temp_dir().join(format!("annotrace-settings-{}", std::process::id()));
+    fs::create_dir_all(&scratch)?;
+    println!(
+        "{} trace(s), {rows} rows in {} file(s), {:.2} MB on disk; profile {}",
+        traces,
+        files.len(),
+        on_disk as f64 / 1e6,
+        if cfg!(debug_assertions) {
+            "debug"
+        } else {
+            "release"
+        }
+    );
+    println!(
+        "| setting | encode s (wall) | encode CPU s | M rows per CPU s | MB | MB per 1,000 traces | frames MB | size vs the first |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|");
+    let mut base = None;
+    let result = (|| -> anyhow::Result<()> {
+        for (name, settings) in candidate_settings() {
+            let (mut bytes, mut frames_bytes) = (0u64, 0u64);
+            let start = Instant::now();
+            let cpu0 = cpu_s(libc::RUSAGE_SELF);
+            for (i, (table, schema, batches, _)) in files.iter().enumerate() {
+                let target = scratch.join(format!("{i}.parquet"));
+                let mut sink = ParquetSink::create_with(&target, schema.clone(), &settings)?;
+                for b in batches {
+                    sink.write(b)?;
+                }
+                let (path, _) = sink.commit()?;
+                let n = fs::metadata(&path)?.len();
+                bytes += n;
+                if *table == "frames" {
+                    frames_bytes += n;
+                }
+            }
+            let secs = start.elapsed().as_secs_f64();
+            let cpu = cpu_s(libc::RUSAGE_SELF) - cpu0;
+            let base = *base.get_or_insert(bytes);
+            println!(
+                "| {name} | {secs:.2} | {cpu:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.3} |",
+                rows as f64 / cpu.max(1e-9) / 1e6,
+                bytes as f64 / 1e6,
+                bytes as f64 / 1e3 / traces.max(1) as f64,
+                frames_bytes as f64 / 1e6,
+                bytes as f64 / base as f64
+            );
+        }
+        Ok(())
+    })();
+    let _ = fs::remove_dir_all(&scratch);
+    result
+}
+
+/// What one case measured.
+#[derive(Debug, serde::Serialize)]
+struct Measured {
+    case: &'static str,
+    what: &'static str,
+    threads: usize,
+    items: u64,
+    unit: &'static str,
+    traces: u64,
+    frame_rows: u64,
+    wall_s: f64,
+    /// CPU time of the process (user + system): on a shared machine a steadier measure than wall time.
+    cpu_s: f64,
+    items_per_s: f64,
+    /// Items per CPU second.
+    items_per_cpu_s: f64,
+    frame_rows_per_s: f64,
+    parquet_bytes: u64,
+    parquet_bytes_per_1000_traces: f64,
+    frames_bytes: u64,
+    profile: &'static str,
+}
+
+fn parse_list<T: std::str::FromStr>(s: &str, flag: &str) -> Result<Vec<T>, CliError> {
+    s.split(',')
+        .map(|p| {
+            p.trim()
+                .parse()
+                .map_err(|_| CliError::input(anyhow!("{flag}: {p:?} is not a valid entry")))
+        })
+        .collect()
+}
+
+fn cases(list: &str) -> Result<Vec<Case>, CliError> {
+    if list.trim() == "all" {
+        return Ok(CASES.to_vec());
+    }
+    list.split(',')
+        .map(|name| {
+            CASES
+                .iter()
+                .find(|c| c.name == name.trim())
+                .copied()
+                .ok_or_else(|| {
+                    CliError::input(anyhow!(
+                        "--cases: unknown case {name:?} (expected pool, phyre-1, phyre-6, iphyre or all)"
+                    ))
+                })
+        })
+        .collect()
+}
+
+/// Rows and bytes of the Parquet files under `dir` (recursively), per table folder.
+fn parquet_totals(dir: &Path, table: Option<&str>) -> anyhow::Result<(u64, u64)> {
+    let (mut rows, mut bytes) = (0u64, 0u64);
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in fs::read_dir(&d).with_context(|| d.display().to_string())? {
+            let path = entry?.path();
+            let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+            if path.is_dir() {
+                if !name.starts_with('.') {
+                    stack.push(path);
+                }
+            } else if name.ends_with(".parquet") {
+                let rel = path.strip_prefix(dir).unwrap_or(&path);
+                let first = rel
+                    .components()
+                    .next()
+                    .map(|c| c.as_os_str().to_string_lossy());
+                if table.is_some_and(|t| first.as_deref() != Some(t)) {
+                    continue;
+                }
+                bytes += fs::metadata(&path)?.len();
+                let file = fs::File::open(&path)?;
+                let reader =
+                    SerializedFileReader::new(file).with_context(|| path.display().to_string())?;
+                rows += reader.metadata().file_metadata().num_rows() as u64;
+            }
+        }
+    }
+    Ok((rows, bytes))
+}
+
+/// CPU seconds (user + system) of every child process waited for so far.
+fn children_cpu_s() -> f64 {
+    cpu_s(libc::RUSAGE_CHILDREN)
+}
+
+/// CPU seconds (user + system) of `who` (`RUSAGE_SELF`, `RUSAGE_CHILDREN`).
+fn cpu_s(who: libc::c_int) -> f64 {
+    // SAFETY: getrusage writes one `rusage` struct into the zeroed value it is given.
+    let usage = unsafe {
+        let mut u: libc::rusage = std::mem::zeroed();
+        libc::getrusage(who, &mut u);
+        u
+    };
+    let secs = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 / 1e6;
+    secs(usage.ru_utime) + secs(usage.ru_stime)
+}
+
+fn run_case(
+    exe: &Path,
+    case: &Case,
+    n: u64,
+    threads: usize,
+    seed: u64,
+    run: &Path,
+) -> anyhow::Result<Measured> {
+    let mut args: Vec<String> = vec!["-q".into(), "simulate".into()];
+    args.extend(case.args.iter().map(|a| a.replace("{n}", &n.to_string())));
+    args.extend(["--seed".to_string(), seed.to_string(), "--run".to_string()]);
+    args.push(run.display().to_string());
+    let cpu_before = children_cpu_s();
+    let start = Instant::now();
+    let status = Command::new(exe)
+        .args(&args)
+        .env("RAYON_NUM_THREADS", threads.to_string())
+        .status()
+        .with_context(|| format!("starting {}", exe.display()))?;
+    let wall_s = start.elapsed().as_secs_f64();
+    let cpu_s = children_cpu_s() - cpu_before;
+    if !status.success() {
+        return Err(anyhow!("annotrace {} failed: {status}", args.join(" ")));
+    }
+    let (traces, _) = parquet_totals(run, Some("traces"))?;
+    let (frame_rows, frames_bytes) = parquet_totals(run, Some("frames"))?;
+    let (_, parquet_bytes) = parquet_totals(run, None)?;
+    let items = if case.name == "iphyre" { n * 40 } else { n };
+    Ok(Measured {
+        case: case.name,
+        what: case.what,
+        threads,
+        items,
+        unit: case.unit,
+        traces,
+        frame_rows,
+        wall_s,
+        cpu_s,
+        items_per_s: items as f64 / wall_s,
+        items_per_cpu_s: items as f64 / cpu_s.max(1e-9),
+        frame_rows_per_s: frame_rows as f64 / wall_s,
+        parquet_bytes,
+        parquet_bytes_per_1000_traces: parquet_bytes as f64 * 1000.0 / traces.max(1) as f64,
+        frames_bytes,
+        profile: if cfg!(debug_assertions) {
+            "debug"
+        } else {
+            "release"
+        },
+    })
+}
+
+pub fn run(args: Args) -> CliResult {
+    if let Some(run) = &args.settings {
+        compare_settings(run).map_err(CliError::failed)?;
+        return Ok(0);
+    }
+    let cases = cases(&args.cases)?;
+    let threads: Vec<usize> = parse_list(&args.threads, "--threads")?;
+    if threads.contains(&0) {
+        return Err(CliError::input(anyhow!(
+            "--threads: counts must be at least 1"
+        )));
+    }
+    if !(args.scale.is_finite() && args.scale > 0.0) {
+        return Err(CliError::input(anyhow!(
+            "--scale: must be a positive number"
+        )));
+    }
+    let exe = std::env::current_exe()
+        .map_err(|e| CliError::new(annotrace::pipeline::ErrorCategory::Io, e))?;
+    let (dir, keep) = match &args.dir {
+        Some(d) => (d.clone(), true),
+        None => (
+            std::env::temp_dir().join(format!("annotrace-bench-{}", std::process::id())),
+            false,
+        ),
+    };
+    fs::create_dir_all(&dir).map_err(|e| CliError::io(&dir, e))?;
+    let mut out = Vec::new();
+    println!(
+        "| case | what | threads | n | traces | frame rows | wall s | CPU s | per s (wall) | per CPU s | M frame rows/s (wall) | Parquet MB per 1,000 traces | profile |"
+    );
+    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+    let result = (|| -> anyhow::Result<()> {
+        for case in &cases {
+            let n = ((case.count as f64 * args.scale).round() as u64).max(1);
+            for &t in &threads {
+                let run = dir.join(format!("{}-t{t}", case.name));
+                if run.exists() {
+                    fs::remove_dir_all(&run).with_context(|| run.display().to_string())?;
+                }
+                let m = run_case(&exe, case, n, t, args.seed, &run)?;
+                println!(
+                    "| {} | {} | {} | {} {} | {} | {} | {:.2} | {:.2} | {:.1} {}/s | {:.1} | {:.2} | {:.2} | {} |",
+                    m.case,
+                    m.what,
+                    m.threads,
+                    m.items,
+                    m.unit,
+                    m.traces,
+                    m.frame_rows,
+                    m.wall_s,
+                    m.cpu_s,
+                    m.items_per_s,
+                    m.unit,
+                    m.items_per_cpu_s,
+                    m.frame_rows_per_s / 1e6,
+                    m.parquet_bytes_per_1000_traces / 1e6,
+                    m.profile
+                );
+                if !keep {
+                    let _ = fs::remove_dir_all(&run);
+                }
+                out.push(m);
+            }
+        }
+        Ok(())
+    })();
+    if !keep {
+        let _ = fs::remove_dir_all(&dir);
+    }
+    result.map_err(CliError::failed)?;
+    if let Some(path) = &args.json {
+        let text: String = out
+            .iter()
+            .map(|m| serde_json::to_string(m).unwrap_or_default() + "\n")
+            .collect();
+        annotrace::store::write_atomic(path, text.as_bytes()).map_err(|e| CliError::io(path, e))?;
+    }
+    Ok(0)
+}

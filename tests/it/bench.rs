@@ -1,0 +1,67 @@
+//! `annotrace bench`: one case end to end (the `simulate` child, Parquet counted from the footers, the
+//! JSON record), the Parquet settings comparison on the run it kept, and bad flags.
+
+use serde_json::Value;
+
+use crate::common::TestRun;
+
+#[test]
+fn a_case_is_measured_from_the_files_it_wrote_and_settings_compare_on_them() {
+    let t = TestRun::new();
+    let dir = t.path("b");
+    let json = t.path("b.jsonl");
+    let r = t.run(&[
+        "bench",
+        "--cases",
+        "iphyre",
+        "--scale",
+        "0.04",
+        "--threads",
+        "1",
+        "--dir",
+        dir.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    r.ok().stdout_has("| iphyre |");
+    let text = std::fs::read_to_string(&json).unwrap();
+    let m: Value = serde_json::from_str(text.lines().next().unwrap()).unwrap();
+    // 40 games × 1 click set: 40 traces, every frame row counted, the files' bytes summed.
+    assert_eq!(m["items"], 40);
+    assert_eq!(m["traces"], 40);
+    assert!(m["frame_rows"].as_u64().unwrap() > 40);
+    assert!(m["parquet_bytes"].as_u64().unwrap() > m["frames_bytes"].as_u64().unwrap());
+    assert!(m["wall_s"].as_f64().unwrap() > 0.0 && m["cpu_s"].as_f64().unwrap() > 0.0);
+    // The same frame rows as the run's own table.
+    let q = t.run(&[
+        "query",
+        "SELECT count(*) AS n FROM frames",
+        "--run",
+        dir.join("iphyre-t1").to_str().unwrap(),
+        "--format",
+        "csv",
+    ]);
+    q.ok().stdout_has(&m["frame_rows"].to_string());
+    let s = t.run(&[
+        "bench",
+        "--settings",
+        dir.join("iphyre-t1").to_str().unwrap(),
+    ]);
+    s.ok()
+        .stdout_has("40 trace(s)")
+        .stdout_has("no float dictionary (the default)");
+}
+
+#[test]
+fn bad_flags_are_input_errors() {
+    let t = TestRun::new();
+    t.run(&["bench", "--cases", "nope"])
+        .code(2)
+        .stderr_has("unknown case");
+    t.run(&["bench", "--threads", "0"])
+        .code(2)
+        .stderr_has("--threads");
+    t.run(&["bench", "--scale=-1"])
+        .code(2)
+        .stderr_has("--scale");
+}
