@@ -18,9 +18,12 @@
 //! - [`fitness`]: trace and annotation distances and the Evaluate function (ν = ρ + η − λ − ψ);
 //! - [`llm`]: OpenAI-compatible chat client (retries, budget, `llm_calls` recording and replay), prompt templates;
 //! - [`query`]: DataFusion over a run's tables, and result formats (table, CSV, Markdown, LaTeX, JSON);
+//! - [`plot`]: figures as SVG and PNG (axes, bands, bars), the plot kinds of a run and the
+//!   annotation-examples figure;
 //! - [`search`]: the evolutionary search for detectors (proposers, islands, rounds, Algorithm 2);
 //! - [`reward`]: the reward-program DSL over annotated traces, goal files, verification rules, synthesis;
 //! - [`optimise`]: simulated annealing of actions for reward programs and the billiards experiment;
+//! - [`report`]: the static web report of a run (trace player, pattern timeline, annotated text);
 //! - [`pipeline`]: pipeline files, the stage registry and every stage kind, fingerprints, the runner and
 //!   its manifest.
 //!
@@ -39,7 +42,9 @@ pub mod fitness;
 pub mod llm;
 pub mod optimise;
 pub mod pipeline;
+pub mod plot;
 pub mod query;
+pub mod report;
 pub mod reward;
 pub mod rng;
 pub mod search;

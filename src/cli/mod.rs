@@ -27,9 +27,11 @@ mod export;
 mod import;
 mod llm_args;
 mod one_stage;
+mod plot;
 mod progress;
 mod query;
 mod render;
+mod report;
 mod reward;
 mod run;
 mod show;
@@ -162,6 +164,10 @@ enum Command {
     Summarise(summarise::Args),
     /// Print a trace with its annotations as compact text for language models, with a token count.
     Show(show::Args),
+    /// Draw a figure of a run as SVG and PNG (success-budget, convergence, library-size, fitness, learning-stats, annotation-examples).
+    Plot(plot::Args),
+    /// Write a run's static web report: trace list, trace player, pattern timeline, annotated text.
+    Report(report::Args),
     /// Reward programs: check one, evaluate it on a trace, or synthesise one from a goal sentence.
     Reward(reward::Args),
     /// Ask the configured LLM for K new pattern labels given a library (ANNOTRACE_LLM_* endpoint).
@@ -195,6 +201,8 @@ pub fn main() -> ExitCode {
         Command::Benchmark(a) => benchmark::run(a, cli.quiet),
         Command::Summarise(a) => summarise::run(a, cli.quiet),
         Command::Show(a) => show::run(a),
+        Command::Plot(a) => plot::run(a, cli.quiet),
+        Command::Report(a) => report::run(a, cli.quiet),
         Command::Reward(a) => reward::run(a),
         Command::SuggestLabels(a) => suggest_labels::run(a, cli.quiet),
         Command::Export(a) => export::run(a),

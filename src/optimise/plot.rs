@@ -1,10 +1,10 @@
 //! The success-versus-budget figure: for each reward type and budget, the success rate averaged over
 //! goals and scenes for each seed, then the mean over seeds (line) and its standard deviation
-//! (shaded band). Written as SVG (text, by hand) and PNG (tiny-skia, no text: axes, grid and legend
-//! swatches only; the SVG carries the labels).
+//! (shaded band). Drawn by the plotting module (`plot`): SVG with every label, PNG without text.
 
 use std::collections::BTreeMap;
-use std::fmt::Write as _;
+
+use crate::plot::{Axis, Figure, Mark, Point as PlotPoint, Series};
 
 /// One point of a curve.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -56,269 +56,40 @@ pub fn curves<'a>(rows: impl IntoIterator<Item = (&'a str, u64, u64, bool)>) -> 
         .collect()
 }
 
-const W: f64 = 640.0;
-const H: f64 = 420.0;
-const LEFT: f64 = 70.0;
-const RIGHT: f64 = 20.0;
-const TOP: f64 = 40.0;
-const BOTTOM: f64 = 60.0;
-
-fn colour(i: usize) -> [u8; 3] {
-    [
-        [31, 119, 180],
-        [214, 39, 40],
-        [44, 160, 44],
-        [148, 103, 189],
-    ][i % 4]
-}
-
-struct Frame {
-    x_max: f64,
-    y_max: f64,
-}
-
-impl Frame {
-    fn of(curves: &[Curve]) -> Frame {
-        let x_max = curves
+/// The curves as a figure of the plotting module: one line with a ±std band per reward type.
+pub fn figure(curves: &[Curve], title: &str) -> Figure {
+    Figure {
+        title: title.to_string(),
+        x: Axis::new("optimisation budget", "samples"),
+        y: Axis::new("success rate", "share of goals × scenes").range(0.0, 1.0),
+        categories: Vec::new(),
+        series: curves
             .iter()
-            .flat_map(|c| c.points.iter().map(|p| p.budget))
-            .fold(1.0_f64, f64::max);
-        let y_top = curves
-            .iter()
-            .flat_map(|c| c.points.iter().map(|p| p.mean + p.std))
-            .fold(0.0_f64, f64::max);
-        let y_max = if y_top <= 0.0 {
-            0.1
-        } else {
-            ((y_top * 10.0).ceil() / 10.0).clamp(0.1, 1.0)
-        };
-        Frame { x_max, y_max }
-    }
-    fn x(&self, b: f64) -> f64 {
-        LEFT + b / self.x_max * (W - LEFT - RIGHT)
-    }
-    fn y(&self, v: f64) -> f64 {
-        H - BOTTOM - (v / self.y_max).clamp(0.0, 1.0) * (H - TOP - BOTTOM)
-    }
-    fn x_ticks(&self) -> Vec<f64> {
-        let step = [50.0, 100.0, 200.0, 250.0, 500.0, 1000.0]
-            .into_iter()
-            .find(|s| self.x_max / s <= 10.0)
-            .unwrap_or(1000.0);
-        (0..=((self.x_max / step) as usize))
-            .map(|i| i as f64 * step)
-            .collect()
-    }
-    fn y_ticks(&self) -> Vec<f64> {
-        (0..=5).map(|i| self.y_max * i as f64 / 5.0).collect()
+            .map(|c| Series {
+                name: c.name.clone(),
+                mark: Mark::Line,
+                points: c
+                    .points
+                    .iter()
+                    .map(|p| PlotPoint {
+                        x: p.budget,
+                        y: p.mean,
+                        err: p.std,
+                    })
+                    .collect(),
+            })
+            .collect(),
     }
 }
 
-/// The figure as SVG text.
+/// The figure as SVG text (`plot::svg`).
 pub fn svg(curves: &[Curve], title: &str) -> String {
-    let f = Frame::of(curves);
-    let mut s = String::new();
-    let esc = |t: &str| {
-        t.replace('&', "&amp;")
-            .replace('<', "&lt;")
-            .replace('>', "&gt;")
-    };
-    let _ = writeln!(
-        s,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{H}" viewBox="0 0 {W} {H}" font-family="sans-serif" font-size="12">"#
-    );
-    let _ = writeln!(s, r#"<rect width="{W}" height="{H}" fill="white"/>"#);
-    let _ = writeln!(
-        s,
-        r#"<text x="{}" y="22" text-anchor="middle" font-size="14">{}</text>"#,
-        W / 2.0,
-        esc(title)
-    );
-    for t in f.y_ticks() {
-        let y = f.y(t);
-        let _ = writeln!(
-            s,
-            r##"<line x1="{LEFT}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#ddd"/><text x="{:.1}" y="{:.1}" text-anchor="end">{t:.2}</text>"##,
-            W - RIGHT,
-            LEFT - 6.0,
-            y + 4.0
-        );
-    }
-    for t in f.x_ticks() {
-        let x = f.x(t);
-        let _ = writeln!(
-            s,
-            r##"<line x1="{x:.1}" y1="{TOP}" x2="{x:.1}" y2="{:.1}" stroke="#eee"/><text x="{x:.1}" y="{:.1}" text-anchor="middle">{t}</text>"##,
-            H - BOTTOM,
-            H - BOTTOM + 18.0
-        );
-    }
-    let _ = writeln!(
-        s,
-        r##"<rect x="{LEFT}" y="{TOP}" width="{:.1}" height="{:.1}" fill="none" stroke="#333"/>"##,
-        W - LEFT - RIGHT,
-        H - TOP - BOTTOM
-    );
-    let _ = writeln!(
-        s,
-        r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">optimisation budget (samples)</text>"#,
-        (LEFT + W - RIGHT) / 2.0,
-        H - 18.0
-    );
-    let _ = writeln!(
-        s,
-        r#"<text transform="translate(18 {:.1}) rotate(-90)" text-anchor="middle">success rate</text>"#,
-        (TOP + H - BOTTOM) / 2.0
-    );
-    for (i, c) in curves.iter().enumerate() {
-        let [r, g, b] = colour(i);
-        let upper: Vec<String> = c
-            .points
-            .iter()
-            .map(|p| format!("{:.1},{:.1}", f.x(p.budget), f.y(p.mean + p.std)))
-            .collect();
-        let lower: Vec<String> = c
-            .points
-            .iter()
-            .rev()
-            .map(|p| format!("{:.1},{:.1}", f.x(p.budget), f.y((p.mean - p.std).max(0.0))))
-            .collect();
-        let _ = writeln!(
-            s,
-            r#"<polygon points="{} {}" fill="rgb({r},{g},{b})" fill-opacity="0.2" stroke="none"/>"#,
-            upper.join(" "),
-            lower.join(" ")
-        );
-        let line: Vec<String> = c
-            .points
-            .iter()
-            .map(|p| format!("{:.1},{:.1}", f.x(p.budget), f.y(p.mean)))
-            .collect();
-        let _ = writeln!(
-            s,
-            r#"<polyline points="{}" fill="none" stroke="rgb({r},{g},{b})" stroke-width="2"/>"#,
-            line.join(" ")
-        );
-        let ly = TOP + 16.0 + 18.0 * i as f64;
-        let _ = writeln!(
-            s,
-            r#"<line x1="{:.1}" y1="{ly:.1}" x2="{:.1}" y2="{ly:.1}" stroke="rgb({r},{g},{b})" stroke-width="3"/><text x="{:.1}" y="{:.1}">{}</text>"#,
-            LEFT + 12.0,
-            LEFT + 36.0,
-            LEFT + 42.0,
-            ly + 4.0,
-            esc(&c.name)
-        );
-    }
-    s.push_str("</svg>\n");
-    s
+    crate::plot::svg(&figure(curves, title))
 }
 
-/// The figure as PNG bytes (no text; see the module docs).
+/// The figure as PNG bytes (`plot::png`: no text, see its docs).
 pub fn png(curves: &[Curve]) -> Result<Vec<u8>, String> {
-    use tiny_skia::{Color, FillRule, Paint, PathBuilder, Pixmap, Rect, Stroke, Transform};
-    let f = Frame::of(curves);
-    let mut pm = Pixmap::new(W as u32, H as u32).ok_or("cannot allocate the image")?;
-    pm.fill(Color::WHITE);
-    let paint = |rgb: [u8; 3], a: u8| {
-        let mut p = Paint::default();
-        p.set_color_rgba8(rgb[0], rgb[1], rgb[2], a);
-        p.anti_alias = true;
-        p
-    };
-    let line = |pm: &mut Pixmap, pts: &[(f64, f64)], rgb: [u8; 3], width: f32| {
-        let mut pb = PathBuilder::new();
-        for (k, (x, y)) in pts.iter().enumerate() {
-            if k == 0 {
-                pb.move_to(*x as f32, *y as f32);
-            } else {
-                pb.line_to(*x as f32, *y as f32);
-            }
-        }
-        if let Some(path) = pb.finish() {
-            let stroke = Stroke {
-                width,
-                ..Stroke::default()
-            };
-            pm.stroke_path(
-                &path,
-                &paint(rgb, 255),
-                &stroke,
-                Transform::identity(),
-                None,
-            );
-        }
-    };
-    for t in f.y_ticks() {
-        line(
-            &mut pm,
-            &[(LEFT, f.y(t)), (W - RIGHT, f.y(t))],
-            [221, 221, 221],
-            1.0,
-        );
-    }
-    for t in f.x_ticks() {
-        line(
-            &mut pm,
-            &[(f.x(t), TOP), (f.x(t), H - BOTTOM)],
-            [238, 238, 238],
-            1.0,
-        );
-        line(
-            &mut pm,
-            &[(f.x(t), H - BOTTOM), (f.x(t), H - BOTTOM + 6.0)],
-            [51, 51, 51],
-            1.0,
-        );
-    }
-    for (i, c) in curves.iter().enumerate() {
-        let rgb = colour(i);
-        let mut pb = PathBuilder::new();
-        for (k, p) in c.points.iter().enumerate() {
-            let (x, y) = (f.x(p.budget) as f32, f.y(p.mean + p.std) as f32);
-            if k == 0 {
-                pb.move_to(x, y);
-            } else {
-                pb.line_to(x, y);
-            }
-        }
-        for p in c.points.iter().rev() {
-            pb.line_to(f.x(p.budget) as f32, f.y((p.mean - p.std).max(0.0)) as f32);
-        }
-        pb.close();
-        if let Some(path) = pb.finish() {
-            pm.fill_path(
-                &path,
-                &paint(rgb, 51),
-                FillRule::Winding,
-                Transform::identity(),
-                None,
-            );
-        }
-        let pts: Vec<(f64, f64)> = c
-            .points
-            .iter()
-            .map(|p| (f.x(p.budget), f.y(p.mean)))
-            .collect();
-        line(&mut pm, &pts, rgb, 2.0);
-        let ly = TOP + 16.0 + 18.0 * i as f64;
-        if let Some(r) = Rect::from_xywh((LEFT + 12.0) as f32, (ly - 2.0) as f32, 24.0, 4.0) {
-            pm.fill_rect(r, &paint(rgb, 255), Transform::identity(), None);
-        }
-    }
-    line(
-        &mut pm,
-        &[
-            (LEFT, TOP),
-            (W - RIGHT, TOP),
-            (W - RIGHT, H - BOTTOM),
-            (LEFT, H - BOTTOM),
-            (LEFT, TOP),
-        ],
-        [51, 51, 51],
-        1.0,
-    );
-    pm.encode_png().map_err(|e| e.to_string())
+    crate::plot::png(&figure(curves, ""))
 }
 
 #[cfg(test)]

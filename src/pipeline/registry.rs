@@ -60,6 +60,8 @@ pub static STAGE_KINDS: &[&StageKind] = &[
     &stages::evolve::KIND,
     &stages::sql::KIND,
     &stages::export::KIND,
+    &stages::report::KIND,
+    &stages::plot::KIND,
 ];
 
 /// The kind with this name.

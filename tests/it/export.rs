@@ -47,6 +47,25 @@ fn export_stages_write_csv_markdown_and_latex() {
         csv.starts_with("env,traces,steps,frame_rows,events,mean_duration_s,success_rate\n"),
         "{csv}"
     );
+    // The quickstart also draws the evolution's figures and writes the web report of every trace.
+    for f in [
+        "fitness",
+        "convergence",
+        "learning-stats",
+        "annotation-examples",
+    ] {
+        for ext in ["svg", "png"] {
+            let p = t.path(&format!("q/exports/{f}.{ext}"));
+            assert!(p.is_file(), "{}", p.display());
+        }
+    }
+    let index = std::fs::read_to_string(t.path("q/exports/report/data/index.js")).unwrap();
+    assert_eq!(
+        index.matches("\"trace_id\":").count(),
+        273,
+        "3 imported + 270 simulated traces"
+    );
+    t.run(&["verify", "--run", "q"]).ok();
     // The PHYRE row: the imported example plus the 30 simulated episodes, the same numbers in every format.
     let phyre: Vec<&str> = csv
         .lines()

@@ -20,6 +20,7 @@ mod phyre;
 mod publish;
 mod query;
 mod render;
+mod report;
 mod reward;
 mod run;
 mod sandbox;

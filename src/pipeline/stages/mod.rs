@@ -6,7 +6,7 @@
 //! `optimise` (annealing actions for reward programs), `benchmark` (DeepPHY's agent loop), `summarise`
 //! (summaries of traces, their cost and the identification task), `evolve` (the
 //! evolutionary search for detectors), `sql` (a query over the run stored as a table) and `export` (a
-//! table or query written to `exports/`).
+//! table or query written to `exports/`), `report` (the static web report of the run) and `plot` (a figure of the run as SVG/PNG).
 //!
 //! Helpers shared by kinds: `detector_setup` (the library, environment and sandbox parameters of every
 //! kind that runs detectors), `trace_files` (reading a run's traces file by file for `annotate` and
@@ -21,6 +21,8 @@ pub mod evolve;
 pub mod export;
 pub mod import;
 pub mod optimise;
+pub mod plot;
+pub mod report;
 pub mod simulate;
 pub mod sql;
 pub mod summarise;
