@@ -5,6 +5,7 @@ mod common;
 mod annotate;
 mod anywhere;
 mod benchmark;
+mod ensemble;
 mod evolve;
 mod exit_codes;
 mod export;

@@ -4,7 +4,8 @@
 //! `annotate` (a detector library run over the traces), `accuracy` (its event-grounded labels scored
 //! against simulator events), `synthesise` (goal sentences to reward programs through an LLM),
 //! `optimise` (annealing actions for reward programs), `benchmark` (DeepPHY's agent loop), `evolve` (the
-//! evolutionary search for detectors), `sql` (a query over the run stored as a table) and `export` (a
+//! evolutionary search for detectors), `ensemble` (an ensemble library from the candidates of several
+//! evolve stages, paper section 3.3), `sql` (a query over the run stored as a table) and `export` (a
 //! table or query written to `exports/`).
 //!
 //! Helpers shared by kinds: `detector_setup` (the library, environment and sandbox parameters of every
@@ -16,6 +17,7 @@ pub mod accuracy;
 pub mod annotate;
 pub mod benchmark;
 pub mod detector_setup;
+pub mod ensemble;
 pub mod evolve;
 pub mod export;
 pub mod import;
