@@ -67,7 +67,7 @@ pub fn members_schema() -> SchemaRef {
         ("label", DataType::Utf8, false),
         ("source", DataType::Utf8, false),
         ("code_hash", DataType::Utf8, false),
-        ("cluster", DataType::Int64, false),
+        ("cluster_index", DataType::Int64, false),
         ("nu", DataType::Float64, false),
         ("rho", DataType::Float64, true),
         ("lines", DataType::Int64, false),
@@ -128,7 +128,7 @@ pub fn clusters_schema() -> SchemaRef {
     schema(&[
         ("run_stage", DataType::Utf8, false),
         ("label", DataType::Utf8, false),
-        ("cluster", DataType::Int64, false),
+        ("cluster_index", DataType::Int64, false),
         ("k", DataType::Int64, false),
         ("k_rule", DataType::Utf8, false),
         ("silhouette", DataType::Float64, true),

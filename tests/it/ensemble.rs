@@ -71,8 +71,8 @@ query = "{sql}"
 /// Every ensemble table, as CSV, in a stable order.
 fn tables(t: &TestRun) -> Vec<String> {
     [
-        "SELECT label, source, code_hash, cluster, nu, representative, distance FROM ensemble_members ORDER BY label, code_hash",
-        "SELECT label, cluster, k, k_rule, silhouette, size, representative, nu FROM ensemble_clusters ORDER BY label, cluster",
+        "SELECT label, source, code_hash, cluster_index, nu, representative, distance FROM ensemble_members ORDER BY label, code_hash",
+        "SELECT label, cluster_index, k, k_rule, silhouette, size, representative, nu FROM ensemble_clusters ORDER BY label, cluster_index",
         "SELECT method, objective, label, iteration, gamma, eps_s, eps_t, weights, score, chosen FROM ensemble_calibration ORDER BY method, label, iteration",
         "SELECT variant, source, label, traces, rho, activation_rate, f1 FROM ensemble_evaluation ORDER BY variant, source, label",
         "SELECT variant, libraries, labels, rho_mean, rho_std_over_seeds FROM cmp ORDER BY variant",
@@ -116,7 +116,8 @@ fn a_killed_ensemble_stage_resumes_to_the_same_tables_and_its_library_annotates(
     assert!(
         toml.contains("[[ensemble]]")
             && toml.contains("candidate = ")
-            && toml.contains("eps_s = 0.005")
+            && toml.contains("eps_s = ")
+            && toml.contains("reward = ")
     );
     assert!(
         whole
