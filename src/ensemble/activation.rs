@@ -2,7 +2,8 @@
 //! patterns a label's K member detectors found in one trace are grouped into clusters of agreeing
 //! activations, and a cluster becomes one ensemble annotation when enough reliable members agree.
 //!
-//! **Linking.** Two member patterns a and b of the same label and trace are linked when all three hold:
+//! **Linking.** Two patterns a and b of *different* members of the same label and trace are linked when
+//! all three hold (two patterns of one member are separate detections and never linked directly):
 //! - *objects* (the shared θ): they name at least one common object id, or both name none;
 //! - *time*: the gap between their inclusive step ranges, `max(s_a, s_b) − min(e_a, e_b)`, is at most
 //!   ε_t timesteps (overlapping ranges have a gap ≤ 0);
@@ -18,8 +19,9 @@
 //! when those are 0 too, 1 each. A cluster's activation is `a_C = Σ_{ℓ ∈ C} v_ℓ / Σ_ℓ v_ℓ` (each member
 //! counted once), in [0, 1]; the cluster fires when `a_C > γ`.
 //!
-//! **The annotation** of a fired cluster is the pattern of its leader (the member with the largest vote,
-//! ties to the earlier member; its earliest pattern in the cluster): span, objects and parameters. Its
+//! **The annotations** of a fired cluster are the patterns of its leader (the member with the largest
+//! vote, ties to the earlier member) in the cluster, each with its span, objects and parameters, so a
+//! one-member ensemble reports exactly its member's patterns. Their
 //! detector id is the label's ensemble id ([`ensemble_id`]), its `activation` is a_C and its
 //! `metadata` is `{"ensemble": {"activation", "members", "leader"}, "member": <the leader's metadata>}`.
 //!
@@ -150,7 +152,9 @@ impl LabelEnsemble {
         for i in 0..n {
             for j in i + 1..n {
                 let (a, b) = (items[i].1, items[j].1);
-                if linked(a, b, centres[i], centres[j], self.eps_s * scale, self.eps_t) {
+                if items[i].0 != items[j].0
+                    && linked(a, b, centres[i], centres[j], self.eps_s * scale, self.eps_t)
+                {
                     union(&mut parent, i, j);
                 }
             }
@@ -172,43 +176,43 @@ impl LabelEnsemble {
             if activation.is_nan() || activation <= self.gamma {
                 continue;
             }
-            // The leader: largest vote, ties to the earlier member; its earliest pattern here.
+            // The leader: largest vote, ties to the earlier member; each of its patterns here.
             let lead = members.iter().copied().fold(members[0], |best, k| {
                 if votes[k] > votes[best] { k } else { best }
             });
-            let pattern = group
-                .iter()
-                .map(|&i| items[i])
-                .filter(|(k, _)| *k == lead)
-                .map(|(_, a)| a)
-                .min_by_key(|a| (a.start_step, a.end_step, a.seq))
-                .expect("the leader has a pattern in its cluster");
             let ids: Vec<&str> = members
                 .iter()
                 .map(|&k| self.members[k].id.as_str())
                 .collect();
-            out.push(Annotation {
-                detector_id: id.clone(),
-                trace_id: trace.trace_id.clone(),
-                label: self.label.clone(),
-                seq: 0,
-                start_step: pattern.start_step,
-                end_step: pattern.end_step,
-                t_start: pattern.t_start,
-                t_end: pattern.t_end,
-                objects: pattern.objects.clone(),
-                parameters: pattern.parameters.clone(),
-                provenance: pattern.provenance.clone(),
-                metadata: Some(json!({
-                    "ensemble": {
-                        "activation": activation,
-                        "members": ids,
-                        "leader": self.members[lead].id.as_str(),
-                    },
-                    "member": pattern.metadata.clone(),
-                })),
-                activation,
-            });
+            for pattern in group
+                .iter()
+                .map(|&i| items[i])
+                .filter(|(k, _)| *k == lead)
+                .map(|(_, a)| a)
+            {
+                out.push(Annotation {
+                    detector_id: id.clone(),
+                    trace_id: trace.trace_id.clone(),
+                    label: self.label.clone(),
+                    seq: 0,
+                    start_step: pattern.start_step,
+                    end_step: pattern.end_step,
+                    t_start: pattern.t_start,
+                    t_end: pattern.t_end,
+                    objects: pattern.objects.clone(),
+                    parameters: pattern.parameters.clone(),
+                    provenance: pattern.provenance.clone(),
+                    metadata: Some(json!({
+                        "ensemble": {
+                            "activation": activation,
+                            "members": ids,
+                            "leader": self.members[lead].id.as_str(),
+                        },
+                        "member": pattern.metadata.clone(),
+                    })),
+                    activation,
+                });
+            }
         }
         out.sort_by(|a, b| {
             (a.start_step, a.end_step)
@@ -502,6 +506,41 @@ mod tests {
         };
         assert_eq!(summary(&now.annotate_trace(&t, &refs)).len(), 2);
         assert_eq!(summary(&now.annotate_trace(&t, &refs))[0].2, 0.6);
+    }
+
+    #[test]
+    fn a_member_s_own_patterns_stay_separate_detections() {
+        let t = trace();
+        let ds = members(0.5, 0.02, 1.0);
+        // A alone (K = 1 in effect): two hits of the cue ball one step apart stay two annotations.
+        let one = LabelEnsemble {
+            members: vec![LabelEnsemble::of_detectors(&ds)[0].members[0].clone()],
+            ..LabelEnsemble::of_detectors(&ds)[0].clone()
+        };
+        let anns = [
+            ann(&ds[0], &t, 0, 3, 3, &["cue"]),
+            ann(&ds[0], &t, 1, 4, 4, &["cue"]),
+        ];
+        let refs: Vec<&Annotation> = anns.iter().collect();
+        let out = one.annotate_trace(&t, &refs);
+        assert_eq!(
+            out.iter()
+                .map(|a| (a.start_step, a.activation))
+                .collect::<Vec<_>>(),
+            vec![(3, 1.0), (4, 1.0)]
+        );
+        // B@4 is within one step and 1 cm of both A@3 and A@4: one cluster {A@3, A@4, B@4} of
+        // activation 0.9, which reports both of the leader A's patterns.
+        let mut anns = anns.to_vec();
+        anns.push(ann(&ds[1], &t, 0, 4, 4, &["cue"]));
+        let refs: Vec<&Annotation> = anns.iter().collect();
+        let e = &LabelEnsemble::of_detectors(&ds)[0];
+        let got: Vec<(i64, f64)> = e
+            .annotate_trace(&t, &refs)
+            .iter()
+            .map(|a| (a.start_step, (a.activation * 1e9).round() / 1e9))
+            .collect();
+        assert_eq!(got, vec![(3, 0.9), (4, 0.9)]);
     }
 
     #[test]
