@@ -37,6 +37,7 @@ pub mod bench;
 pub mod builtin;
 pub mod detect;
 pub mod digest;
+pub mod ensemble;
 pub mod envs;
 pub mod fitness;
 pub mod llm;

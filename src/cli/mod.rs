@@ -22,6 +22,7 @@ mod accuracy;
 mod annotate;
 mod bench;
 mod benchmark;
+mod ensemble;
 mod evolve;
 mod export;
 mod import;
@@ -158,6 +159,8 @@ enum Command {
     Accuracy(accuracy::Args),
     /// Learn detectors for labels by evolutionary search over a run's traces (resumable).
     Evolve(evolve::Args),
+    /// Build an ensemble library from the candidates of several evolve stages (K-means, calibration).
+    Ensemble(ensemble::Args),
     /// Play DeepPHY-style physics-reasoning tasks with an agent (random, search or an LLM) and feedback.
     Benchmark(benchmark::Args),
     /// Summarise traces (offline from annotations, or an LLM), with their cost and the identification task.
@@ -198,6 +201,7 @@ pub fn main() -> ExitCode {
         Command::Annotate(a) => annotate::run(a, cli.quiet),
         Command::Accuracy(a) => accuracy::run(a, cli.quiet),
         Command::Evolve(a) => evolve::run(a, cli.quiet),
+        Command::Ensemble(a) => ensemble::run(a, cli.quiet),
         Command::Benchmark(a) => benchmark::run(a, cli.quiet),
         Command::Summarise(a) => summarise::run(a, cli.quiet),
         Command::Show(a) => show::run(a),

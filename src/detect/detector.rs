@@ -1,6 +1,7 @@
 //! A detector: Python source defining `find_pattern(trace)` for one label of one environment.
 
 use std::fmt;
+use std::sync::Arc;
 
 use sha2::{Digest, Sha256};
 
@@ -51,8 +52,46 @@ pub struct Detector {
     pub source: String,
     /// The Python source.
     pub code: String,
-    /// The value its patterns take in the annotation matrix (a library's weight; default 1).
+    /// The value its patterns take in the annotation matrix (a library's weight; default 1). In an
+    /// ensemble library, the member's reliability weight w.
     pub weight: f64,
+    /// Set when the detector is a member of an ensemble library's label ([`Membership`]): its
+    /// patterns are then combined with the other members' by activation clustering (`ensemble`)
+    /// rather than reported as they are.
+    pub ensemble: Option<Arc<Membership>>,
+}
+
+/// A label's settings in an ensemble library (its `[[ensemble]]` table; paper section 3.3).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EnsembleSettings {
+    /// The label.
+    pub label: String,
+    /// Activation threshold γ in [0, 1): a cluster fires when its normalised activation exceeds it.
+    pub gamma: f64,
+    /// Spatial tolerance ε_s, in the environment's `nearby_scale` unit (`envs::EnvFacts`): metres for
+    /// pooltool, fractions of the 256-pixel PHYRE scene, fractions of the 600-pixel I-PHYRE screen.
+    pub eps_s: f64,
+    /// Temporal tolerance ε_t in timesteps.
+    pub eps_t: f64,
+    /// Number of K-means clusters (= members) the label was built with.
+    pub k: u32,
+    /// Ids of the label's member detectors, in manifest order.
+    pub members: Vec<DetectorId>,
+}
+
+/// What a detector is as a member of an ensemble library's label.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Membership {
+    /// The label's settings (shared by its members).
+    pub settings: Arc<EnsembleSettings>,
+    /// Training reward t of the member (its ν in the search that produced it).
+    pub reward: f64,
+    /// The run or stage it came from (`<run folder>/<stage>` or `<stage>`).
+    pub run: String,
+    /// Its candidate id there (the `candidates.code_hash`).
+    pub candidate: String,
+    /// The K-means cluster it represents.
+    pub cluster: u32,
 }
 
 impl Detector {
@@ -66,6 +105,7 @@ impl Detector {
             source: source.to_string(),
             code: code.to_string(),
             weight: 1.0,
+            ensemble: None,
         }
     }
 

@@ -20,8 +20,31 @@
 //! its file) is what runs, is hashed into the detector id and is stored, so every detector stays
 //! self-contained. Line numbers in its errors count from the top of that combined code.
 //!
-//! Several detectors may share a label (an ensemble). Unknown keys are errors, so a typo does not pass
-//! silently.
+//! Several detectors may share a label: in a plain library their patterns are reported side by side
+//! (a fixed-weight union). An **ensemble library** (paper section 3.3, written by the `ensemble` stage)
+//! adds one `[[ensemble]]` table per label and says where each member came from:
+//!
+//! ```toml
+//! [[ensemble]]
+//! label = "cue strike"
+//! gamma = 0.5        # a cluster fires when its normalised activation exceeds γ
+//! eps_s = 0.005      # spatial tolerance, in the environment's NEARBY_AT unit (pooltool: metres)
+//! eps_t = 1          # temporal tolerance, timesteps
+//! k = 2              # clusters = members
+//!
+//! [[detector]]
+//! label = "cue strike"
+//! file = "cue_strike_c0.py"
+//! weight = 1.0       # reliability weight w
+//! reward = 0.42      # training reward t (ν)
+//! run = "evolve_s1"  # provenance: run folder / stage
+//! candidate = "3f9c0a7e51d2b864"   # its candidates.code_hash there
+//! cluster = 0
+//! ```
+//!
+//! The detectors of a label with an `[[ensemble]]` table carry a [`Membership`]; the `ensemble`
+//! module combines their patterns by activation clustering. Unknown keys are errors, so a typo does
+//! not pass silently.
 //!
 //! A library is read from a folder on disk ([`Library::load`]) or from the built-in data compiled into
 //! the binary ([`Library::builtin`]); [`Library::open`] takes either ([`Location`]). Ids, fingerprints
@@ -32,7 +55,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use sha2::{Digest, Sha256};
 
-use super::detector::{Detector, DetectorId};
+use super::detector::{Detector, DetectorId, EnsembleSettings, Membership};
 use crate::builtin::Location;
 use crate::trace::Env;
 
@@ -90,6 +113,18 @@ struct Manifest {
     library: Header,
     #[serde(default, rename = "detector")]
     detectors: Vec<Entry>,
+    #[serde(default, rename = "ensemble")]
+    ensembles: Vec<EnsembleEntry>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EnsembleEntry {
+    label: String,
+    gamma: f64,
+    eps_s: f64,
+    eps_t: f64,
+    k: u32,
 }
 
 #[derive(Deserialize)]
@@ -114,10 +149,91 @@ struct Entry {
     weight: f64,
     #[serde(default)]
     prelude: Vec<String>,
+    #[serde(default)]
+    reward: Option<f64>,
+    #[serde(default)]
+    run: Option<String>,
+    #[serde(default)]
+    candidate: Option<String>,
+    #[serde(default)]
+    cluster: Option<u32>,
 }
 
 fn one() -> f64 {
     1.0
+}
+
+/// The ensemble fields of one `[[detector]]` entry: reward, run, candidate, cluster.
+type MemberFields = (Option<f64>, Option<String>, Option<String>, Option<u32>);
+
+/// Gives every detector of a label with an `[[ensemble]]` table its [`Membership`], checking the tables
+/// (finite tolerances, γ in [0, 1), one table per label, at least one member, k = members).
+fn attach_ensembles(
+    detectors: Vec<(Detector, MemberFields)>,
+    tables: &[EnsembleEntry],
+) -> Result<Vec<Detector>, String> {
+    let mut settings = Vec::new();
+    for (i, t) in tables.iter().enumerate() {
+        if tables[..i].iter().any(|u| u.label == t.label) {
+            return Err(format!("two [[ensemble]] tables for label {:?}", t.label));
+        }
+        if !(0.0..1.0).contains(&t.gamma) {
+            return Err(format!(
+                "[[ensemble]] {:?}: gamma must be in [0, 1), found {}",
+                t.label, t.gamma
+            ));
+        }
+        for (name, v) in [("eps_s", t.eps_s), ("eps_t", t.eps_t)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!(
+                    "[[ensemble]] {:?}: {name} must be a number ≥ 0, found {v}",
+                    t.label
+                ));
+            }
+        }
+        let members: Vec<DetectorId> = detectors
+            .iter()
+            .filter(|(d, _)| d.label == t.label)
+            .map(|(d, _)| d.id.clone())
+            .collect();
+        if members.is_empty() {
+            return Err(format!(
+                "[[ensemble]] {:?} names a label no [[detector]] has",
+                t.label
+            ));
+        }
+        if members.len() != t.k as usize {
+            return Err(format!(
+                "[[ensemble]] {:?}: k = {} but the label has {} member detector(s)",
+                t.label,
+                t.k,
+                members.len()
+            ));
+        }
+        settings.push(std::sync::Arc::new(EnsembleSettings {
+            label: t.label.clone(),
+            gamma: t.gamma,
+            eps_s: t.eps_s,
+            eps_t: t.eps_t,
+            k: t.k,
+            members,
+        }));
+    }
+    Ok(detectors
+        .into_iter()
+        .map(|(mut d, (reward, run, candidate, cluster))| {
+            if let Some(s) = settings.iter().find(|s| s.label == d.label) {
+                d.ensemble = Some(std::sync::Arc::new(Membership {
+                    settings: s.clone(),
+                    reward: reward.unwrap_or(1.0),
+                    run: run.unwrap_or_default(),
+                    candidate: candidate.unwrap_or_default(),
+                    cluster: cluster.unwrap_or(0),
+                }));
+            }
+            d
+        })
+        .collect())
 }
 
 /// A loaded library.
@@ -199,16 +315,40 @@ impl Library {
                 code.push_str("\n\n");
             }
             code.push_str(&read(&e.file)?);
-            detectors.push(Detector {
-                id: DetectorId::of(env, &e.label, &code),
-                label: e.label,
-                aliases: e.aliases,
-                env,
-                source: format!("{}/{}", m.library.name, e.file),
-                code,
-                weight: e.weight,
-            });
+            let member = [
+                e.reward.is_some(),
+                e.run.is_some(),
+                e.candidate.is_some(),
+                e.cluster.is_some(),
+            ];
+            let is_member = m.ensembles.iter().any(|x| x.label == e.label);
+            if !is_member && member.iter().any(|&b| b) {
+                return Err(bad(format!(
+                    "detector {:?} ({}) has ensemble fields (reward, run, candidate, cluster) but no [[ensemble]] table names its label",
+                    e.label, e.file
+                )));
+            }
+            if e.reward.is_some_and(|r| !r.is_finite()) {
+                return Err(bad(format!(
+                    "detector {:?}: reward must be a finite number",
+                    e.label
+                )));
+            }
+            detectors.push((
+                Detector {
+                    id: DetectorId::of(env, &e.label, &code),
+                    label: e.label,
+                    aliases: e.aliases,
+                    env,
+                    source: format!("{}/{}", m.library.name, e.file),
+                    code,
+                    weight: e.weight,
+                    ensemble: None,
+                },
+                (e.reward, e.run, e.candidate, e.cluster),
+            ));
         }
+        let detectors = attach_ensembles(detectors, &m.ensembles).map_err(bad)?;
         Ok(Library {
             name: m.library.name,
             env,
@@ -218,8 +358,9 @@ impl Library {
         })
     }
 
-    /// A hash of everything that decides the library's output (ids, labels, aliases, weights), for
-    /// stage fingerprints.
+    /// A hash of everything that decides the library's output (ids, labels, aliases, weights and, in
+    /// an ensemble library, each member's reward and its label's γ, ε_s, ε_t), for stage fingerprints.
+    /// A plain library's fingerprint is what it was before ensembles existed.
     pub fn fingerprint(&self) -> String {
         let mut h = Sha256::new();
         for d in &self.detectors {
@@ -227,8 +368,32 @@ impl Library {
             h.update(d.aliases.join("\u{1}").as_bytes());
             h.update(d.weight.to_le_bytes());
             h.update(d.source.as_bytes());
+            if let Some(m) = &d.ensemble {
+                let s = &m.settings;
+                for x in [m.reward, s.gamma, s.eps_s, s.eps_t] {
+                    h.update(x.to_le_bytes());
+                }
+            }
         }
         crate::digest::hex(&h.finalize())
+    }
+
+    /// Whether any label of the library is an ensemble (has an `[[ensemble]]` table).
+    pub fn is_ensemble(&self) -> bool {
+        self.detectors.iter().any(|d| d.ensemble.is_some())
+    }
+
+    /// The settings of each ensemble label, in manifest order of their first member.
+    pub fn ensembles(&self) -> Vec<std::sync::Arc<EnsembleSettings>> {
+        let mut out: Vec<std::sync::Arc<EnsembleSettings>> = Vec::new();
+        for d in &self.detectors {
+            if let Some(m) = &d.ensemble
+                && !out.iter().any(|s| std::sync::Arc::ptr_eq(s, &m.settings))
+            {
+                out.push(m.settings.clone());
+            }
+        }
+        out
     }
 
     /// The distinct labels, in manifest order.

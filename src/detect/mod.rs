@@ -31,7 +31,7 @@ mod validate;
 mod worker;
 
 pub use self::annotation::{Annotation, AnnotationMatrix};
-pub use self::detector::{Detector, DetectorId, normalise_label};
+pub use self::detector::{Detector, DetectorId, EnsembleSettings, Membership, normalise_label};
 pub use self::error::{CandidateStatus, DetectError, DetectorError};
 pub use self::library::{Library, LibraryError};
 pub use self::pool::{BatchResult, CallResult, RunStats, WorkerPool};

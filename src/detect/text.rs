@@ -273,9 +273,19 @@ pub fn annotated_text(trace: &Trace, annotations: &[Annotation]) -> String {
             String::new()
         };
         let params = key_parameters(a);
+        // An ensemble annotation (ensemble libraries) says how strongly its members agreed.
+        let ensemble = a
+            .metadata
+            .as_ref()
+            .and_then(|m| m.get("ensemble"))
+            .map(|e| {
+                let n = e["members"].as_array().map_or(0, Vec::len);
+                format!(" [ensemble a={:.2}, {n} member(s)]", a.activation)
+            })
+            .unwrap_or_default();
         let _ = writeln!(
             out,
-            "{steps}{time} {}: {}{}",
+            "{steps}{time} {}{ensemble}: {}{}",
             a.label,
             objects(a),
             if params.is_empty() {

@@ -58,6 +58,7 @@ pub static STAGE_KINDS: &[&StageKind] = &[
     &stages::benchmark::KIND,
     &stages::summarise::KIND,
     &stages::evolve::KIND,
+    &stages::ensemble::KIND,
     &stages::sql::KIND,
     &stages::export::KIND,
     &stages::report::KIND,

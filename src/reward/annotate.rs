@@ -21,7 +21,9 @@ pub fn detectors_for(library: &Library, labels: &[String]) -> Vec<Detector> {
 }
 
 /// Runs `detectors` over `traces` in one pool call; returns the annotations of the successful calls
-/// and the number of failed calls.
+/// and the number of failed calls. Members of an ensemble library's labels are combined into the
+/// label's ensemble annotations (`ensemble::activation`), so reward programs read ensemble libraries
+/// as they read plain ones.
 pub fn annotate(
     pool: &WorkerPool,
     detectors: &[Detector],
@@ -43,7 +45,10 @@ pub fn annotate(
             out.push(Annotation::new(det, &traces[r.trace], seq, p));
         }
     }
-    (out, failed)
+    (
+        crate::ensemble::activation::combine(detectors, traces, out),
+        failed,
+    )
 }
 
 /// Shots of the probe: straight, cut, soft, follow, draw, side spin, masse and a bank, so that every

@@ -6,6 +6,7 @@ mod annotate;
 mod anywhere;
 mod bench;
 mod benchmark;
+mod ensemble;
 mod evolve;
 mod exit_codes;
 mod export;

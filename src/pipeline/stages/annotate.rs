@@ -78,7 +78,8 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     }))
 }
 
-/// The annotations of a batch's successful calls.
+/// The annotations of a batch's successful calls; an ensemble library's member patterns are combined
+/// into its ensemble annotations (`ensemble::activation`).
 pub(crate) fn annotations_of(
     library: &Library,
     traces: &[Trace],
@@ -94,7 +95,7 @@ pub(crate) fn annotations_of(
             out.push(Annotation::new(det, &traces[r.trace], seq, p.clone()));
         }
     }
-    out
+    crate::ensemble::activation::combine(&library.detectors, traces, out)
 }
 
 /// Counts of call statuses, for summaries.
@@ -171,12 +172,20 @@ impl Stage for AnnotateStage {
             ctx.progress().advance(ctx.stage_id(), 1);
         }
         if ctx.finished_shard("detectors")?.is_none() {
-            let b = detectors_batch(&lib.name, &lib.detectors)?;
+            // An ensemble library also lists one pseudo-detector per ensemble label, the id its
+            // annotations carry.
+            let mut dets = lib.detectors.clone();
+            dets.extend(crate::ensemble::activation::ensemble_detectors(lib));
+            let b = detectors_batch(&lib.name, &dets)?;
             let n = ctx.write_batch("detectors", env, "detectors", &b)?;
             ctx.finish_shard("detectors", &json!({"rows": {"detectors": n}}))?;
         }
         let mut rows: BTreeMap<String, u64> = BTreeMap::new();
-        rows.insert("detectors".into(), lib.detectors.len() as u64);
+        rows.insert(
+            "detectors".into(),
+            (lib.detectors.len() + crate::ensemble::activation::ensemble_detectors(lib).len())
+                as u64,
+        );
         let mut statuses: BTreeMap<String, u64> = BTreeMap::new();
         let (mut traces, mut anns) = (0u64, 0u64);
         let mut layers = Value::Null;

@@ -4,9 +4,10 @@
 //! `annotate` (a detector library run over the traces), `accuracy` (its event-grounded labels scored
 //! against simulator events), `synthesise` (goal sentences to reward programs through an LLM),
 //! `optimise` (annealing actions for reward programs), `benchmark` (DeepPHY's agent loop), `summarise`
-//! (summaries of traces, their cost and the identification task), `evolve` (the
-//! evolutionary search for detectors), `sql` (a query over the run stored as a table) and `export` (a
-//! table or query written to `exports/`), `report` (the static web report of the run) and `plot` (a figure of the run as SVG/PNG).
+//! (summaries of traces, their cost and the identification task), `evolve` (the evolutionary search for
+//! detectors), `ensemble` (an ensemble library from the candidates of several evolve stages, paper
+//! section 3.3), `sql` (a query over the run stored as a table), `export` (a table or query written to
+//! `exports/`), `report` (the static web report of the run) and `plot` (a figure of the run as SVG/PNG).
 //!
 //! Helpers shared by kinds: `detector_setup` (the library, environment and sandbox parameters of every
 //! kind that runs detectors), `trace_files` (reading a run's traces file by file for `annotate` and
@@ -17,6 +18,7 @@ pub mod accuracy;
 pub mod annotate;
 pub mod benchmark;
 pub mod detector_setup;
+pub mod ensemble;
 pub mod evolve;
 pub mod export;
 pub mod import;

@@ -1,0 +1,593 @@
+//! Activation clustering at annotation time (paper section 3.3, "pattern activation clustering"): the
+//! patterns a label's K member detectors found in one trace are grouped into clusters of agreeing
+//! activations, and a cluster becomes one ensemble annotation when enough reliable members agree.
+//!
+//! **Linking.** Two patterns a and b of *different* members of the same label and trace are linked when
+//! all three hold (two patterns of one member are separate detections and never linked directly):
+//! - *objects* (the shared θ): they name at least one common object id, or both name none;
+//! - *time*: the gap between their inclusive step ranges, `max(s_a, s_b) − min(e_a, e_b)`, is at most
+//!   ε_t timesteps (overlapping ranges have a gap ≤ 0);
+//! - *space*: the centroids of their objects' centres at their first steps are at most
+//!   ε_s × `nearby_scale` apart (`envs::EnvFacts`; pooltool metres, PHYRE 256 px, I-PHYRE 600 px, so
+//!   the paper's (0.05, 4), (0.00625, 2) and (0.005, 1) read as 12.8 px, 3.75 px and 5 mm). A pattern
+//!   whose objects are not in the trace (a cushion, the table) has no centroid and passes this test.
+//!
+//! Clusters are the connected components of that relation (single linkage).
+//!
+//! **Activation.** Member ℓ votes `v_ℓ = max(w_ℓ · t_ℓ, 0)` (reliability weight × training reward);
+//! when every vote of the label is 0 (all rewards ≤ 0), the votes are the weights `max(w_ℓ, 0)`, and
+//! when those are 0 too, 1 each. A cluster's activation is `a_C = Σ_{ℓ ∈ C} v_ℓ / Σ_ℓ v_ℓ` (each member
+//! counted once), in [0, 1]; the cluster fires when `a_C > γ`.
+//!
+//! **The annotations** of a fired cluster are the patterns of its leader (the member with the largest
+//! vote, ties to the earlier member) in the cluster, each with its span, objects and parameters, so a
+//! one-member ensemble reports exactly its member's patterns. Their
+//! detector id is the label's ensemble id ([`ensemble_id`]), its `activation` is a_C and its
+//! `metadata` is `{"ensemble": {"activation", "members", "leader"}, "member": <the leader's metadata>}`.
+//!
+//! **Owns:** the linking rule, the cluster activation and the ensemble annotations. **Does not:** run
+//! detectors (`detect::WorkerPool`) or choose members (`ensemble::kmeans`, `ensemble::represent`).
+
+use std::collections::BTreeMap;
+
+use serde_json::json;
+
+use crate::detect::{Annotation, Detector, DetectorId, EnsembleSettings, Library};
+use crate::trace::{Env, Trace};
+
+/// One member of a label's ensemble: its detector id, reliability weight w and training reward t.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Member {
+    /// The member detector.
+    pub id: DetectorId,
+    /// Reliability weight w.
+    pub weight: f64,
+    /// Training reward t.
+    pub reward: f64,
+}
+
+/// One label's ensemble as the combination step sees it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LabelEnsemble {
+    /// The environment (decides the unit of ε_s).
+    pub env: Env,
+    /// The label.
+    pub label: String,
+    /// Threshold γ on the normalised cluster activation.
+    pub gamma: f64,
+    /// Spatial tolerance ε_s, in the environment's `nearby_scale` unit.
+    pub eps_s: f64,
+    /// Temporal tolerance ε_t (timesteps).
+    pub eps_t: f64,
+    /// The members, in manifest order.
+    pub members: Vec<Member>,
+}
+
+/// The id of a label's ensemble: a detector id over the environment, the label and the member ids, so
+/// the same members give the same id in every run.
+pub fn ensemble_id(env: Env, label: &str, members: &[DetectorId]) -> DetectorId {
+    let ids: Vec<&str> = members.iter().map(DetectorId::as_str).collect();
+    DetectorId::of(env, label, &format!("ensemble\n{}", ids.join("\n")))
+}
+
+impl LabelEnsemble {
+    /// The label ensembles of `detectors` (those with a membership), in order of their first member.
+    pub fn of_detectors(detectors: &[Detector]) -> Vec<LabelEnsemble> {
+        let mut out: Vec<(std::sync::Arc<EnsembleSettings>, LabelEnsemble)> = Vec::new();
+        for d in detectors {
+            let Some(m) = &d.ensemble else { continue };
+            let member = Member {
+                id: d.id.clone(),
+                weight: d.weight,
+                reward: m.reward,
+            };
+            match out
+                .iter_mut()
+                .find(|(s, _)| std::sync::Arc::ptr_eq(s, &m.settings))
+            {
+                Some((_, e)) => e.members.push(member),
+                None => {
+                    let s = &m.settings;
+                    out.push((
+                        s.clone(),
+                        LabelEnsemble {
+                            env: d.env,
+                            label: s.label.clone(),
+                            gamma: s.gamma,
+                            eps_s: s.eps_s,
+                            eps_t: s.eps_t,
+                            members: vec![member],
+                        },
+                    ));
+                }
+            }
+        }
+        out.into_iter().map(|(_, e)| e).collect()
+    }
+
+    /// The label's ensemble id.
+    pub fn id(&self) -> DetectorId {
+        let ids: Vec<DetectorId> = self.members.iter().map(|m| m.id.clone()).collect();
+        ensemble_id(self.env, &self.label, &ids)
+    }
+
+    /// Each member's vote (see the module docs), in member order.
+    pub fn votes(&self) -> Vec<f64> {
+        let v: Vec<f64> = self
+            .members
+            .iter()
+            .map(|m| (m.weight * m.reward).max(0.0))
+            .collect();
+        if v.iter().sum::<f64>() > 0.0 {
+            return v;
+        }
+        let w: Vec<f64> = self.members.iter().map(|m| m.weight.max(0.0)).collect();
+        if w.iter().sum::<f64>() > 0.0 {
+            return w;
+        }
+        vec![1.0; self.members.len()]
+    }
+
+    /// The ensemble annotations of `trace` from its member patterns `anns` (patterns of other
+    /// detectors or traces are ignored), ordered by start, end and leader.
+    pub fn annotate_trace(&self, trace: &Trace, anns: &[&Annotation]) -> Vec<Annotation> {
+        let items: Vec<(usize, &Annotation)> = anns
+            .iter()
+            .filter(|a| a.trace_id == trace.trace_id)
+            .filter_map(|a| {
+                self.members
+                    .iter()
+                    .position(|m| m.id == a.detector_id)
+                    .map(|k| (k, *a))
+            })
+            .collect();
+        if items.is_empty() {
+            return Vec::new();
+        }
+        let scale = crate::envs::facts(self.env).nearby_scale;
+        let centres: Vec<Option<(f64, f64)>> =
+            items.iter().map(|(_, a)| centroid(trace, a)).collect();
+        let n = items.len();
+        let mut parent: Vec<usize> = (0..n).collect();
+        for i in 0..n {
+            for j in i + 1..n {
+                let (a, b) = (items[i].1, items[j].1);
+                if items[i].0 != items[j].0
+                    && linked(a, b, centres[i], centres[j], self.eps_s * scale, self.eps_t)
+                {
+                    union(&mut parent, i, j);
+                }
+            }
+        }
+        let mut groups: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+        for i in 0..n {
+            let r = find(&mut parent, i);
+            groups.entry(r).or_default().push(i);
+        }
+        let votes = self.votes();
+        let total: f64 = votes.iter().sum();
+        let id = self.id();
+        let mut out = Vec::new();
+        for group in groups.values() {
+            let mut members: Vec<usize> = group.iter().map(|&i| items[i].0).collect();
+            members.sort_unstable();
+            members.dedup();
+            let activation = members.iter().map(|&k| votes[k]).sum::<f64>() / total;
+            if activation.is_nan() || activation <= self.gamma {
+                continue;
+            }
+            // The leader: largest vote, ties to the earlier member; each of its patterns here.
+            let lead = members.iter().copied().fold(members[0], |best, k| {
+                if votes[k] > votes[best] { k } else { best }
+            });
+            let ids: Vec<&str> = members
+                .iter()
+                .map(|&k| self.members[k].id.as_str())
+                .collect();
+            for pattern in group
+                .iter()
+                .map(|&i| items[i])
+                .filter(|(k, _)| *k == lead)
+                .map(|(_, a)| a)
+            {
+                out.push(Annotation {
+                    detector_id: id.clone(),
+                    trace_id: trace.trace_id.clone(),
+                    label: self.label.clone(),
+                    seq: 0,
+                    start_step: pattern.start_step,
+                    end_step: pattern.end_step,
+                    t_start: pattern.t_start,
+                    t_end: pattern.t_end,
+                    objects: pattern.objects.clone(),
+                    parameters: pattern.parameters.clone(),
+                    provenance: pattern.provenance.clone(),
+                    metadata: Some(json!({
+                        "ensemble": {
+                            "activation": activation,
+                            "members": ids,
+                            "leader": self.members[lead].id.as_str(),
+                        },
+                        "member": pattern.metadata.clone(),
+                    })),
+                    activation,
+                });
+            }
+        }
+        out.sort_by(|a, b| {
+            (a.start_step, a.end_step)
+                .cmp(&(b.start_step, b.end_step))
+                .then_with(|| {
+                    a.metadata
+                        .as_ref()
+                        .map(|m| m.to_string())
+                        .cmp(&b.metadata.as_ref().map(|m| m.to_string()))
+                })
+        });
+        for (seq, a) in out.iter_mut().enumerate() {
+            a.seq = seq;
+        }
+        out
+    }
+}
+
+/// Whether two member patterns are linked (see the module docs); `eps_s` is already in trace units.
+fn linked(
+    a: &Annotation,
+    b: &Annotation,
+    ca: Option<(f64, f64)>,
+    cb: Option<(f64, f64)>,
+    eps_s: f64,
+    eps_t: f64,
+) -> bool {
+    let objects = (a.objects.is_empty() && b.objects.is_empty())
+        || a.objects.iter().any(|o| b.objects.contains(o));
+    let gap = a.start_step.max(b.start_step) - a.end_step.min(b.end_step);
+    let time = gap as f64 <= eps_t;
+    let space = match (ca, cb) {
+        (Some(p), Some(q)) => (p.0 - q.0).hypot(p.1 - q.1) <= eps_s,
+        _ => true,
+    };
+    objects && time && space
+}
+
+/// The centroid of a pattern's objects' centres at its first step (the nearest step at or after it),
+/// or `None` when none of its objects is in the trace there.
+fn centroid(trace: &Trace, a: &Annotation) -> Option<(f64, f64)> {
+    let i = trace
+        .timesteps
+        .partition_point(|t| t.index < a.start_step)
+        .min(trace.timesteps.len().checked_sub(1)?);
+    let step = &trace.timesteps[i];
+    let (mut x, mut y, mut n) = (0.0, 0.0, 0usize);
+    for o in &step.objects {
+        if a.objects.contains(&o.object_id()) {
+            let (cx, cy) = o.body.centre();
+            x += cx;
+            y += cy;
+            n += 1;
+        }
+    }
+    (n > 0).then(|| (x / n as f64, y / n as f64))
+}
+
+fn find(parent: &mut [usize], i: usize) -> usize {
+    let mut r = i;
+    while parent[r] != r {
+        r = parent[r];
+    }
+    let mut j = i;
+    while parent[j] != r {
+        let next = parent[j];
+        parent[j] = r;
+        j = next;
+    }
+    r
+}
+
+fn union(parent: &mut [usize], a: usize, b: usize) {
+    let (ra, rb) = (find(parent, a), find(parent, b));
+    if ra != rb {
+        let (lo, hi) = (ra.min(rb), ra.max(rb));
+        parent[hi] = lo;
+    }
+}
+
+/// Replaces the member patterns of every ensemble label among `detectors` by the ensemble annotations
+/// of their traces; patterns of other detectors pass through unchanged (a plain library's annotations
+/// are returned as they are). Ensemble annotations follow the others, by trace then label.
+pub fn combine(detectors: &[Detector], traces: &[Trace], anns: Vec<Annotation>) -> Vec<Annotation> {
+    let ensembles = LabelEnsemble::of_detectors(detectors);
+    if ensembles.is_empty() {
+        return anns;
+    }
+    let member = |a: &Annotation| {
+        ensembles
+            .iter()
+            .any(|e| e.members.iter().any(|m| m.id == a.detector_id))
+    };
+    let (members, mut out): (Vec<Annotation>, Vec<Annotation>) = anns.into_iter().partition(member);
+    let refs: Vec<&Annotation> = members.iter().collect();
+    for trace in traces {
+        for e in &ensembles {
+            out.extend(e.annotate_trace(trace, &refs));
+        }
+    }
+    out
+}
+
+/// The `detectors` rows an ensemble library adds: one pseudo-detector per ensemble label, with the
+/// label's ensemble id, whose "code" lists its members and settings (the ensemble annotations name it).
+pub fn ensemble_detectors(library: &Library) -> Vec<Detector> {
+    LabelEnsemble::of_detectors(&library.detectors)
+        .into_iter()
+        .map(|e| {
+            let mut code = format!(
+                "# ensemble of {} member(s): gamma = {}, eps_s = {}, eps_t = {}\n",
+                e.members.len(),
+                e.gamma,
+                e.eps_s,
+                e.eps_t
+            );
+            for m in &e.members {
+                code.push_str(&format!(
+                    "# member {} weight {} reward {}\n",
+                    m.id, m.weight, m.reward
+                ));
+            }
+            Detector {
+                id: e.id(),
+                label: e.label.clone(),
+                aliases: Vec::new(),
+                env: e.env,
+                source: format!("{}/ensemble:{}", library.name, e.label),
+                code,
+                weight: 1.0,
+                ensemble: None,
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use serde_json::json;
+
+    use super::*;
+    use crate::detect::{EnsembleSettings, Membership, Pattern};
+
+    /// A pooltool trace of 20 steps: ball `cue` at (0.01 s, 0), `1` at (1 + 0.01 s, 2), `2` at
+    /// (2 + 0.01 s, 4) at step s (metres).
+    fn trace() -> Trace {
+        crate::testutil::synthetic_trace(Env::Pooltool, 0, 20, 3)
+    }
+
+    fn ann(d: &Detector, t: &Trace, seq: usize, s: i64, e: i64, objects: &[&str]) -> Annotation {
+        let details: serde_json::Map<String, serde_json::Value> = objects
+            .iter()
+            .map(|o| (o.to_string(), json!({"ball_id": o})))
+            .collect();
+        Annotation::new(
+            d,
+            t,
+            seq,
+            Pattern {
+                label: d.label.clone(),
+                start_step: s,
+                end_step: e,
+                parameters: json!({"object_details": details})
+                    .as_object()
+                    .unwrap()
+                    .clone(),
+                provenance: None,
+                metadata: Some(json!({"seq": seq})),
+            },
+        )
+    }
+
+    /// Members A (w 1, t 0.6), B (w 1, t 0.3), C (w 0.5, t 0.2): votes 0.6, 0.3, 0.1 of 1.0.
+    fn members(gamma: f64, eps_s: f64, eps_t: f64) -> Vec<Detector> {
+        let code = |n: &str| format!("def find_pattern(trace):\n    return []  # {n}\n");
+        let mut ds: Vec<Detector> = ["a", "b", "c"]
+            .iter()
+            .map(|n| Detector::new(Env::Pooltool, "hit", &code(n), n))
+            .collect();
+        let settings = Arc::new(EnsembleSettings {
+            label: "hit".into(),
+            gamma,
+            eps_s,
+            eps_t,
+            k: 3,
+            members: ds.iter().map(|d| d.id.clone()).collect(),
+        });
+        for (d, (w, t)) in ds.iter_mut().zip([(1.0, 0.6), (1.0, 0.3), (0.5, 0.2)]) {
+            d.weight = w;
+            d.ensemble = Some(Arc::new(Membership {
+                settings: settings.clone(),
+                reward: t,
+                run: "evolve".into(),
+                candidate: String::new(),
+                cluster: 0,
+            }));
+        }
+        ds
+    }
+
+    fn patterns(ds: &[Detector], t: &Trace) -> Vec<Annotation> {
+        let (a, b, c) = (&ds[0], &ds[1], &ds[2]);
+        vec![
+            ann(a, t, 0, 5, 5, &["cue"]),
+            ann(b, t, 0, 6, 6, &["cue"]),
+            ann(c, t, 0, 15, 15, &["1"]),
+            ann(a, t, 1, 10, 12, &["1", "2"]),
+            ann(c, t, 1, 10, 10, &["2"]),
+            ann(b, t, 1, 18, 18, &[]),
+            ann(c, t, 2, 18, 19, &[]),
+        ]
+    }
+
+    fn summary(out: &[Annotation]) -> Vec<(i64, i64, f64, Vec<String>)> {
+        out.iter()
+            .map(|a| {
+                let m = &a.metadata.as_ref().unwrap()["ensemble"]["members"];
+                let ids = m
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|v| v.as_str().unwrap().to_string())
+                    .collect();
+                (
+                    a.start_step,
+                    a.end_step,
+                    (a.activation * 1e9).round() / 1e9,
+                    ids,
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn hand_computed_clusters_activations_and_threshold() {
+        let t = trace();
+        let ds = members(0.5, 0.02, 1.0);
+        let ids: Vec<String> = ds.iter().map(|d| d.id.to_string()).collect();
+        let e = &LabelEnsemble::of_detectors(&ds)[0];
+        assert_eq!(e.votes(), vec![0.6, 0.3, 0.1]);
+        let anns = patterns(&ds, &t);
+        let refs: Vec<&Annotation> = anns.iter().collect();
+        // A@5 and B@6: same ball, one step apart, 1 cm apart (≤ 2 cm) → a = 0.9. A@10-12 {1, 2} and
+        // C@10 {2}: centroids (1.6, 3) and (2.1, 4) are 1.118 m apart → A alone, 0.6 > 0.5. C@15 alone
+        // (0.1) and {B, C}@18 (no objects, 0.4) stay below γ.
+        let out = e.annotate_trace(&t, &refs);
+        assert_eq!(
+            summary(&out),
+            vec![
+                (5, 5, 0.9, vec![ids[0].clone(), ids[1].clone()]),
+                (10, 12, 0.6, vec![ids[0].clone()]),
+            ]
+        );
+        assert_eq!(out[0].detector_id, e.id());
+        assert_eq!((out[0].seq, out[1].seq), (0, 1));
+        assert_eq!(out[0].objects, vec!["cue".to_string()]);
+        assert_eq!(
+            out[0].metadata.as_ref().unwrap()["member"],
+            json!({"seq": 0})
+        );
+        assert_eq!(
+            out[1].metadata.as_ref().unwrap()["ensemble"]["leader"],
+            json!(ids[0])
+        );
+        // γ = 0.35: {B, C}@18 (0.4) fires too, led by B (the larger vote), with B's span.
+        let low = LabelEnsemble {
+            gamma: 0.35,
+            ..e.clone()
+        };
+        let out = low.annotate_trace(&t, &refs);
+        assert_eq!(
+            summary(&out)[2],
+            (18, 18, 0.4, vec![ids[1].clone(), ids[2].clone()])
+        );
+        // ε_s = 5 mm (the paper's pooltool value): A@5 and B@6 are 1 cm apart → separate; A fires
+        // alone with 0.6.
+        let tight = LabelEnsemble {
+            eps_s: 0.005,
+            ..e.clone()
+        };
+        assert_eq!(
+            summary(&tight.annotate_trace(&t, &refs))[0],
+            (5, 5, 0.6, vec![ids[0].clone()])
+        );
+        // ε_t = 0: one step apart is too far in time as well.
+        let now = LabelEnsemble {
+            eps_t: 0.0,
+            ..e.clone()
+        };
+        assert_eq!(summary(&now.annotate_trace(&t, &refs)).len(), 2);
+        assert_eq!(summary(&now.annotate_trace(&t, &refs))[0].2, 0.6);
+    }
+
+    #[test]
+    fn a_member_s_own_patterns_stay_separate_detections() {
+        let t = trace();
+        let ds = members(0.5, 0.02, 1.0);
+        // A alone (K = 1 in effect): two hits of the cue ball one step apart stay two annotations.
+        let one = LabelEnsemble {
+            members: vec![LabelEnsemble::of_detectors(&ds)[0].members[0].clone()],
+            ..LabelEnsemble::of_detectors(&ds)[0].clone()
+        };
+        let anns = [
+            ann(&ds[0], &t, 0, 3, 3, &["cue"]),
+            ann(&ds[0], &t, 1, 4, 4, &["cue"]),
+        ];
+        let refs: Vec<&Annotation> = anns.iter().collect();
+        let out = one.annotate_trace(&t, &refs);
+        assert_eq!(
+            out.iter()
+                .map(|a| (a.start_step, a.activation))
+                .collect::<Vec<_>>(),
+            vec![(3, 1.0), (4, 1.0)]
+        );
+        // B@4 is within one step and 1 cm of both A@3 and A@4: one cluster {A@3, A@4, B@4} of
+        // activation 0.9, which reports both of the leader A's patterns.
+        let mut anns = anns.to_vec();
+        anns.push(ann(&ds[1], &t, 0, 4, 4, &["cue"]));
+        let refs: Vec<&Annotation> = anns.iter().collect();
+        let e = &LabelEnsemble::of_detectors(&ds)[0];
+        let got: Vec<(i64, f64)> = e
+            .annotate_trace(&t, &refs)
+            .iter()
+            .map(|a| (a.start_step, (a.activation * 1e9).round() / 1e9))
+            .collect();
+        assert_eq!(got, vec![(3, 0.9), (4, 0.9)]);
+    }
+
+    #[test]
+    fn votes_fall_back_to_weights_then_to_one() {
+        let mut ds = members(0.5, 0.02, 1.0);
+        for d in &mut ds {
+            let mut m = (**d.ensemble.as_ref().unwrap()).clone();
+            m.reward = -1.0;
+            d.ensemble = Some(Arc::new(m));
+        }
+        let e = &LabelEnsemble::of_detectors(&ds)[0];
+        assert_eq!(e.votes(), vec![1.0, 1.0, 0.5]);
+        let zero = LabelEnsemble {
+            members: e
+                .members
+                .iter()
+                .map(|m| Member {
+                    weight: 0.0,
+                    ..m.clone()
+                })
+                .collect(),
+            ..e.clone()
+        };
+        assert_eq!(zero.votes(), vec![1.0; 3]);
+    }
+
+    #[test]
+    fn combine_replaces_member_patterns_and_passes_others_through() {
+        let t = trace();
+        let mut ds = members(0.5, 0.02, 1.0);
+        let plain = Detector::new(
+            Env::Pooltool,
+            "other",
+            "def find_pattern(trace):\n    return []\n",
+            "x",
+        );
+        let mut anns = patterns(&ds, &t);
+        let other = ann(&plain, &t, 0, 3, 4, &["1"]);
+        anns.insert(0, other.clone());
+        ds.push(plain);
+        let out = combine(&ds, std::slice::from_ref(&t), anns);
+        assert_eq!(out.len(), 3);
+        assert_eq!(out[0], other);
+        assert_eq!((out[1].start_step, out[1].label.as_str()), (5, "hit"));
+        assert!((out[2].activation - 0.6).abs() < 1e-12);
+        // A plain library's annotations are returned as they are.
+        let p = vec![other.clone()];
+        assert_eq!(combine(&ds[3..], std::slice::from_ref(&t), p.clone()), p);
+    }
+}
