@@ -132,12 +132,15 @@ pub fn scene(trace: &Trace, config: &PoolConfig) -> Result<Scene, SceneError> {
     }
 }
 
+/// Each object's pose `[x, y, angle]` per timestep, `None` where the object is absent.
+type Poses = Vec<Vec<Option<[f64; 3]>>>;
+
 /// Object ids in first-appearance order and the pose table filled by `pose`.
 fn collect<F>(
     trace: &Trace,
     id_of: impl Fn(&Body) -> Result<String, String>,
     mut pose: F,
-) -> Result<(Vec<String>, Vec<Vec<Option<[f64; 3]>>>), String>
+) -> Result<(Vec<String>, Poses), String>
 where
     F: FnMut(usize, &Body) -> Option<[f64; 3]>,
 {
@@ -487,7 +490,8 @@ fn iphyre_scene(trace: &Trace) -> Result<Scene, String> {
     )?;
     let k = CANVAS / IPHYRE_SCREEN;
     let mut links = Vec::new();
-    let picks: [fn(&(Vec<Value>, String, i64, i64)) -> i64; 2] = [|f| f.2, |f| f.3];
+    type Pick = fn(&(Vec<Value>, String, i64, i64)) -> i64;
+    let picks: [Pick; 2] = [|f| f.2, |f| f.3];
     for pick in picks {
         let mut ends: Vec<(i64, usize)> = first
             .iter()

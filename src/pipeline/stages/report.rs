@@ -219,12 +219,12 @@ impl Stage for ReportStage {
         let mut annotations: HashMap<Env, HashMap<String, Vec<Annotation>>> = HashMap::new();
         for set in &sets {
             let env = set.env;
-            if !annotations.contains_key(&env) {
+            if let std::collections::hash_map::Entry::Vacant(slot) = annotations.entry(env) {
                 let mut per: HashMap<String, Vec<Annotation>> = HashMap::new();
                 for a in read_annotations(run, env, None)? {
                     per.entry(a.trace_id.clone()).or_default().push(a);
                 }
-                annotations.insert(env, per);
+                slot.insert(per);
             }
             let with_truth = accuracy.files.iter().any(|f| f.env == Some(env));
             for trace in read_traces(run, set)? {
