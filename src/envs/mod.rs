@@ -2,8 +2,9 @@
 //!
 //! **Owns:** the [`Environment`] trait (scenes, action validation, simulate → [`Trace`], success,
 //! rendering) and its implementations: [`pool`] (billiards, pooltool 0.6.0 physics) and [`iphyre`]
-//! (I-PHYRE on rapier2d) and [`phyre`] (PHYRE's ball tier on Box2D by default, or rapier2d), which share the rapier state of
-//! [`rapier`]. Their renderers share the pixmap, PNG and strip plumbing of the private `draw` module.
+//! (I-PHYRE on rapier2d by default, or Box2D) and [`phyre`] (PHYRE's ball tier on Box2D by default, or rapier2d), which share the rapier state of
+//! [`rapier`]. Their renderers share the pixmap, PNG and strip plumbing of the private `draw` module; PHYRE's and
+//! I-PHYRE's Box2D worlds share the contact listener of the private `box2d_contacts` module.
 //! **Does not:** write run folders or order stages (`pipeline/`), parse command lines (`cli/`). It uses
 //! only [`crate::trace`], [`crate::rng`] and [`crate::digest`] below it. The physics each simulator
 //! follows is written out in `docs/envs/{pool,phyre,iphyre}.md`.
@@ -18,6 +19,7 @@
 //! assert_eq!(trace.events[1].kind, "physics_stick_ball");
 //! ```
 
+mod box2d_contacts;
 mod draw;
 pub mod iphyre;
 pub mod phyre;

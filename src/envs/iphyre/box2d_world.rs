@@ -37,17 +37,14 @@
 //!   line, and the relative normal velocity is damped by `1 − exp(−c·dt·(1/m₁ + 1/m₂))`.
 
 use std::cell::RefCell;
-use std::collections::HashMap;
 use std::rc::Rc;
 
 use box2d_rs::b2_body::{B2body, B2bodyDef, B2bodyType, BodyPtr};
-use box2d_rs::b2_contact::B2contactDynTrait;
 use box2d_rs::b2_fixture::B2fixtureDef;
 use box2d_rs::b2_joint::B2JointDefEnum;
 use box2d_rs::b2_math::B2vec2;
 use box2d_rs::b2_shape::B2massData;
 use box2d_rs::b2_world::{B2world, B2worldPtr};
-use box2d_rs::b2_world_callbacks::B2contactListener;
 use box2d_rs::b2rs_common::UserDataType;
 use box2d_rs::joints::b2_distance_joint::B2distanceJointDef;
 use box2d_rs::shapes::b2_circle_shape::B2circleShape;
@@ -56,6 +53,8 @@ use box2d_rs::shapes::b2_polygon_shape::B2polygonShape;
 use super::error::Result;
 use super::game::{Game, ObjectKind};
 use super::params::PhysicsParams;
+use crate::envs::box2d_contacts::PairContacts;
+
 use super::world::{ContactChange, Pose};
 
 /// The user data Box2D carries: every body and fixture holds its object index.
@@ -66,54 +65,6 @@ impl UserDataType for Iphyre {
     type Fixture = usize;
     type Body = usize;
     type Joint = ();
-}
-
-/// The contact listener: fixture-level begin/end turned into object-pair changes.
-#[derive(Default)]
-struct Listener {
-    active_pairs: HashMap<[usize; 2], u32>,
-    changes: Vec<ContactChange>,
-}
-
-impl Listener {
-    fn pair(contact: &dyn B2contactDynTrait<Iphyre>) -> Option<[usize; 2]> {
-        let base = contact.get_base();
-        let a = base.get_fixture_a().borrow().get_user_data()?;
-        let b = base.get_fixture_b().borrow().get_user_data()?;
-        (a != b).then(|| [a.min(b), a.max(b)])
-    }
-}
-
-impl B2contactListener<Iphyre> for Listener {
-    fn begin_contact(&mut self, contact: &mut dyn B2contactDynTrait<Iphyre>) {
-        let Some(key) = Self::pair(contact) else {
-            return;
-        };
-        let count = self.active_pairs.entry(key).or_insert(0);
-        *count += 1;
-        if *count == 1 {
-            self.changes.push(ContactChange {
-                began: true,
-                objects: key,
-            });
-        }
-    }
-
-    fn end_contact(&mut self, contact: &mut dyn B2contactDynTrait<Iphyre>) {
-        let Some(key) = Self::pair(contact) else {
-            return;
-        };
-        let count = self.active_pairs.entry(key).or_insert(0);
-        if *count > 0 {
-            *count -= 1;
-            if *count == 0 {
-                self.changes.push(ContactChange {
-                    began: false,
-                    objects: key,
-                });
-            }
-        }
-    }
 }
 
 /// A damped spring between two body centres (pymunk `DampedSpring` with zero anchors).
@@ -130,7 +81,7 @@ pub(super) struct Box2dWorld {
     world: B2worldPtr<Iphyre>,
     bodies_of: Vec<Option<BodyPtr<Iphyre>>>,
     springs: Vec<Spring>,
-    listener: Rc<RefCell<Listener>>,
+    listener: Rc<RefCell<PairContacts>>,
     dt: f32,
     velocity_iterations: i32,
     position_iterations: i32,
@@ -164,7 +115,7 @@ impl Box2dWorld {
         let scale = params.box2d_pixels_per_metre;
         let m = |px: f64| (px / scale) as f32;
         let world = B2world::<Iphyre>::new(B2vec2::new(0.0, m(params.gravity)));
-        let listener = Rc::new(RefCell::new(Listener::default()));
+        let listener = Rc::new(RefCell::new(PairContacts::default()));
         {
             let mut w = world.borrow_mut();
             w.set_contact_listener(listener.clone());
@@ -346,7 +297,11 @@ impl Box2dWorld {
         self.world
             .borrow_mut()
             .step(self.dt, self.velocity_iterations, self.position_iterations);
-        std::mem::take(&mut self.listener.borrow_mut().changes)
+        let changes = std::mem::take(&mut self.listener.borrow_mut().changes);
+        changes
+            .into_iter()
+            .map(|(began, objects)| ContactChange { began, objects })
+            .collect()
     }
 
     /// Removes object `index` with its fixture, contacts and joints (its springs stop acting); returns

@@ -17,16 +17,13 @@
 //! computes (`box2d_compat.rs`).
 
 use std::cell::RefCell;
-use std::collections::HashMap;
 use std::rc::Rc;
 
 use box2d_phyre::Phyre;
 use box2d_rs::b2_body::{B2bodyDef, B2bodyType, BodyPtr};
-use box2d_rs::b2_contact::B2contactDynTrait;
 use box2d_rs::b2_fixture::B2fixtureDef;
 use box2d_rs::b2_math::B2vec2;
 use box2d_rs::b2_world::B2worldPtr;
-use box2d_rs::b2_world_callbacks::B2contactListener;
 use box2d_rs::shapes::b2_circle_shape::B2circleShape;
 use box2d_rs::shapes::b2_polygon_shape::B2polygonShape;
 
@@ -34,6 +31,8 @@ use super::box2d_compat::{Fixture, legacy_gravity_scale, legacy_mass_data};
 use super::error::{PhyreError, Result};
 use super::params::{PIXELS_PER_METRE, PhysicsParams};
 use super::task::{Shape, Task};
+use crate::envs::box2d_contacts::PairContacts;
+
 use super::world::{BodySpec, BodyState, ContactChange};
 
 /// PHYRE's velocity and position iterations (`kVelocityIterations`, `kPositionIterations`).
@@ -48,55 +47,6 @@ fn p2m(px: f64) -> f32 {
     px as f32 / PIXELS_PER_METRE as f32
 }
 
-/// The contact listener: fixture-level begin/end turned into body-pair changes, counted per pair so a
-/// jar touching a ball with two of its parts is one contact.
-#[derive(Default)]
-struct Listener {
-    active_pairs: HashMap<[usize; 2], u32>,
-    changes: Vec<ContactChange>,
-}
-
-impl Listener {
-    fn pair(contact: &dyn B2contactDynTrait<Phyre>) -> Option<[usize; 2]> {
-        let base = contact.get_base();
-        let a = base.get_fixture_a().borrow().get_user_data()?;
-        let b = base.get_fixture_b().borrow().get_user_data()?;
-        (a != b).then(|| [a.min(b), a.max(b)])
-    }
-}
-
-impl B2contactListener<Phyre> for Listener {
-    fn begin_contact(&mut self, contact: &mut dyn B2contactDynTrait<Phyre>) {
-        let Some(key) = Self::pair(contact) else {
-            return;
-        };
-        let count = self.active_pairs.entry(key).or_insert(0);
-        *count += 1;
-        if *count == 1 {
-            self.changes.push(ContactChange {
-                began: true,
-                objects: key,
-            });
-        }
-    }
-
-    fn end_contact(&mut self, contact: &mut dyn B2contactDynTrait<Phyre>) {
-        let Some(key) = Self::pair(contact) else {
-            return;
-        };
-        let count = self.active_pairs.entry(key).or_insert(0);
-        if *count > 0 {
-            *count -= 1;
-            if *count == 0 {
-                self.changes.push(ContactChange {
-                    began: false,
-                    objects: key,
-                });
-            }
-        }
-    }
-}
-
 /// A task's bodies in Box2D.
 pub struct Box2dWorld {
     world: B2worldPtr<Phyre>,
@@ -107,7 +57,7 @@ pub struct Box2dWorld {
     /// Goal radii in metres when both goal bodies are single circles (PHYRE's ball–ball rule).
     two_ball: Option<(f32, f32)>,
     ball_threshold: f32,
-    listener: Rc<RefCell<Listener>>,
+    listener: Rc<RefCell<PairContacts>>,
     dt: f32,
 }
 
@@ -164,7 +114,7 @@ impl Box2dWorld {
     ) -> Result<Box2dWorld> {
         let (dt, gravity) = (params.dt() as f32, -(params.gravity as f32));
         let world = box2d_phyre::new_world(B2vec2::new(0.0, gravity));
-        let listener = Rc::new(RefCell::new(Listener::default()));
+        let listener = Rc::new(RefCell::new(PairContacts::default()));
         {
             let mut w = world.borrow_mut();
             w.set_contact_listener(listener.clone());
@@ -274,7 +224,13 @@ impl Box2dWorld {
             VELOCITY_ITERATIONS,
             POSITION_ITERATIONS,
         );
-        out.append(&mut self.listener.borrow_mut().changes);
+        out.extend(
+            self.listener
+                .borrow_mut()
+                .changes
+                .drain(..)
+                .map(|(began, objects)| ContactChange { began, objects }),
+        );
     }
 
     /// PHYRE's goal test (`isTaskInSolvedState`): for two goal balls, centre distance < r₁ + r₂ + 0.1 px
