@@ -170,3 +170,23 @@ pub fn import_round_trip(
     }
     Ok(accepted)
 }
+
+/// Asserts that `docs/schema.md`'s section `## <table>` lists exactly `schema`'s columns, in order,
+/// followed by the `env` partition column (the check every table-defining module runs on its tables).
+#[cfg(test)]
+pub(crate) fn assert_documented_columns(table: &str, schema: &arrow::datatypes::Schema) {
+    let doc = include_str!("../docs/schema.md");
+    let section = doc
+        .split(&format!("\n## {table}\n"))
+        .nth(1)
+        .unwrap_or_else(|| panic!("docs/schema.md has no section {table}"));
+    let section = section.split("\n## ").next().unwrap_or_default();
+    let documented: Vec<&str> = section
+        .lines()
+        .filter(|l| l.starts_with("| `"))
+        .filter_map(|l| l.split('`').nth(1))
+        .collect();
+    let mut expected: Vec<String> = schema.fields().iter().map(|f| f.name().clone()).collect();
+    expected.push(crate::trace::schema::ENV_COLUMN.to_string());
+    assert_eq!(documented, expected, "section {table}");
+}

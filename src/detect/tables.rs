@@ -278,26 +278,12 @@ mod tests {
     /// `docs/schema.md` lists exactly the columns of each detector table, in order, plus `env`.
     #[test]
     fn docs_match_the_schemas() {
-        let doc = include_str!("../../docs/schema.md");
         for (table, schema) in [
             ("detectors", detectors_schema()),
             ("detector_calls", calls_schema()),
             ("annotations", annotations_schema()),
         ] {
-            let section = doc
-                .split(&format!("\n## {table}\n"))
-                .nth(1)
-                .unwrap_or_else(|| panic!("docs/schema.md has no section {table}"));
-            let section = section.split("\n## ").next().unwrap_or_default();
-            let documented: Vec<&str> = section
-                .lines()
-                .filter(|l| l.starts_with("| `"))
-                .filter_map(|l| l.split('`').nth(1))
-                .collect();
-            let mut expected: Vec<String> =
-                schema.fields().iter().map(|f| f.name().clone()).collect();
-            expected.push("env".into());
-            assert_eq!(documented, expected, "section {table}");
+            crate::testutil::assert_documented_columns(table, &schema);
         }
     }
 }

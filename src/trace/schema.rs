@@ -142,26 +142,8 @@ mod tests {
     /// `docs/schema.md` lists exactly the columns of every trace table, in order, plus `env`.
     #[test]
     fn docs_match_the_schemas() {
-        let doc = include_str!("../../docs/schema.md");
         for table in TRACE_TABLES {
-            let section = doc
-                .split(&format!("\n## {table}\n"))
-                .nth(1)
-                .unwrap_or_else(|| panic!("docs/schema.md has no section {table}"));
-            let section = section.split("\n## ").next().unwrap();
-            let documented: Vec<&str> = section
-                .lines()
-                .filter(|l| l.starts_with("| `"))
-                .map(|l| l.split('`').nth(1).unwrap())
-                .collect();
-            let mut expected: Vec<String> = table_schema(table)
-                .unwrap()
-                .fields()
-                .iter()
-                .map(|f| f.name().clone())
-                .collect();
-            expected.push(ENV_COLUMN.to_string());
-            assert_eq!(documented, expected, "docs/schema.md, table {table}");
+            crate::testutil::assert_documented_columns(table, &table_schema(table).unwrap());
         }
     }
 }
