@@ -28,7 +28,7 @@
 //! **Owns:** the linking rule, the cluster activation and the ensemble annotations. **Does not:** run
 //! detectors (`detect::WorkerPool`) or choose members (`ensemble::kmeans`, `ensemble::represent`).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 
 use serde_json::json;
 
@@ -307,10 +307,17 @@ pub fn combine(detectors: &[Detector], traces: &[Trace], anns: Vec<Annotation>) 
             .any(|e| e.members.iter().any(|m| m.id == a.detector_id))
     };
     let (members, mut out): (Vec<Annotation>, Vec<Annotation>) = anns.into_iter().partition(member);
-    let refs: Vec<&Annotation> = members.iter().collect();
+    // Member patterns grouped by trace once, so a batch costs its patterns, not traces × patterns.
+    let mut by_trace: HashMap<&str, Vec<&Annotation>> = HashMap::new();
+    for a in &members {
+        by_trace.entry(a.trace_id.as_str()).or_default().push(a);
+    }
     for trace in traces {
+        let Some(refs) = by_trace.get(trace.trace_id.as_str()) else {
+            continue;
+        };
         for e in &ensembles {
-            out.extend(e.annotate_trace(trace, &refs));
+            out.extend(e.annotate_trace(trace, refs));
         }
     }
     out
