@@ -61,8 +61,15 @@ fn ensemble_of(base: &Library, k: usize, dir: &Path) -> Library {
         })
         .collect();
     let path = dir.join(format!("ensemble-k{k}"));
-    write(&path, &format!("bench-k{k}"), Env::Pooltool, "ensemble bench", &labels, true)
-        .expect("the ensemble library is written");
+    write(
+        &path,
+        &format!("bench-k{k}"),
+        Env::Pooltool,
+        "ensemble bench",
+        &labels,
+        true,
+    )
+    .expect("the ensemble library is written");
     Library::load(&path).expect("the ensemble library loads")
 }
 
@@ -89,8 +96,9 @@ fn main() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(400);
-    let base = Library::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("data/libraries/pooltool"))
-        .expect("the built-in library loads");
+    let base =
+        Library::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("data/libraries/pooltool"))
+            .expect("the built-in library loads");
     let tmp = std::env::temp_dir().join(format!("annotrace-ensemble-bench-{}", std::process::id()));
     let mut libs = vec![("single".to_string(), base.clone())];
     for k in [2, 4] {
