@@ -14,7 +14,8 @@
 //! | 70 | `Internal` | a bug in annotrace (please report it) |
 //!
 //! The environment is read here only: `ANNOTRACE_LOG` (log filter, e.g. `debug`) and `ANNOTRACE_FAULT`
-//! (a test switch that stops a run on purpose, see `docs/pipelines.md`); the LLM endpoint's
+//! (a test switch that stops a run on purpose, see `docs/pipelines.md`), `ANNOTRACE_PYTHON` (the
+//! detector workers' interpreter, e.g. `pypy3`; default `python3` on the `PATH`); the LLM endpoint's
 //! `ANNOTRACE_LLM_BASE_URL`, `ANNOTRACE_LLM_MODEL`, `ANNOTRACE_LLM_API_KEY` and `ANNOTRACE_PROMPTS`
 //! are read in `llm_args.rs` ([`llm_args::LlmArgs`], see `docs/llm.md`).
 
@@ -192,6 +193,9 @@ pub fn main() -> ExitCode {
     quiet_on_closed_pipe();
     let cli = Cli::parse();
     init_logging(cli.quiet);
+    if let Some(python) = std::env::var_os("ANNOTRACE_PYTHON").filter(|p| !p.is_empty()) {
+        annotrace::detect::set_default_python(python.into());
+    }
     let result = match cli.command {
         Command::Run(a) => run::run(a, cli.quiet),
         Command::Stages(a) => stages::run(a),

@@ -4,10 +4,12 @@
 //!
 //! Layers, outermost first; each is tested by a hostile detector in `tests/it/sandbox.rs`:
 //! 1. **Process**: the interpreter is resolved once to its real executable (no shell shims), started
-//!    with `-s -S -B -P` and an empty environment plus `PYTHONHASHSEED=0` and `LC_ALL=C.UTF-8`. (`-I`
-//!    would also ignore `PYTHONHASHSEED`; with the environment emptied by us, `-s -P` gives the rest of
-//!    `-I`, and a fixed hash seed makes set iteration, and so detector output, reproducible.) Working
-//!    folder `/`; the worker dies with its parent (`PR_SET_PDEATHSIG`).
+//!    with `-s -S -B` and an empty environment plus `PYTHONHASHSEED=0` and `LC_ALL=C.UTF-8`; the
+//!    worker's first statement drops the working folder from `sys.path`, which is what CPython 3.11's
+//!    `-P` does, for every interpreter (PyPy has no `-P`). (`-I` would also ignore `PYTHONHASHSEED`;
+//!    with the environment emptied by us, `-s` and that first statement give the rest of `-I`, and a
+//!    fixed hash seed makes set iteration, and so detector output, reproducible.) Working folder `/`;
+//!    the worker dies with its parent (`PR_SET_PDEATHSIG`).
 //! 2. **Resource limits** (`setrlimit` before `exec`): address space, file size 0, no core files,
 //!    few file descriptors, no new processes (not enforced by Linux for root; seccomp covers it), and
 //!    CPU seconds, which the worker re-arms before every call.
@@ -35,8 +37,11 @@ use super::error::DetectError;
 pub struct SandboxLimits {
     /// Worker processes. Default: the number of cores (`std::thread::available_parallelism`).
     pub workers: usize,
-    /// The Python interpreter. Default `None`: `python3` on the `PATH`, resolved once to its real
-    /// executable (`sys.executable`) so that shims (pyenv) do not run inside the sandbox.
+    /// The Python interpreter (a path, or a name looked up on the `PATH`), resolved once to its real
+    /// executable (`sys.executable`) so that shims (pyenv) do not run inside the sandbox. Default:
+    /// the process-wide interpreter set by [`set_default_python`] (the command line's
+    /// `ANNOTRACE_PYTHON`), else `None`, meaning `python3` on the `PATH`. CPython 3.8+ and PyPy 3.9+
+    /// run the worker unchanged, with the same sandbox layers (`docs/detectors.md`).
     pub python: Option<PathBuf>,
     /// Wall-clock limit of one call (compiling or running a detector on one trace). Default 10 s: the
     /// paper's detectors take milliseconds per trace; a call past this is an infinite loop.
@@ -74,7 +79,7 @@ impl Default for SandboxLimits {
             workers: std::thread::available_parallelism()
                 .map(|n| n.get())
                 .unwrap_or(1),
-            python: None,
+            python: DEFAULT_PYTHON.get().cloned(),
             call_timeout: Duration::from_secs(10),
             memory_bytes: 2 << 30,
             max_open_files: 16,
@@ -127,23 +132,40 @@ impl SandboxLayers {
     }
 }
 
-/// Resolves the interpreter: the configured path, or `python3` on the `PATH` asked for its real
+/// The interpreter [`SandboxLimits::default`] uses, set once per process (the command line sets it
+/// from `ANNOTRACE_PYTHON`).
+static DEFAULT_PYTHON: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+
+/// Sets the interpreter every later [`SandboxLimits::default`] names (a path, or a name such as
+/// `pypy3` looked up on the `PATH`). A machine setting, like which `python3` is on the `PATH`: it is
+/// not part of any stage's fingerprint, since the worker's output does not depend on it. Only the
+/// first call counts; returns whether this one did.
+pub fn set_default_python(python: PathBuf) -> bool {
+    DEFAULT_PYTHON.set(python).is_ok()
+}
+
+/// Resolves the interpreter: the configured one (else `python3` on the `PATH`) asked for its real
 /// executable.
 pub(crate) fn resolve_python(limits: &SandboxLimits) -> Result<PathBuf, DetectError> {
-    if let Some(p) = &limits.python {
-        return Ok(p.clone());
-    }
-    let out = Command::new("python3")
+    let program = limits
+        .python
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("python3"));
+    let tried = match &limits.python {
+        Some(p) => p.display().to_string(),
+        None => "python3 on the PATH".into(),
+    };
+    let out = Command::new(&program)
         .args(["-c", "import sys; print(sys.executable)"])
         .output()
         .map_err(|e| DetectError::NoPython {
-            tried: "python3 on the PATH".into(),
+            tried: tried.clone(),
             message: e.to_string(),
         })?;
     let path = String::from_utf8_lossy(&out.stdout).trim().to_string();
     if !out.status.success() || path.is_empty() {
         return Err(DetectError::NoPython {
-            tried: "python3 on the PATH".into(),
+            tried,
             message: String::from_utf8_lossy(&out.stderr).into_owned(),
         });
     }
@@ -164,7 +186,9 @@ pub(crate) fn worker_command(python: &PathBuf, limits: &SandboxLimits, script: &
         "cpu_seconds": limits.call_timeout.as_secs_f64().ceil() + 1.0,
     });
     let mut cmd = Command::new(python);
-    cmd.args(["-s", "-S", "-B", "-P", "-c", script])
+    // No `-P` (CPython 3.11+ only; PyPy 3.9 refuses it): the worker drops the working folder's entry
+    // from `sys.path` as its first statement, which is what `-P` does.
+    cmd.args(["-s", "-S", "-B", "-c", script])
         .arg(config.to_string())
         .env_clear()
         .env("PYTHONHASHSEED", "0")

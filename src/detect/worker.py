@@ -1,6 +1,6 @@
 # annotrace detector worker: runs untrusted `find_pattern(trace)` functions for the Rust side.
 #
-# Started by src/detect/worker.rs as `python3 -I -S -B -c <this file>` with a scrubbed environment and
+# Started by src/detect/worker.rs as `python3 -s -S -B -c <this file>` with a scrubbed environment and
 # resource limits already applied (RLIMIT_AS, RLIMIT_FSIZE=0, RLIMIT_NPROC, RLIMIT_NOFILE, RLIMIT_CORE=0,
 # RLIMIT_CPU). Standard library only. Order of work, which matters:
 #   1. import every module the worker will ever need (nothing may be imported after step 3);
@@ -27,6 +27,13 @@
 # Before every request and call at least cpu_seconds of CPU time remain below the soft RLIMIT_CPU (re-armed
 # to twice that when fewer do), a backstop behind the Rust side's wall-clock timer.
 # An error reply is {"ok": false, "error": {"category", "message", "line", "column", ...}}.
+import sys
+
+# What `-P` does on CPython 3.11+, for every interpreter (PyPy and older CPythons lack the flag): no
+# entry for the working folder on the module path, so no file there can stand in for a module imported
+# below. `sys` is built in, so importing it reads no file.
+sys.path[:] = [p for p in sys.path if p]
+
 import array
 import ast
 import builtins as _builtins
@@ -37,7 +44,6 @@ import marshal
 import os
 import resource
 import struct
-import sys
 import time
 
 try:
@@ -346,6 +352,7 @@ def _freeze(d):
 
 TRACES = {}
 DETECTORS = {}
+_GC_FREEZE = getattr(gc, "freeze", None)
 
 
 def load_pool_columns(frame):
@@ -619,8 +626,10 @@ def serve():
                         del trace
                 finally:
                     gc.enable()
-                # The cached trace never holds cycles: keep it out of every later collection.
-                gc.freeze()
+                # The cached trace never holds cycles: keep it out of every later collection
+                # (CPython; PyPy's generational collector has no `freeze` and does not need it).
+                if _GC_FREEZE is not None:
+                    _GC_FREEZE()
                 _reply({"ok": True, "build": time.perf_counter() - b0})
             elif kind == b"E":
                 msg = json.loads(frame[1:])
@@ -664,7 +673,9 @@ def main():
     sys.setrecursionlimit(int(CONFIG.get("recursion_limit", 2000)))
     layers = _lock_down()
     layers["python_guard"] = PYTHON_GUARD
-    _reply({"ok": True, "ready": True, "layers": layers, "python": sys.version.split()[0]})
+    impl = sys.implementation.name
+    version = sys.version.split()[0] if impl == "cpython" else "%s %s" % (impl, sys.version.split()[0])
+    _reply({"ok": True, "ready": True, "layers": layers, "python": version})
     serve()
 
 

@@ -140,6 +140,16 @@ pub struct Timings {
     pub failed_calls: u64,
     /// Reward programs that raised a runtime error (scored 0).
     pub program_errors: u64,
+    /// Samples whose action the environment refused (a PHYRE ball overlapping an object or
+    /// crossing the border: `INVALID_INPUT`). They score 0 under both rewards and are never
+    /// annotated or scored by the program.
+    pub invalid_actions: u64,
+}
+
+/// Whether the environment refused the action of `trace` (PHYRE's `INVALID_INPUT`): the trace holds
+/// the scene without the user's ball, so no reward program or rule is asked about it.
+pub fn invalid_action(trace: &Trace) -> bool {
+    trace.outcome.terminal_status == "INVALID_INPUT"
 }
 
 struct State {
@@ -194,15 +204,20 @@ pub fn run_chains<P: Problem>(
             .map(|(s, &l)| l.then(|| s.annealer.propose()))
             .collect();
         let t0 = Instant::now();
-        let traces = simulate_all(problem, chains, &xs, step);
+        let mut traces = simulate_all(problem, chains, &xs, step);
         timings.simulate_s += t0.elapsed().as_secs_f64();
         let n_live = live.iter().filter(|&&l| l).count() as u64;
         timings.failed_simulations += n_live - traces.iter().flatten().count() as u64;
+        timings.invalid_actions += traces
+            .iter()
+            .flatten()
+            .filter(|t| invalid_action(t))
+            .count() as u64;
 
         // Annotate the dense chains' traces, one pool call per goal.
         let t1 = Instant::now();
         let anns = match pool {
-            Some(pool) => annotate_dense(pool, goals, chains, &traces, &mut timings),
+            Some(pool) => annotate_dense(pool, goals, chains, &mut traces, &mut timings),
             None => vec![Vec::new(); chains.len()],
         };
         timings.annotate_s += t1.elapsed().as_secs_f64();
@@ -257,42 +272,51 @@ fn simulate_all<P: Problem>(
 }
 
 /// The annotations of the dense chains' traces (one pool call per goal, with that goal's
-/// detectors), by chain; sparse chains and failed simulations get none.
+/// detectors), by chain; sparse chains and failed simulations get none. The traces are moved into
+/// each goal's batch and back (no copy of a trace per sample).
 fn annotate_dense<S>(
     pool: &WorkerPool,
     goals: &[GoalTask],
     chains: &[Chain<S>],
-    traces: &[Option<Trace>],
+    traces: &mut [Option<Trace>],
     timings: &mut Timings,
 ) -> Vec<Vec<Annotation>> {
     let mut anns: Vec<Vec<Annotation>> = vec![Vec::new(); chains.len()];
     for (g, goal) in goals.iter().enumerate() {
         let idx: Vec<usize> = (0..chains.len())
             .filter(|&i| {
-                chains[i].goal == g && chains[i].kind == RewardKind::Dense && traces[i].is_some()
+                chains[i].goal == g
+                    && chains[i].kind == RewardKind::Dense
+                    && traces[i].as_ref().is_some_and(|t| !invalid_action(t))
             })
             .collect();
         if idx.is_empty() {
             continue;
         }
-        let batch: Vec<Trace> = idx.iter().filter_map(|&i| traces[i].clone()).collect();
+        let batch: Vec<Trace> = idx.iter().filter_map(|&i| traces[i].take()).collect();
         let (found, failed) = annotate(pool, &goal.detectors, &batch);
         timings.failed_calls += failed as u64;
         timings.dense_samples += idx.len() as u64;
+        let chain_of: std::collections::HashMap<&str, usize> = batch
+            .iter()
+            .zip(&idx)
+            .map(|(t, &i)| (t.trace_id.as_str(), i))
+            .collect();
         for a in found {
-            if let Some(&i) = idx
-                .iter()
-                .find(|&&i| traces[i].as_ref().is_some_and(|t| t.trace_id == a.trace_id))
-            {
+            if let Some(&i) = chain_of.get(a.trace_id.as_str()) {
                 anns[i].push(a);
             }
+        }
+        for (t, &i) in batch.into_iter().zip(&idx) {
+            traces[i] = Some(t);
         }
     }
     anns
 }
 
 /// Every chain's (reward, verified success, program error) for its trace: sparse chains score
-/// the goal's rule, dense chains its reward program over the annotations.
+/// the goal's rule, dense chains its reward program over the annotations; a failed simulation or
+/// an invalid action (`invalid_action`) scores 0 and does not verify.
 fn score_all<S: Sync>(
     goals: &[GoalTask],
     chains: &[Chain<S>],
@@ -306,6 +330,9 @@ fn score_all<S: Sync>(
             let Some(trace) = &traces[i] else {
                 return (0.0, false, false);
             };
+            if invalid_action(trace) {
+                return (0.0, false, false);
+            }
             let goal = &goals[c.goal];
             let verified = goal.rule.holds(trace).unwrap_or(false);
             match c.kind {

@@ -18,7 +18,9 @@ pub mod problem;
 pub mod scenes;
 
 pub use anneal::{Annealer, Dim, Schedule};
-pub use chains::{Chain, CheckpointRow, GoalTask, RewardKind, Settings, Timings, run_chains};
+pub use chains::{
+    Chain, CheckpointRow, GoalTask, RewardKind, Settings, Timings, invalid_action, run_chains,
+};
 pub use problem::{IphyreProblem, PhyreProblem, PoolProblem, Problem, ShotBounds};
 pub use scenes::{Layout, scenes};
 

@@ -370,3 +370,94 @@ fn synthesise_and_optimise_refuse_what_they_cannot_do_offline() {
         .code(2)
         .stderr_has("is for iphyre, but this stage optimises phyre");
 }
+
+/// A PHYRE action the environment refuses (`INVALID_INPUT`: the trace has no red ball) scores 0 under
+/// both rewards, is counted as an invalid action rather than a program error, and never reaches the
+/// detector workers; a program naming the red ball used to raise a runtime error on it.
+#[test]
+fn an_invalid_phyre_placement_scores_zero_without_a_program_error() {
+    use annotrace::envs::EnvError;
+    use annotrace::envs::phyre::{PhyreEnv, Task, TaskSet};
+    use annotrace::optimise::{Dim, PhyreProblem, Problem, invalid_action};
+    use annotrace::trace::{Env, Trace};
+    use serde_json::Value;
+
+    /// PHYRE with every point mapped to one action the environment refuses.
+    struct Refused(PhyreProblem, [f64; 3]);
+    impl Problem for Refused {
+        type Scene = Task;
+        fn env(&self) -> Env {
+            self.0.env()
+        }
+        fn dims(&self, scene: &Task) -> Vec<Dim> {
+            self.0.dims(scene)
+        }
+        fn simulate(&self, scene: &Task, _x: &[f64]) -> Result<Trace, EnvError> {
+            self.0.simulate(scene, &self.1)
+        }
+        fn scene_id(&self, scene: &Task) -> String {
+            self.0.scene_id(scene)
+        }
+        fn action_json(&self, scene: &Task, x: &[f64]) -> Value {
+            self.0.action_json(scene, x)
+        }
+        fn describe(&self, scene: &Task) -> String {
+            self.0.describe(scene)
+        }
+        fn strip(&self, scene: &Task, trace: &Trace, k: usize) -> Result<Vec<u8>, EnvError> {
+            self.0.strip(scene, trace, k)
+        }
+    }
+    let phyre = PhyreProblem {
+        env: PhyreEnv::default(),
+    };
+    let task = TaskSet::default_tasks().unwrap().get("00001:000").unwrap();
+    // The largest ball on a grid over the scene, at the first spot where it overlaps an object.
+    let refused = (0..=10)
+        .flat_map(|i| (0..=10).map(move |j| [i as f64 / 10.0, j as f64 / 10.0, 1.0]))
+        .find(|x| invalid_action(&phyre.simulate(&task, x).unwrap()))
+        .expect("some placement overlaps an object");
+    let problem = Refused(phyre, refused);
+    let lib = Library::load(&repo().join("data/libraries/phyre")).unwrap();
+    let program = compile(
+        r#"NEARBY_AT(OBJECT_ID("red", "ball"), 60.0, 220.0, 0.0)"#,
+        &Schema::from_library(&lib),
+    )
+    .unwrap();
+    let goal = GoalTask {
+        id: "toy".into(),
+        detectors: detectors_for(&lib, &labels_used(&program)),
+        program,
+        rule: Rule::parse("NOT(SUCCESS())").unwrap(),
+    };
+    let chains: Vec<Chain<Task>> = [RewardKind::Dense, RewardKind::Sparse]
+        .into_iter()
+        .map(|kind| Chain {
+            goal: 0,
+            scene: task.clone(),
+            seed: 3,
+            kind,
+            budget: 4,
+        })
+        .collect();
+    let s = Settings {
+        problem,
+        schedule: Schedule::default(),
+        checkpoint: None,
+    };
+    let pool = WorkerPool::new(SandboxLimits {
+        workers: 1,
+        ..SandboxLimits::default()
+    })
+    .unwrap();
+    let (rows, timings) = run_chains(&s, &[goal], &chains, Some(&pool), |_| {}).unwrap();
+    assert_eq!(rows.len(), 2);
+    for r in &rows {
+        // The rule would hold on the refused trace (it is not solved), but nothing is asked of it.
+        assert_eq!((r.best_reward, r.success), (0.0, false), "{r:?}");
+    }
+    assert_eq!(timings.samples, 8);
+    assert_eq!(timings.invalid_actions, 8);
+    assert_eq!(timings.program_errors, 0);
+    assert_eq!(timings.dense_samples, 0);
+}

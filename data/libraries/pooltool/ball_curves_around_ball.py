@@ -22,17 +22,28 @@ def _carried(p, q, tp, tq, t):
                          float(vp[1]) + f * (float(vq[1]) - float(vp[1])))}
 
 
-def _ball_events(trace, bid):
-    out = []
+def _ball_events(trace):
+    """Times of each ball's physics events, sorted, by ball id (one pass over the event log)."""
+    out = {}
     for e in trace.get("events", []):
         p = e.get("payload") or {}
         k = e.get("kind", "")
         if not k.startswith("physics_") or e.get("t") is None:
             continue
-        balls = _roles(k, p)[0]
-        if bid in balls:
-            out.append(float(e["t"]))
-    return sorted(out)
+        t = float(e["t"])
+        for bid in set(_roles(k, p)[0]):
+            out.setdefault(bid, []).append(t)
+    for times in out.values():
+        times.sort()
+    return out
+
+
+def _by_id(step):
+    """The step's objects by ball id (the first object of each id, as `_state` finds it)."""
+    m = {}
+    for o in step.get("objects", []):
+        m.setdefault(str(o.get("ball_id")), o)
+    return m
 
 
 def _unit(o):
@@ -54,8 +65,9 @@ def find_pattern(trace):
             touched.add((ag[0], ag[1]))
             touched.add((ag[1], ag[0]))
     out = []
+    events = _ball_events(trace) if ids else {}
     for bid in ids:
-        times = _ball_events(trace, bid) + [ts[-1]]
+        times = events.get(bid, []) + [ts[-1]]
         for t0, t1 in zip(times, times[1:]):
             a, b = _at(ts, t0) + 1, _at(ts, t1)
             if b - a < 2 or t1 - t0 < MIN_S - 1e-9:
@@ -74,11 +86,15 @@ def find_pattern(trace):
                 continue
             r = float(oa.get("radius") or 0.028575)
             best = None
+            maps = None
             for other in ids:
                 if other == bid or (bid, other) in touched:
                     continue
+                if maps is None:
+                    maps = [_by_id(steps[k]) for k in range(a, b + 1)]
                 for k in range(a, b + 1):
-                    p, q = _state(trace, k, bid), _state(trace, k, other)
+                    m = maps[k - a]
+                    p, q = m.get(bid), m.get(other)
                     if p is None or q is None or q.get("motion_state") == "pocketed":
                         continue
                     d = ((p["position"][0] - q["position"][0]) ** 2 + (p["position"][1] - q["position"][1]) ** 2) ** 0.5

@@ -775,6 +775,7 @@ impl OptimiseStage {
                 "simulate_s": timings.simulate_s, "annotate_s": timings.annotate_s,
                 "score_s": timings.score_s, "failed_simulations": timings.failed_simulations,
                 "failed_calls": timings.failed_calls, "program_errors": timings.program_errors,
+                "invalid_actions": timings.invalid_actions,
             },
         });
         ctx.finish_shard(shard, &record)?;
