@@ -505,13 +505,13 @@ impl EnsembleStage {
     fn calibrate_identification(
         &self,
         ctx: &StageContext<'_>,
-        seed: u64,
         start: &[LabelEnsemble],
         rho: &HeldoutRho<'_>,
         calib: &[Trace],
         anns: &[crate::detect::Annotation],
         settings: CalibrationSettings,
     ) -> Result<crate::ensemble::calibrate::Calibrated, StageError> {
+        let seed = settings.seed;
         let m = self.model(ctx, seed)?;
         let summariser = LlmSummariser {
             client: m.client.clone(),
@@ -806,7 +806,7 @@ impl Stage for EnsembleStage {
                             hint: ": simulate more traces or lower `options`",
                         });
                     }
-                    self.calibrate_identification(ctx, seed, &start, &rho, &calib, &anns, settings)?
+                    self.calibrate_identification(ctx, &start, &rho, &calib, &anns, settings)?
                 } else {
                     let mut objective = HeldoutRho::new(&calib, &anns, &dx, bins, self.p.dp);
                     calibrate(&start, &rho, &mut objective, settings)
