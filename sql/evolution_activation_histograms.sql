@@ -9,5 +9,6 @@ SELECT run_stage,
        avg(value)      AS share_mean,
        stddev(value)   AS share_std
 FROM evolution_histograms
+WHERE split IN ('train', 'holdout')
 GROUP BY run_stage, label, split, bin
 ORDER BY run_stage, label, split, bin

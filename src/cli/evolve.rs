@@ -8,7 +8,7 @@
 
 use std::path::PathBuf;
 
-use annotrace::fitness::Dp;
+use annotrace::fitness::{Dp, Dx};
 use annotrace::llm::LlmSettings;
 use annotrace::pipeline::stages::evolve::{EvolveParams, EvolveSummary, KIND, ProposerChoice};
 use annotrace::search::Strategy;
@@ -64,6 +64,17 @@ pub struct Args {
     /// cross-entropy (the paper's wording).
     #[arg(long, default_value_t = D.dp)]
     dp: Dp,
+    /// Trace distance d_x: positions (the paper's) or invariant (each matched object's trajectory
+    /// aligned by a rigid Procrustes fit first).
+    #[arg(long, default_value_t = D.dx)]
+    dx: Dx,
+    /// Accuracy guard: also reject a best detector of an event-grounded label whose F1 against the
+    /// simulator's ground truth on the held-out traces fell by more than --max-f1-drop.
+    #[arg(long)]
+    accuracy_guard: bool,
+    /// The largest F1 drop the accuracy guard accepts.
+    #[arg(long, default_value_t = D.max_f1_drop)]
+    max_f1_drop: f64,
     /// Proposals requested at once.
     #[arg(long, default_value_t = D.parallel)]
     parallel: u64,
@@ -157,6 +168,9 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
         delta: a.delta,
         allow_nonpositive_rho: a.allow_nonpositive_rho,
         dp: a.dp,
+        dx: a.dx,
+        accuracy_guard: a.accuracy_guard,
+        max_f1_drop: a.max_f1_drop,
         parallel: a.parallel,
         repair_attempts: a.repair_attempts,
         max_traces: a.max_traces,
@@ -203,8 +217,11 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
         let held = l
             .holdout_rho
             .map_or_else(|| "–".to_string(), |x| format!("{x:.4}"));
+        let f1 = l.guard.map_or(String::new(), |g| {
+            format!("  (F1 {:.3} → {:.3})", g.seed_f1, g.best_f1)
+        });
         println!(
-            "  {:<28} ν {:>8.4} → {:>8.4}  (ρ {:.4}, η {:.4}, λ {:.4}, ψ {:.4}; held-out ρ {held})  {} candidates  {}",
+            "  {:<28} ν {:>8.4} → {:>8.4}  (ρ {:.4}, η {:.4}, λ {:.4}, ψ {:.4}; held-out ρ {held})  {} candidates  {}{f1}",
             l.label,
             l.seed_nu,
             l.best_nu,

@@ -11,12 +11,74 @@
 //! ([`scene_scale`]) first, so d_x is a fraction of the scene in every environment (pooltool metres,
 //! PHYRE's 256-unit scene, I-PHYRE's 600-pixel scene) and figures compare across environments.
 //! A pair with no matched object (or an empty trace) has no distance (`NaN`) and is left out of ρ.
+//!
+//! **Variants** ([`Dx`]). `positions` (the paper's d_x, the default) compares matched objects where they
+//! are. `invariant` (beyond the paper, which names d_x's lack of translation and rotation invariance as
+//! a limitation) first aligns each matched object's trajectory in one trace to its trajectory in the
+//! other by a rigid 2-D Procrustes fit — the translation that matches their centroids over the frames
+//! where both exist, then the rotation (no reflection, no scaling) that minimises the squared
+//! differences, θ = atan2(Σ(x_a y_b − y_a x_b), Σ(x_a x_b + y_a y_b)) on the centred points — and then
+//! measures as `positions` does. The same bounce at two places of the table, or in two directions, is
+//! then 0 apart; only the shape and timing of each object's motion count. Each object gets its own
+//! fit, so the relative placement of objects is not compared either.
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 
 use std::collections::BTreeMap;
 
 use rayon::prelude::*;
 
 use crate::trace::{Env, Trace};
+
+/// Which trace distance d_x is (see the module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum Dx {
+    /// Matched objects' centres where they are (the paper's d_x).
+    #[default]
+    Positions,
+    /// Each matched object's trajectory aligned to its counterpart by a rigid Procrustes fit first
+    /// (translation and rotation invariant).
+    Invariant,
+}
+
+impl Dx {
+    /// Every variant, in documentation order.
+    pub const ALL: [Dx; 2] = [Dx::Positions, Dx::Invariant];
+
+    /// `positions` or `invariant`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Dx::Positions => "positions",
+            Dx::Invariant => "invariant",
+        }
+    }
+
+    /// d_x of two resampled traces under this variant.
+    pub fn distance(self, a: &Resampled, b: &Resampled) -> f64 {
+        match self {
+            Dx::Positions => trace_distance(a, b),
+            Dx::Invariant => invariant_distance(a, b),
+        }
+    }
+}
+
+impl std::fmt::Display for Dx {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl std::str::FromStr for Dx {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Dx::ALL
+            .into_iter()
+            .find(|d| d.as_str() == s)
+            .ok_or_else(|| format!("unknown d_x {s:?}: expected positions or invariant"))
+    }
+}
 
 /// Default number of normalised-time samples per trace.
 pub const DEFAULT_SAMPLES: usize = 64;
@@ -114,14 +176,9 @@ pub fn resample(trace: &Trace, samples: usize) -> Resampled {
     }
 }
 
-/// d_x between two resampled traces (same `samples`): the mean over frames of the mean distance of
-/// matched objects; `NaN` when no object is matched at any frame.
-pub fn trace_distance(a: &Resampled, b: &Resampled) -> f64 {
-    if a.samples == 0 || a.samples != b.samples {
-        return f64::NAN;
-    }
+/// Matched columns of `a` and `b` (indices into their sorted object lists), by a merge.
+fn matched(a: &Resampled, b: &Resampled) -> Vec<(usize, usize)> {
     let (ma, mb) = (a.objects.len(), b.objects.len());
-    // Matched columns by a merge of the sorted id lists.
     let mut pairs = Vec::new();
     let (mut i, mut j) = (0, 0);
     while i < ma && j < mb {
@@ -135,11 +192,17 @@ pub fn trace_distance(a: &Resampled, b: &Resampled) -> f64 {
             }
         }
     }
+    pairs
+}
+
+/// The mean over frames of the mean distance of the matched objects' centres `ca`/`cb`
+/// (`samples × pairs`, row-major; `NaN` where absent); `NaN` when no frame has a matched object.
+fn mean_frame_distance(ca: &[[f64; 2]], cb: &[[f64; 2]], samples: usize, pairs: usize) -> f64 {
     let (mut sum, mut frames) = (0.0, 0usize);
-    for k in 0..a.samples {
+    for k in 0..samples {
         let (mut s, mut c) = (0.0, 0usize);
-        for &(i, j) in &pairs {
-            let (p, q) = (a.centres[k * ma + i], b.centres[k * mb + j]);
+        for m in 0..pairs {
+            let (p, q) = (ca[k * pairs + m], cb[k * pairs + m]);
             if p[0].is_nan() || q[0].is_nan() {
                 continue;
             }
@@ -158,6 +221,90 @@ pub fn trace_distance(a: &Resampled, b: &Resampled) -> f64 {
     }
 }
 
+/// The matched objects' centres of `a` and `b` side by side (`samples × pairs`, row-major).
+fn matched_centres(a: &Resampled, b: &Resampled) -> (Vec<[f64; 2]>, Vec<[f64; 2]>, usize) {
+    let pairs = matched(a, b);
+    let (ma, mb) = (a.objects.len(), b.objects.len());
+    let mut ca = Vec::with_capacity(a.samples * pairs.len());
+    let mut cb = Vec::with_capacity(a.samples * pairs.len());
+    for k in 0..a.samples {
+        for &(i, j) in &pairs {
+            ca.push(a.centres[k * ma + i]);
+            cb.push(b.centres[k * mb + j]);
+        }
+    }
+    (ca, cb, pairs.len())
+}
+
+/// d_x between two resampled traces (same `samples`): the mean over frames of the mean distance of
+/// matched objects; `NaN` when no object is matched at any frame.
+pub fn trace_distance(a: &Resampled, b: &Resampled) -> f64 {
+    if a.samples == 0 || a.samples != b.samples {
+        return f64::NAN;
+    }
+    let (ca, cb, n) = matched_centres(a, b);
+    mean_frame_distance(&ca, &cb, a.samples, n)
+}
+
+/// Rigidly aligns the points `p` onto `q` (same length; pairs with a `NaN` on either side are ignored
+/// by the fit and stay `NaN`): `p` is centred, rotated by the Procrustes angle and moved to `q`'s
+/// centroid. Returns `p` unchanged when no pair is complete.
+pub fn procrustes_align(p: &[[f64; 2]], q: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    let both = |k: usize| !p[k][0].is_nan() && !q[k][0].is_nan();
+    let n = (0..p.len()).filter(|&k| both(k)).count();
+    if n == 0 {
+        return p.to_vec();
+    }
+    let (mut pc, mut qc) = ([0.0; 2], [0.0; 2]);
+    for k in (0..p.len()).filter(|&k| both(k)) {
+        for d in 0..2 {
+            pc[d] += p[k][d] / n as f64;
+            qc[d] += q[k][d] / n as f64;
+        }
+    }
+    let (mut dot, mut cross) = (0.0, 0.0);
+    for k in (0..p.len()).filter(|&k| both(k)) {
+        let (px, py) = (p[k][0] - pc[0], p[k][1] - pc[1]);
+        let (qx, qy) = (q[k][0] - qc[0], q[k][1] - qc[1]);
+        dot += px * qx + py * qy;
+        cross += px * qy - py * qx;
+    }
+    // A degenerate fit (a stationary object on either side) has no preferred angle: rotate by 0.
+    let theta = if dot == 0.0 && cross == 0.0 {
+        0.0
+    } else {
+        cross.atan2(dot)
+    };
+    let (s, c) = theta.sin_cos();
+    p.iter()
+        .map(|v| {
+            if v[0].is_nan() {
+                return [f64::NAN; 2];
+            }
+            let (x, y) = (v[0] - pc[0], v[1] - pc[1]);
+            [c * x - s * y + qc[0], s * x + c * y + qc[1]]
+        })
+        .collect()
+}
+
+/// The `invariant` d_x: each matched object's trajectory in `a` aligned to its trajectory in `b` by
+/// [`procrustes_align`], then measured as [`trace_distance`]. Symmetric up to rounding (the optimal
+/// rigid fit of a onto b and of b onto a leave the same residuals).
+pub fn invariant_distance(a: &Resampled, b: &Resampled) -> f64 {
+    if a.samples == 0 || a.samples != b.samples {
+        return f64::NAN;
+    }
+    let (mut ca, cb, n) = matched_centres(a, b);
+    for m in 0..n {
+        let p: Vec<[f64; 2]> = (0..a.samples).map(|k| ca[k * n + m]).collect();
+        let q: Vec<[f64; 2]> = (0..a.samples).map(|k| cb[k * n + m]).collect();
+        for (k, v) in procrustes_align(&p, &q).into_iter().enumerate() {
+            ca[k * n + m] = v;
+        }
+    }
+    mean_frame_distance(&ca, &cb, a.samples, n)
+}
+
 /// The symmetric pairwise D_x matrix of a training set, stored as its upper triangle.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DistanceMatrix {
@@ -170,13 +317,18 @@ pub struct DistanceMatrix {
 impl DistanceMatrix {
     /// Computes every pair in parallel (rayon): each trace is resampled once, then pairs are independent.
     pub fn compute(traces: &[Trace], samples: usize) -> Self {
+        Self::compute_with(traces, samples, Dx::Positions)
+    }
+
+    /// [`DistanceMatrix::compute`] under the d_x variant `dx`.
+    pub fn compute_with(traces: &[Trace], samples: usize, dx: Dx) -> Self {
         let res: Vec<Resampled> = traces.par_iter().map(|t| resample(t, samples)).collect();
         let n = res.len();
         let upper: Vec<f64> = (0..n)
             .into_par_iter()
             .flat_map_iter(|i| {
                 let res = &res;
-                (i + 1..n).map(move |j| trace_distance(&res[i], &res[j]))
+                (i + 1..n).map(move |j| dx.distance(&res[i], &res[j]))
             })
             .collect();
         DistanceMatrix {
@@ -277,5 +429,62 @@ mod tests {
                 assert!((m.get(i, j) - want).abs() < 1e-12, "{i} {j}");
             }
         }
+    }
+
+    fn one_object(points: &[[f64; 2]]) -> Resampled {
+        Resampled {
+            trace_id: "t".into(),
+            objects: vec!["o".into()],
+            centres: points.to_vec(),
+            samples: points.len(),
+        }
+    }
+
+    #[test]
+    fn invariant_dx_ignores_a_rigid_motion_that_positions_counts() {
+        let path = [[0.0, 0.0], [0.1, 0.0], [0.2, 0.05], [0.25, 0.15]];
+        // Rotated by 90° and moved to another place.
+        let moved: Vec<[f64; 2]> = path.iter().map(|p| [0.5 - p[1], 0.3 + p[0]]).collect();
+        let (a, b) = (one_object(&path), one_object(&moved));
+        assert!(invariant_distance(&a, &b).abs() < 1e-12);
+        assert!(trace_distance(&a, &b) > 0.2);
+        assert!(Dx::Invariant.distance(&a, &a).abs() < 1e-12);
+    }
+
+    #[test]
+    fn invariant_dx_hand_values() {
+        // A moving object against a stationary one: no rotation is preferred, so only the centroids
+        // are matched: distances 1, 0, 1 → 2/3.
+        let a = one_object(&[[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]);
+        let b = one_object(&[[5.0, 5.0], [5.0, 5.0], [5.0, 5.0]]);
+        assert!((invariant_distance(&a, &b) - 2.0 / 3.0).abs() < 1e-12);
+        // An L and its mirror image: no reflection, so the best rotation (−90°) leaves residuals
+        // √2/3, 2√2/3, √2/3 → 4√2/9.
+        let l = one_object(&[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]);
+        let m = one_object(&[[0.0, 0.0], [1.0, 0.0], [1.0, -1.0]]);
+        let want = 4.0 * 2f64.sqrt() / 9.0;
+        assert!((invariant_distance(&l, &m) - want).abs() < 1e-12);
+        assert!((invariant_distance(&m, &l) - want).abs() < 1e-12);
+        // Frames where one side is absent take no part in the fit or the mean.
+        let mut gap = l.clone();
+        gap.centres.push([f64::NAN; 2]);
+        gap.samples = 4;
+        let mut m4 = m.clone();
+        m4.centres.push([9.0, 9.0]);
+        m4.samples = 4;
+        assert!((invariant_distance(&gap, &m4) - want).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_invariant_matrix_of_shifted_copies_is_zero() {
+        let ts: Vec<Trace> = (0..4)
+            .map(|i| shifted(Env::Pooltool, 7, 2, i as f64 * 0.1))
+            .collect();
+        let m = DistanceMatrix::compute_with(&ts, 8, Dx::Invariant);
+        assert!(m.upper.iter().all(|d| d.abs() < 1e-12), "{:?}", m.upper);
+        assert_eq!(
+            DistanceMatrix::compute(&ts, 8),
+            DistanceMatrix::compute_with(&ts, 8, Dx::Positions)
+        );
     }
 }

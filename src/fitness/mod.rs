@@ -4,7 +4,7 @@
 //! traces follow the distances between the traces themselves (ρ), how different its annotations are from
 //! the current library's (η), minus a length penalty (λ) and a time penalty (ψ): ν = ρ + η − λ − ψ.
 //!
-//! **Owns:** trace distance d_x and the pairwise D_x matrix ([`distance`]), annotation histograms and
+//! **Owns:** trace distance d_x with its variants ([`Dx`]) and the pairwise D_x matrix ([`distance`]), annotation histograms and
 //! d_p with its variants ([`histogram`], [`Dp`]), Evaluate ([`evaluate()`]) and the `trace_distances`
 //! table ([`table`]).
 //! **Does not:** run detectors (`detect/`) or choose them (`search/`).
@@ -15,7 +15,7 @@ pub mod histogram;
 pub mod table;
 mod terms;
 
-pub use self::distance::{DistanceMatrix, scene_scale};
+pub use self::distance::{DistanceMatrix, Dx, scene_scale};
 pub use self::evaluate::{
     CandidateOutput, LibraryView, correlation, evaluate, length_penalty, time_penalty,
 };

@@ -9,7 +9,7 @@ use arrow::datatypes::{DataType, Field, Float64Type, Schema, SchemaRef};
 use arrow::error::ArrowError;
 use sha2::{Digest, Sha256};
 
-use super::distance::DistanceMatrix;
+use super::distance::{DistanceMatrix, Dx};
 
 /// Version of the d_x convention (alignment, scaling), part of every `set_id`.
 pub const DX_VERSION: u32 = 1;
@@ -26,9 +26,19 @@ pub fn distances_schema() -> SchemaRef {
 
 /// The id of a training set: a hash of its trace ids (in order), `samples` and [`DX_VERSION`].
 pub fn set_id(ids: &[String], samples: usize) -> String {
+    set_id_with(ids, samples, Dx::Positions)
+}
+
+/// [`set_id`] of a set whose D_x is computed under `dx`; `positions` gives the same id as
+/// [`set_id`] (ids of earlier runs stay valid), another variant adds its name to the hash.
+pub fn set_id_with(ids: &[String], samples: usize, dx: Dx) -> String {
     let mut h = Sha256::new();
     h.update(DX_VERSION.to_le_bytes());
     h.update((samples as u64).to_le_bytes());
+    if dx != Dx::Positions {
+        h.update(dx.as_str().as_bytes());
+        h.update([0xff]);
+    }
     for id in ids {
         h.update(id.as_bytes());
         h.update([0]);

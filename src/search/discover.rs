@@ -7,6 +7,18 @@
 //! their own D_x ([`Discovery::holdout_dx`]); a held-out trace it fails on counts as no activation.
 //! With fewer than [`MIN_HOLDOUT`] held-out traces there is no held-out ρ and the training ρ decides.
 //!
+//! **Accuracy guard** (optional, beyond the paper). Fitness is not meaning: a child with higher ν
+//! and positive held-out ρ can fire on other moments than the label names. With
+//! [`AccuracyGuard`] set, a best program of an event-grounded label (`detect::accuracy::grounded`)
+//! that passed the ν and ρ tests is also scored against the simulator's ground truth on the held-out
+//! traces (the training traces when there are none), next to the label's seed program(s); when its
+//! F1 is lower than theirs by more than `max_drop` it is rejected (`accuracy_drop`).
+//!
+//! **Sampled candidates.** The convergence measurement runs up to `convergence_per_bin` scored
+//! candidates of every 10 % bin on the held-out traces; their held-out histograms and ρ are kept
+//! ([`SampleRow`]) so SQL can recompute both ρ and the convergence similarity. A held-out trace a
+//! sampled candidate fails on counts as no activation (as for the best program's held-out ρ).
+//!
 //! The seed programs of a label are the library's detectors for that label (when it has some), which
 //! are left out of the library the label's candidates are compared with (a detector is not novel with
 //! respect to itself); otherwise the skeleton g₀. An accepted program replaces the library's detectors
@@ -39,6 +51,49 @@ pub struct ConvergenceRow {
     pub traces: u64,
 }
 
+/// One candidate sampled for the convergence measurement, run on the held-out traces.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SampleRow {
+    /// The label.
+    pub label: String,
+    /// The 10 % bin of the search budget (0–9).
+    pub bin: u32,
+    /// Its search step.
+    pub step: i64,
+    /// Its code hash.
+    pub code_hash: String,
+    /// Its ν on the training traces.
+    pub nu: f64,
+    /// Its ρ on the training traces.
+    pub rho: f64,
+    /// Its ρ on the held-out traces (`None` with fewer than [`MIN_HOLDOUT`] of them).
+    pub holdout_rho: Option<f64>,
+    /// Held-out traces it failed on (counted as no activation).
+    pub failed_traces: u64,
+    /// Its smoothed activation histograms on the held-out traces (held-out order).
+    pub hists: Vec<Vec<f64>>,
+}
+
+/// The optional accuracy guard of acceptance (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AccuracyGuard {
+    /// The largest F1 drop (seed − best) still accepted.
+    pub max_drop: f64,
+    /// Time tolerance (s) of the matching, as the `accuracy` stage's.
+    pub tolerance: f64,
+}
+
+/// F1 of the seed and the best program against ground truth, as the guard measured it.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GuardCheck {
+    /// F1 of the label's seed program(s).
+    pub seed_f1: f64,
+    /// F1 of the best program.
+    pub best_f1: f64,
+    /// Traces scored (scorable held-out traces, else scorable training traces).
+    pub traces: u64,
+}
+
 /// Fewest held-out traces for a held-out ρ: 8 traces make 28 pairs; a correlation over fewer pairs is
 /// mostly noise (3 traces, 3 pairs, gave ρ from −0.9 to 0.9 for the same detector).
 pub const MIN_HOLDOUT: usize = 8;
@@ -53,6 +108,9 @@ pub enum Acceptance {
     BelowDelta,
     /// ν > δ but ρ ≤ 0 (held-out ρ, or the training ρ without a held-out set).
     NonpositiveRho,
+    /// ν > δ and ρ > 0, but with the accuracy guard on, its F1 against ground truth fell by more than
+    /// the guard allows.
+    AccuracyDrop,
 }
 
 impl Acceptance {
@@ -62,6 +120,7 @@ impl Acceptance {
             Acceptance::Accepted => "accepted",
             Acceptance::BelowDelta => "below_delta",
             Acceptance::NonpositiveRho => "nonpositive_rho",
+            Acceptance::AccuracyDrop => "accuracy_drop",
         }
     }
 
@@ -74,6 +133,17 @@ impl Acceptance {
             Acceptance::NonpositiveRho
         } else {
             Acceptance::Accepted
+        }
+    }
+
+    /// The accuracy guard on top of [`Acceptance::decide`]: an accepted program whose F1 is below the
+    /// seed's by more than `max_drop` becomes [`Acceptance::AccuracyDrop`].
+    pub fn guard(self, check: Option<&GuardCheck>, max_drop: f64) -> Acceptance {
+        match (self, check) {
+            (Acceptance::Accepted, Some(c)) if c.seed_f1 - c.best_f1 > max_drop => {
+                Acceptance::AccuracyDrop
+            }
+            (a, _) => a,
         }
     }
 }
@@ -96,6 +166,11 @@ pub struct LabelResult {
     pub holdout_hists: Vec<Vec<f64>>,
     /// Convergence pairs on the held-out traces (empty without held-out traces).
     pub convergence: Vec<ConvergenceRow>,
+    /// The candidates the convergence measurement sampled, with their held-out histograms and ρ.
+    pub samples: Vec<SampleRow>,
+    /// The accuracy guard's measurement (`None` when the guard is off, the label is not
+    /// event-grounded, the best program is a seed program, or no trace is scorable).
+    pub guard: Option<GuardCheck>,
 }
 
 /// Everything the discovery loop needs.
@@ -124,6 +199,8 @@ pub struct Discovery<'a> {
     pub source: String,
     /// Detectors sampled per 10 % bin for the convergence measurement (0 = skip it).
     pub convergence_per_bin: usize,
+    /// The accuracy guard of acceptance (`None`: off).
+    pub accuracy_guard: Option<AccuracyGuard>,
 }
 
 impl Discovery<'_> {
@@ -165,7 +242,7 @@ impl Discovery<'_> {
                 label_index: m as u32,
                 evaluator: &evaluator,
                 proposer: self.proposer,
-                seeds,
+                seeds: seeds.clone(),
                 library_labels: others.iter().map(|d| d.label.clone()).collect(),
                 checkpoint: self.checkpoint,
             };
@@ -180,12 +257,20 @@ impl Discovery<'_> {
             };
             let holdout_rho = (!holdout_hists.is_empty())
                 .then(|| correlation(self.holdout_dx, &holdout_hists, self.eval.dp));
-            let acceptance = Acceptance::decide(
+            let mut acceptance = Acceptance::decide(
                 outcome.best.terms.nu,
                 self.config.delta,
                 holdout_rho.unwrap_or(outcome.best.terms.rho),
                 self.config.allow_nonpositive_rho,
             );
+            let guard = match self.accuracy_guard {
+                Some(g) if acceptance == Acceptance::Accepted => {
+                    let check = self.guard_check(&det_label, &seeds, &outcome.best.code, g);
+                    acceptance = acceptance.guard(check.as_ref(), g.max_drop);
+                    check
+                }
+                _ => None,
+            };
             let accepted = acceptance == Acceptance::Accepted;
             if accepted {
                 let aliases = own.first().map(|d| d.aliases.clone()).unwrap_or_default();
@@ -196,10 +281,11 @@ impl Discovery<'_> {
                 d.weight = weight;
                 library.push(d);
             }
-            let convergence = if self.convergence_per_bin > 0 && !self.holdout.is_empty() {
+            let (convergence, samples) = if self.convergence_per_bin > 0 && !self.holdout.is_empty()
+            {
                 self.convergence(&det_label, &outcome.records)
             } else {
-                Vec::new()
+                (Vec::new(), Vec::new())
             };
             let result = LabelResult {
                 outcome,
@@ -209,6 +295,8 @@ impl Discovery<'_> {
                 train_hists,
                 holdout_hists,
                 convergence,
+                samples,
+                guard,
             };
             after_label(m as u32, &result)?;
             results.push(result);
@@ -235,8 +323,89 @@ impl Discovery<'_> {
         hists
     }
 
-    /// Section 4.5: detectors from each 10 % bin of the search compared with those of the final bin.
-    pub fn convergence(&self, label: &str, records: &[CandidateRecord]) -> Vec<ConvergenceRow> {
+    /// The accuracy guard's F1 of the seed program(s) and of `best` for `label` (see the module docs);
+    /// `None` when the label is not event-grounded in the environment, `best` is a seed, or no trace
+    /// is scorable.
+    pub fn guard_check(
+        &self,
+        label: &str,
+        seeds: &[String],
+        best: &str,
+        guard: AccuracyGuard,
+    ) -> Option<GuardCheck> {
+        use crate::detect::accuracy::{grounded, scorable, score_trace, truth};
+        use crate::detect::{Annotation, normalise_label};
+        if seeds.iter().any(|s| s == best) {
+            return None;
+        }
+        let norm = normalise_label(label);
+        let g = grounded(self.env)
+            .iter()
+            .copied()
+            .find(|g| normalise_label(g) == norm)?;
+        let pick = if self.holdout.is_empty() {
+            self.train
+        } else {
+            self.holdout
+        };
+        let traces: Vec<Trace> = pick
+            .iter()
+            .filter(|t| scorable(self.env, t))
+            .cloned()
+            .collect();
+        if traces.is_empty() {
+            return None;
+        }
+        let mut dets: Vec<Detector> = seeds
+            .iter()
+            .map(|c| Detector::new(self.env, label, c, "seed"))
+            .collect();
+        dets.push(Detector::new(self.env, label, best, "best"));
+        let batch = self.pool.run(&dets, &traces);
+        let n_seeds = seeds.len();
+        let f1 = |best_side: bool| -> f64 {
+            let mut scores = std::collections::BTreeMap::new();
+            for (ti, t) in traces.iter().enumerate() {
+                let anns: Vec<Annotation> = batch
+                    .results
+                    .iter()
+                    .filter(|r| {
+                        r.trace == ti
+                            && r.status == CandidateStatus::Ok
+                            && (r.detector >= n_seeds) == best_side
+                    })
+                    .flat_map(|r| {
+                        r.patterns
+                            .iter()
+                            .enumerate()
+                            .map(|(seq, p)| Annotation::new(&dets[r.detector], t, seq, p.clone()))
+                    })
+                    .collect();
+                let refs: Vec<&Annotation> = anns.iter().collect();
+                let events: Vec<_> = truth(self.env, t, guard.tolerance)
+                    .into_iter()
+                    .filter(|e| e.label == g)
+                    .collect();
+                score_trace(&[g], &events, &refs, guard.tolerance, &mut scores);
+            }
+            scores
+                .get(g)
+                .map_or(0.0, crate::detect::accuracy::LabelScore::f1)
+        };
+        Some(GuardCheck {
+            seed_f1: f1(false),
+            best_f1: f1(true),
+            traces: traces.len() as u64,
+        })
+    }
+
+    /// Section 4.5: detectors from each 10 % bin of the search compared with those of the final bin,
+    /// and the sampled detectors' held-out histograms and ρ.
+    pub fn convergence(
+        &self,
+        label: &str,
+        records: &[CandidateRecord],
+    ) -> (Vec<ConvergenceRow>, Vec<SampleRow>) {
         let budget = self.config.budget.max(1);
         let mut bins: Vec<Vec<&CandidateRecord>> = vec![Vec::new(); 10];
         for r in records.iter().filter(|r| r.step >= 0 && r.status == "ok") {
@@ -251,7 +420,7 @@ impl Discovery<'_> {
             (0..k).map(|i| v[i * v.len() / k].clone()).collect()
         };
         let Some(last) = (0..10).rev().find(|&b| !bins[b].is_empty()) else {
-            return Vec::new();
+            return (Vec::new(), Vec::new());
         };
         let chosen: Vec<(u32, CandidateRecord)> = (0..=last)
             .flat_map(|b| pick(&bins[b]).into_iter().map(move |r| (b as u32, r)))
@@ -261,10 +430,13 @@ impl Discovery<'_> {
             .map(|(_, r)| Detector::new(self.env, label, &r.code, "convergence"))
             .collect();
         let batch = self.pool.run(&dets, self.holdout);
-        // hists[detector][trace], None where the call failed.
-        let mut hists = vec![vec![None; self.holdout.len()]; dets.len()];
+        // hists[detector][trace]; a failed call counts as no activation.
+        let silent = histogram(&[], self.eval.bins);
+        let mut hists = vec![vec![silent; self.holdout.len()]; dets.len()];
+        let mut failed = vec![0u64; dets.len()];
         for r in &batch.results {
             if r.status != CandidateStatus::Ok {
+                failed[r.detector] += 1;
                 continue;
             }
             let steps: Vec<i64> = self.holdout[r.trace]
@@ -276,7 +448,7 @@ impl Discovery<'_> {
                 &steps,
                 r.patterns.iter().map(|p| (p.start_step, p.end_step)),
             );
-            hists[r.detector][r.trace] = Some(histogram(&a, self.eval.bins));
+            hists[r.detector][r.trace] = histogram(&a, self.eval.bins);
         }
         let finals: Vec<usize> = (0..chosen.len())
             .filter(|&i| chosen[i].0 == last as u32)
@@ -284,13 +456,12 @@ impl Discovery<'_> {
         let mut out = Vec::new();
         for (i, (bin, r)) in chosen.iter().enumerate() {
             for &f in &finals {
-                let (mut sum, mut n) = (0.0, 0u64);
-                for (a, b) in hists[i].iter().zip(&hists[f]) {
-                    if let (Some(p), Some(q)) = (a, b) {
-                        sum += similarity(p, q);
-                        n += 1;
-                    }
-                }
+                let n = hists[i].len();
+                let sum: f64 = hists[i]
+                    .iter()
+                    .zip(&hists[f])
+                    .map(|(p, q)| similarity(p, q))
+                    .sum();
                 if n > 0 {
                     out.push(ConvergenceRow {
                         label: label.to_string(),
@@ -298,18 +469,36 @@ impl Discovery<'_> {
                         code_hash: r.code_hash.clone(),
                         final_hash: chosen[f].1.code_hash.clone(),
                         similarity: sum / n as f64,
-                        traces: n,
+                        traces: n as u64,
                     });
                 }
             }
         }
-        out
+        let with_rho =
+            self.holdout.len() >= MIN_HOLDOUT && self.holdout_dx.len() == self.holdout.len();
+        let samples = chosen
+            .into_iter()
+            .zip(hists)
+            .zip(failed)
+            .map(|(((bin, r), h), failed_traces)| SampleRow {
+                label: label.to_string(),
+                bin,
+                step: r.step,
+                nu: r.terms.as_ref().map_or(f64::NAN, |t| t.nu),
+                rho: r.terms.as_ref().map_or(f64::NAN, |t| t.rho),
+                holdout_rho: with_rho.then(|| correlation(self.holdout_dx, &h, self.eval.dp)),
+                code_hash: r.code_hash,
+                failed_traces,
+                hists: h,
+            })
+            .collect();
+        (out, samples)
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::Acceptance;
+    use super::{Acceptance, GuardCheck};
 
     #[test]
     fn acceptance_needs_nu_above_delta_and_positive_rho_unless_allowed() {
@@ -323,5 +512,27 @@ mod tests {
         assert_eq!(d(2.5, 0.0, f64::NAN, false), Acceptance::NonpositiveRho);
         assert_eq!(d(2.5, 0.0, -0.06, true), Acceptance::Accepted);
         assert_eq!(d(-1.0, 0.0, 0.9, true), Acceptance::BelowDelta);
+    }
+
+    #[test]
+    fn the_accuracy_guard_rejects_only_an_accepted_program_whose_f1_fell_too_far() {
+        let c = |seed_f1, best_f1| GuardCheck {
+            seed_f1,
+            best_f1,
+            traces: 10,
+        };
+        let a = Acceptance::Accepted;
+        // "gentle touch" of learn-pooltool: 1.000 → 0.007.
+        assert_eq!(a.guard(Some(&c(1.0, 0.007)), 0.1), Acceptance::AccuracyDrop);
+        assert_eq!(
+            a.guard(Some(&c(0.985, 0.878)), 0.1),
+            Acceptance::AccuracyDrop
+        );
+        assert_eq!(a.guard(Some(&c(0.985, 0.9)), 0.1), Acceptance::Accepted);
+        assert_eq!(a.guard(Some(&c(0.5, 0.9)), 0.1), Acceptance::Accepted);
+        assert_eq!(a.guard(None, 0.1), Acceptance::Accepted);
+        let r = Acceptance::NonpositiveRho;
+        assert_eq!(r.guard(Some(&c(1.0, 0.0)), 0.1), Acceptance::NonpositiveRho);
+        assert_eq!(Acceptance::AccuracyDrop.as_str(), "accuracy_drop");
     }
 }

@@ -31,7 +31,9 @@ pub mod tables;
 pub mod tally;
 
 pub use self::candidate::{CandidateRecord, code_hash};
-pub use self::discover::{Acceptance, ConvergenceRow, Discovery, LabelResult};
+pub use self::discover::{
+    Acceptance, AccuracyGuard, ConvergenceRow, Discovery, GuardCheck, LabelResult, SampleRow,
+};
 pub use self::evaluator::{EvalSettings, Evaluation, Evaluator};
 pub use self::islands::{Database, Program, Strategy, Temperatures};
 pub use self::llm_proposer::LlmProposer;

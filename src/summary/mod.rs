@@ -8,7 +8,8 @@
 //! the trace's own, and picks one; its accuracy is the objective the ensemble calibration maximises)
 //! with its choosers ([`OfflineChooser`], a clearly labelled annotation-overlap baseline, and
 //! [`LlmChooser`], images as image content parts), and the `summaries` and `identification` tables
-//! ([`table`]).
+//! ([`table`]), and the identification task as the ensemble calibration's objective
+//! ([`IdentificationObjective`]).
 //!
 //! **Does not:** run detectors (callers pass the annotations, from the worker pool or the
 //! `annotations` table), read the process environment (callers build the [`crate::llm::LlmClient`]),
@@ -28,6 +29,7 @@ mod error;
 mod identify;
 mod images;
 mod llm;
+mod objective;
 mod offline;
 pub mod table;
 
@@ -39,6 +41,7 @@ pub use self::identify::{
 };
 pub use self::images::TraceImages;
 pub use self::llm::{LlmMode, LlmSummariser, TEMPLATES, add_templates};
+pub use self::objective::IdentificationObjective;
 pub use self::offline::{OfflineSummariser, offline_summary};
 
 use crate::detect::Annotation;

@@ -1,7 +1,9 @@
 //! `ensemble` (paper section 3.3): an offline learn → ensemble pipeline for pooltool at a tiny size,
 //! its tables and library folders, the library read back by `annotate` and `show`, and resumption after
-//! a kill in the middle of the ensemble stage.
+//! a kill in the middle of the ensemble stage; calibration (b) against the identification objective
+//! through the local scripted chat server, replayed from the recorded calls, and its offline fallback.
 
+use crate::common::chat_server::{ChatServer, Reply};
 use crate::common::{TestRun, repo};
 
 /// Simulate, two seeded evolve stages over the same labels, an ensemble stage, the comparison.
@@ -223,4 +225,110 @@ fn bad_ensemble_parameters_are_refused_with_the_parameter_named() {
     ])
     .code(2)
     .stderr_has("no valid pooltool candidate");
+}
+
+/// The tiny pipeline with calibration (b) maximising identification accuracy (8 calibration traces,
+/// 8 summaries per trial, one BO step after the 4 starting points), with `llm` as its LLM settings.
+fn identification_pipeline(llm: &str) -> String {
+    pipeline().replace(
+        "bo_iterations = 3",
+        &format!(
+            "bo_iterations = 1\nobjective = \"identification\"\nidentification_traces = 8\noptions = 8\nkeyframes = 2\nimage_size = 96\n{llm}"
+        ),
+    )
+}
+
+/// Summaries name the request seed (so they differ by trace); choices pick the summary whose
+/// number is the seed of the request modulo 8, plus one (a deterministic, imperfect chooser).
+fn scripted() -> ChatServer {
+    ChatServer::responder(|s| {
+        let seed = s.body["seed"].as_u64().unwrap_or(0);
+        if s.body
+            .to_string()
+            .contains("Which summary describes this rollout?")
+        {
+            Reply::chat(&format!("Answer: {}", seed % 8 + 1))
+        } else {
+            Reply::chat(&format!("The balls move (request {seed})."))
+        }
+    })
+}
+
+#[test]
+fn identification_calibration_runs_through_the_chat_server_and_replays() {
+    let server = scripted();
+    let t = TestRun::new();
+    let llm = format!(
+        "llm = {{ base_url = \"{}\", model = \"vlm\", max_retries = 0 }}",
+        server.url()
+    );
+    t.write("p.toml", &identification_pipeline(&llm));
+    t.run(&["run", "p.toml"]).ok();
+    // 5 points (the sweep's optimum, 3 random, 1 EI step) × 8 traces × (summary + choice).
+    let asked = server.seen().len();
+    assert_eq!(asked, 80, "calls to the endpoint");
+    let calls = t.csv(
+        "runs/ens",
+        "SELECT purpose, count(*) AS n FROM llm_calls GROUP BY purpose ORDER BY purpose",
+    );
+    assert_eq!(
+        calls, "purpose,n\nidentify,40\nsummarise_annotations,40\n",
+        "{calls}"
+    );
+    let bo = t.csv(
+        "runs/ens",
+        "SELECT DISTINCT objective, score FROM ensemble_calibration WHERE method = 'bo' ORDER BY score",
+    );
+    assert!(
+        bo.lines().skip(1).all(|l| l.starts_with("identification,")),
+        "{bo}"
+    );
+    // Scores are identification accuracies: multiples of 1/8 in [0, 1].
+    for l in bo.lines().skip(1) {
+        let v: f64 = l.split(',').nth(1).unwrap().parse().unwrap();
+        assert!((0.0..=1.0).contains(&v) && (v * 8.0).fract() == 0.0, "{bo}");
+    }
+    let manifest = std::fs::read_to_string(t.path("runs/ens/manifest.json")).unwrap();
+    assert!(
+        manifest.contains("\"objective\": \"identification\""),
+        "manifest"
+    );
+    assert!(
+        manifest.contains("maximised identification accuracy"),
+        "manifest note"
+    );
+
+    // Replayed into a fresh run from the recorded calls: the endpoint is not asked again and the
+    // calibration and the library are the same.
+    let r = TestRun::new();
+    let replay = format!(
+        "llm = {{ replay = \"{}\", model = \"vlm\" }}",
+        t.path("runs/ens").display()
+    );
+    r.write("p.toml", &identification_pipeline(&replay));
+    r.run(&["run", "p.toml"]).ok();
+    assert_eq!(server.seen().len(), asked, "the replay asked the endpoint");
+    let q = "SELECT method, objective, label, iteration, gamma, eps_s, eps_t, weights, score, chosen FROM ensemble_calibration ORDER BY method, label, iteration";
+    assert_eq!(t.csv("runs/ens", q), r.csv("runs/ens", q));
+    assert_eq!(
+        std::fs::read_to_string(t.path("runs/ens/exports/ens/library/library.toml")).unwrap(),
+        std::fs::read_to_string(r.path("runs/ens/exports/ens/library/library.toml")).unwrap()
+    );
+
+    // No endpoint and no replay: calibration (b) falls back to held-out ρ and says so.
+    let o = TestRun::new();
+    o.write("p.toml", &identification_pipeline(""));
+    o.run_env(&["run", "p.toml"], &[("ANNOTRACE_LLM_BASE_URL", "")])
+        .ok()
+        .stderr_has("objective heldout-rho");
+    let manifest = std::fs::read_to_string(o.path("runs/ens/manifest.json")).unwrap();
+    assert!(
+        manifest.contains("\"objective\": \"heldout-rho\""),
+        "fallback objective"
+    );
+    assert!(
+        manifest.contains("identification was asked for but no endpoint"),
+        "fallback note"
+    );
+    assert_eq!(server.seen().len(), asked);
 }

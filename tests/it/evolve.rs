@@ -426,6 +426,84 @@ fn acceptance_uses_the_held_out_rho_and_sql_recomputes_it() {
     assert_eq!(check.lines().nth(1), Some("true,true"), "{check}");
 }
 
+/// Reads an SQL file of the repository without its comment lines.
+fn sql_body(name: &str) -> String {
+    std::fs::read_to_string(repo().join("sql").join(name))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.trim_start().starts_with("--"))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+#[test]
+fn sampled_candidates_keep_their_held_out_rho_and_sql_recomputes_it_and_the_convergence() {
+    let t = TestRun::new();
+    let p = pipeline(
+        "holdout = 0.5\nconvergence_per_bin = 2\ndx = \"invariant\"\naccuracy_guard = true",
+    )
+    .replace("scenes = 14", "scenes = 24");
+    t.write("p.toml", &p);
+    t.run(&["run", "p.toml"]).ok();
+    let labels = t.csv("runs/evt", "SELECT DISTINCT dx FROM evolution_labels");
+    assert_eq!(labels, "dx\ninvariant\n", "{labels}");
+    let samples = t.csv(
+        "runs/evt",
+        "SELECT count(*) AS n, count(holdout_rho) AS rho, count(DISTINCT bin) AS bins FROM evolution_samples",
+    );
+    let n: Vec<i64> = samples
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert!(n[0] >= 2 && n[0] == n[1] && n[2] >= 1, "{samples}");
+    // ρ of every sampled candidate, recomputed from its stored held-out histograms and D_x.
+    let rho = t.csv(
+        "runs/evt",
+        &format!(
+            "WITH s AS ({}) SELECT count(*) AS n, max(abs(coalesce(s.rho, 0.0) - e.holdout_rho)) AS diff \
+             FROM s JOIN evolution_samples AS e ON e.run_stage = s.run_stage AND e.label = s.label \
+             AND e.code_hash = s.code_hash WHERE s.split = 'sample'",
+            sql_body("evolution_fitness_correlation.sql")
+        ),
+    );
+    let row: Vec<f64> = rho
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert_eq!(row[0], n[0] as f64, "{rho}");
+    assert!(row[1] < 1e-9, "{rho}");
+    // The convergence similarity, pair by pair.
+    let conv = t.csv(
+        "runs/evt",
+        &format!(
+            "WITH s AS ({}) SELECT count(*) AS n, max(abs(s.similarity - c.similarity)) AS diff, \
+             sum(CASE WHEN s.traces = c.traces THEN 1 ELSE 0 END) AS same_traces, \
+             (SELECT count(*) FROM evolution_convergence) AS rust \
+             FROM s JOIN evolution_convergence AS c ON c.run_stage = s.run_stage AND c.label = s.label \
+             AND c.bin = s.bin AND c.code_hash = s.code_hash AND c.final_hash = s.final_hash",
+            sql_body("evolution_convergence_similarity.sql")
+        ),
+    );
+    let row: Vec<f64> = conv
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert!(
+        row[0] > 0.0 && row[0] == row[3] && row[2] == row[0],
+        "{conv}"
+    );
+    assert!(row[1] < 1e-9, "{conv}");
+}
+
 /// `annotrace evolve` with an LLM proposer against `server`, budget 4 for one label.
 fn evolve_with(t: &TestRun, server: &crate::common::chat_server::ChatServer) -> crate::common::Ran {
     t.run(&[

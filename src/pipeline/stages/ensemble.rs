@@ -21,6 +21,7 @@
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
@@ -40,11 +41,16 @@ use crate::ensemble::tables::{
     EvaluationRow, calibration_batch, clusters_batch, evaluation_batch, members_batch,
 };
 use crate::fitness::{DistanceMatrix, Dp, correlation};
+use crate::llm::{LlmClient, LlmConfig, LlmSettings, Prompts, ReplayConfig};
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
 use crate::store::RunDir;
+use crate::summary::{
+    IdentificationObjective, IdentifyParams, LlmChooser, LlmMode, LlmSummariser, TraceImages,
+    add_templates,
+};
 use crate::trace::{Env, Trace};
 
 /// The `ensemble` stage kind.
@@ -70,10 +76,14 @@ pub static KIND: StageKind = StageKind {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum ObjectiveChoice {
-    /// Mean over labels of ρ of the ensemble's annotations on the calibration traces (offline; the
-    /// paper's identification accuracy plugs in as another `ensemble::calibrate::Objective`).
+    /// Mean over labels of ρ of the ensemble's annotations on the calibration traces (offline).
     #[default]
     HeldoutRho,
+    /// The paper's: `identification_traces` calibration traces are annotated, summarised by the LLM
+    /// (initial image + annotated trace) and a vision-language model picks each trace's summary among
+    /// `options`; the share of right picks. Needs an endpoint (or `llm.replay`); without one, held-out
+    /// ρ is used and the output and manifest say so.
+    Identification,
 }
 
 impl ObjectiveChoice {
@@ -81,6 +91,7 @@ impl ObjectiveChoice {
     pub fn as_str(self) -> &'static str {
         match self {
             ObjectiveChoice::HeldoutRho => "heldout-rho",
+            ObjectiveChoice::Identification => "identification",
         }
     }
 }
@@ -136,8 +147,26 @@ pub struct EnsembleParams {
     pub sweep_points: u64,
     /// Calibration (b): expected-improvement steps of the Bayesian optimisation (0: skip it).
     pub bo_iterations: u64,
-    /// The objective of calibration (b).
+    /// The objective of calibration (b): heldout-rho (offline) or identification (the paper's; an LLM).
     pub objective: ObjectiveChoice,
+    /// Identification objective: calibration traces it uses (the first ones; at least `options`).
+    pub identification_traces: u64,
+    /// Identification objective: summaries shown per trial, one of them the trace's own.
+    pub options: u64,
+    /// Identification objective: keyframes the chooser is shown.
+    pub keyframes: u64,
+    /// Identification objective: image size (px) of the initial image and keyframes.
+    pub image_size: u64,
+    /// Identification objective: words a summary may have at most.
+    pub words: u64,
+    /// LLM settings of the identification objective (endpoint, model, replay, …; docs/llm.md), over
+    /// the ANNOTRACE_LLM_* variables.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub llm: Option<LlmSettings>,
+    /// Prompt template folder, relative to the project (default: `<project>/prompts` if present, else
+    /// built-in).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub prompts: Option<String>,
     /// Baseline library for the comparison, relative to the project (default: the project's
     /// `data/libraries/<env>` when it has one, else the built-in library).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -181,6 +210,13 @@ impl EnsembleParams {
         sweep_points: 24,
         bo_iterations: 12,
         objective: ObjectiveChoice::HeldoutRho,
+        identification_traces: 20,
+        options: 8,
+        keyframes: 5,
+        image_size: 256,
+        words: 120,
+        llm: None,
+        prompts: None,
         baseline: None,
         output: None,
         seed: None,
@@ -265,6 +301,9 @@ pub struct EnsembleStage {
     limits: crate::detect::SandboxLimits,
     eps: (f64, f64),
     output: Option<PathBuf>,
+    llm: LlmSettings,
+    prompts: Option<PathBuf>,
+    project: PathBuf,
 }
 
 fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
@@ -318,6 +357,35 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
             "signature_traces must be ≥ 2 and calibration_traces ≥ max(signature_traces, 3)",
         ));
     }
+    if p.objective == ObjectiveChoice::Identification {
+        if p.options < 2 || p.identification_traces < p.options {
+            return Err(BuildError::param(
+                "identification_traces",
+                "options must be ≥ 2 and identification_traces ≥ options",
+            ));
+        }
+        if p.calibration_traces < p.identification_traces {
+            return Err(BuildError::param(
+                "identification_traces",
+                "identification_traces must be ≤ calibration_traces (they are calibration traces)",
+            ));
+        }
+        if !(64..=1024).contains(&p.image_size) {
+            return Err(BuildError::param(
+                "image_size",
+                format!("image_size must be in 64..=1024, found {}", p.image_size),
+            ));
+        }
+    } else if p.llm.is_some() {
+        return Err(BuildError::param(
+            "llm",
+            "`llm` settings are only used with objective = \"identification\"",
+        ));
+    }
+    let mut llm = p.llm.clone().unwrap_or_default();
+    if let Some(r) = &llm.replay {
+        llm.replay = Some(spec.project_dir.join(r));
+    }
     let mut runs = Vec::new();
     for r in &p.runs {
         let dir = spec.project_dir.join(r);
@@ -350,6 +418,9 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         baseline: setup.library,
         limits: setup.limits,
         output: p.output.as_ref().map(|o| spec.project_dir.join(o)),
+        llm,
+        prompts: p.prompts.as_ref().map(|d| spec.project_dir.join(d)),
+        project: spec.project_dir.clone(),
         p,
     }))
 }
@@ -377,7 +448,102 @@ struct CalibrationRecord {
     bo: Option<(f64, f64)>,
 }
 
+/// The LLM pieces of the identification objective.
+struct Model {
+    client: Arc<LlmClient>,
+    prompts: Arc<Prompts>,
+    images: Arc<TraceImages>,
+}
+
 impl EnsembleStage {
+    /// Whether calibration (b) runs the identification objective (asked for, with an endpoint).
+    fn identification(&self) -> bool {
+        self.p.objective == ObjectiveChoice::Identification
+            && self.p.bo_iterations > 0
+            && self.endpoint_configured()
+    }
+
+    /// Whether an endpoint or a replay run is configured for the identification objective.
+    fn endpoint_configured(&self) -> bool {
+        self.llm.base_url.is_some()
+            || self.llm.replay.is_some()
+            || std::env::var(crate::llm::ENV_BASE_URL).is_ok_and(|v| !v.trim().is_empty())
+    }
+
+    /// The client, prompts and renderer of the identification objective. Answers this run already
+    /// recorded are served again (a resumed calibration asks nothing twice).
+    fn model(&self, ctx: &StageContext<'_>, seed: u64) -> Result<Model, StageError> {
+        let mut settings = self.llm.clone();
+        settings.seed = Some(settings.seed.unwrap_or(seed));
+        let mut config = LlmConfig::resolve(&settings, &|k| std::env::var(k).ok())?;
+        if config.replay.is_none() {
+            config.replay = Some(ReplayConfig {
+                run: ctx.run().root().to_path_buf(),
+                strict: false,
+            });
+        }
+        let dir = self
+            .prompts
+            .clone()
+            .or_else(|| Some(self.project.join("prompts")).filter(|d| d.is_dir()));
+        let mut prompts = Prompts::load(dir.as_deref())?;
+        add_templates(&mut prompts)?;
+        let images =
+            TraceImages::new(self.p.image_size as u32).map_err(|e| StageError::Simulation {
+                item: "renderer".into(),
+                source: Box::new(e),
+            })?;
+        Ok(Model {
+            client: Arc::new(LlmClient::new(config, Some(ctx.run()))?),
+            prompts: Arc::new(prompts),
+            images: Arc::new(images),
+        })
+    }
+
+    /// Calibration (b) against the identification objective on the first `identification_traces`
+    /// calibration traces (the sweep (a) still maximises ρ, as in the paper).
+    fn calibrate_identification(
+        &self,
+        ctx: &StageContext<'_>,
+        start: &[LabelEnsemble],
+        rho: &HeldoutRho<'_>,
+        calib: &[Trace],
+        anns: &[crate::detect::Annotation],
+        settings: CalibrationSettings,
+    ) -> Result<crate::ensemble::calibrate::Calibrated, StageError> {
+        let seed = settings.seed;
+        let m = self.model(ctx, seed)?;
+        let summariser = LlmSummariser {
+            client: m.client.clone(),
+            prompts: m.prompts.clone(),
+            images: m.images.clone(),
+            mode: LlmMode::Annotations,
+            keyframes: self.p.keyframes as usize,
+            words: self.p.words as usize,
+            seed,
+        };
+        let chooser = LlmChooser {
+            client: m.client.clone(),
+            prompts: m.prompts.clone(),
+            images: m.images.clone(),
+            keyframes: self.p.keyframes as usize,
+        };
+        let traces = &calib[..(self.p.identification_traces as usize).min(calib.len())];
+        let mut objective = IdentificationObjective::new(
+            traces,
+            anns,
+            &summariser,
+            &chooser,
+            IdentifyParams {
+                options: self.p.options as usize,
+                seed,
+            },
+        );
+        let c = calibrate(start, rho, &mut objective, settings);
+        m.client.flush()?;
+        c.map_err(|e| StageError::Input(e.to_string()))
+    }
+
     fn detector(&self, p: &Pooled) -> Detector {
         Detector::new(
             self.p.env,
@@ -425,6 +591,7 @@ impl Stage for EnsembleStage {
         Ok(json!({
             "baseline": self.baseline.fingerprint(),
             "worker": crate::detect::worker_fingerprint(),
+            "endpoint": (self.p.objective == ObjectiveChoice::Identification).then(|| self.endpoint_configured()),
             "runs": self.runs.iter().map(|(r, d)| {
                 let m = std::fs::read(d.join("manifest.json")).unwrap_or_default();
                 (r.clone(), crate::digest::sha256_hex(&m))
@@ -622,19 +789,36 @@ impl Stage for EnsembleStage {
                 );
                 let dx = DistanceMatrix::compute(&calib, self.p.samples.max(2) as usize);
                 let rho = HeldoutRho::new(&calib, &anns, &dx, bins, self.p.dp);
-                let mut objective = HeldoutRho::new(&calib, &anns, &dx, bins, self.p.dp);
-                let c = calibrate(
-                    &start,
-                    &rho,
-                    &mut objective,
-                    CalibrationSettings {
-                        sweep_points: self.p.sweep_points as usize,
-                        bo_iterations: self.p.bo_iterations as usize,
-                        seed,
-                    },
-                )
-                .map_err(|e| StageError::Input(e.to_string()))?;
-                let name = self.p.objective.as_str().to_string();
+                let settings = CalibrationSettings {
+                    sweep_points: self.p.sweep_points as usize,
+                    bo_iterations: self.p.bo_iterations as usize,
+                    seed,
+                };
+                let c = if self.identification() {
+                    if calib.len() < self.p.options as usize {
+                        return Err(StageError::TooFewTraces {
+                            stage: "ensemble",
+                            what: format!(
+                                "{env} calibration traces for the identification objective"
+                            ),
+                            needed: self.p.options as usize,
+                            found: calib.len(),
+                            hint: ": simulate more traces or lower `options`",
+                        });
+                    }
+                    self.calibrate_identification(ctx, &start, &rho, &calib, &anns, settings)?
+                } else {
+                    let mut objective = HeldoutRho::new(&calib, &anns, &dx, bins, self.p.dp);
+                    calibrate(&start, &rho, &mut objective, settings)
+                        .map_err(|e| StageError::Input(e.to_string()))?
+                };
+                let name = if self.identification() {
+                    ObjectiveChoice::Identification
+                } else {
+                    ObjectiveChoice::HeldoutRho
+                }
+                .as_str()
+                .to_string();
                 let mut written = serde_json::Map::new();
                 if !c.rows.is_empty() {
                     let n = ctx.write_batch(
@@ -876,8 +1060,13 @@ impl Stage for EnsembleStage {
                 test_rho.insert(v.into(), xs.iter().sum::<f64>() / xs.len() as f64);
             }
         }
-        let note = match self.p.objective {
-            ObjectiveChoice::HeldoutRho => "calibration (b) maximised held-out ρ on the calibration traces (offline objective; identification accuracy needs the summary module)".to_string(),
+        let note = match (self.p.objective, self.identification()) {
+            (ObjectiveChoice::Identification, true) => format!(
+                "calibration (b) maximised identification accuracy: {} calibration traces annotated, summarised by the LLM and identified among {} summaries by the LLM chooser (calls in llm_calls)",
+                self.p.identification_traces, self.p.options
+            ),
+            (ObjectiveChoice::Identification, false) => "identification was asked for but no endpoint (llm.base_url, ANNOTRACE_LLM_BASE_URL) or llm.replay is configured: calibration (b) maximised held-out ρ on the calibration traces instead".to_string(),
+            (ObjectiveChoice::HeldoutRho, _) => "calibration (b) maximised held-out ρ on the calibration traces (offline objective)".to_string(),
         };
         let line = format!(
             "{} label(s) from {} source(s), K = [{}]; objective {}; test ρ ensemble {:.3}, -SP {:.3}, baseline {:.3}; library: {}",

@@ -18,8 +18,8 @@ use serde_json::{Value, json};
 
 use super::detector_setup::{DetectorSetup, SandboxParams};
 use super::trace_files::{read_traces, trace_file_sets};
-use crate::fitness::table::{distances_batch, matrix_from_batches, set_id};
-use crate::fitness::{DistanceMatrix, Dp};
+use crate::fitness::table::{distances_batch, matrix_from_batches, set_id_with};
+use crate::fitness::{DistanceMatrix, Dp, Dx};
 use crate::llm::{LlmClient, LlmConfig, LlmSettings, Prompts};
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
@@ -28,7 +28,9 @@ use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
 use crate::search::candidate::candidates_batch;
 use crate::search::library_out::write_library;
 use crate::search::run::Checkpoint;
-use crate::search::tables::{SetIds, convergence_batch, histograms_batch, labels_batch};
+use crate::search::tables::{
+    SetIds, convergence_batch, histograms_batch, labels_batch, samples_batch,
+};
 use crate::search::{
     CandidateRecord, Discovery, EvalSettings, LlmProposer, MutateProposer, ProposalTally, Proposer,
     SearchConfig, SearchError, Strategy, Temperatures,
@@ -47,7 +49,7 @@ pub static KIND: StageKind = StageKind {
           the annotation distance d_p (kl, js or the paper's literal cross-entropy). \
           Every candidate goes to the candidates table; the grown library is written as a folder \
           (default exports/<stage>/library) that `annotate` reads. See docs/evolution.md.",
-    writes: "candidates, evolution_labels, evolution_histograms, evolution_convergence, trace_distances, exports/<stage>/library/",
+    writes: "candidates, evolution_labels, evolution_histograms, evolution_samples, evolution_convergence, trace_distances, exports/<stage>/library/",
     params: ParamsOf::of::<EvolveParams>(),
     build,
 };
@@ -117,6 +119,15 @@ pub struct EvolveParams {
     /// Annotation distance d_p of ρ and η: kl (symmetrised Kullback–Leibler, 0 for identical
     /// annotations), js (Jensen–Shannon) or cross-entropy (the paper's wording; docs/evolution.md).
     pub dp: Dp,
+    /// Trace distance d_x of ρ: positions (the paper's: matched objects where they are) or invariant
+    /// (each matched object's trajectory aligned by a rigid Procrustes fit first; docs/evolution.md).
+    pub dx: Dx,
+    /// Accuracy guard of acceptance: for an event-grounded label, also reject a best program whose
+    /// F1 against the simulator's ground truth on the held-out traces is below the seed's by more
+    /// than `max_f1_drop` (docs/evolution.md).
+    pub accuracy_guard: bool,
+    /// The largest F1 drop the accuracy guard accepts.
+    pub max_f1_drop: f64,
     /// Proposals requested at once.
     pub parallel: u64,
     /// Repair requests per failed child (proposers that repair).
@@ -174,6 +185,9 @@ impl EvolveParams {
             delta: search.delta,
             allow_nonpositive_rho: search.allow_nonpositive_rho,
             dp: eval.dp,
+            dx: Dx::Positions,
+            accuracy_guard: false,
+            max_f1_drop: 0.1,
             parallel: search.parallel as u64,
             repair_attempts: search.repair_attempts as u64,
             max_traces: 100,
@@ -227,6 +241,9 @@ pub struct EvolveSummary {
     pub budget: u64,
     /// The annotation distance d_p.
     pub dp: Dp,
+    /// The trace distance d_x (absent from summaries recorded before it was added: positions).
+    #[serde(default)]
+    pub dx_kind: Dx,
     /// Training traces.
     pub train: u64,
     /// Held-out traces.
@@ -281,6 +298,9 @@ pub struct LabelSummary {
     pub acceptance: crate::search::Acceptance,
     /// ρ of the best candidate on the held-out traces (none without enough of them).
     pub holdout_rho: Option<f64>,
+    /// The accuracy guard's F1 of the seed and the best program (absent when it did not run).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub guard: Option<crate::search::GuardCheck>,
     /// Candidates evaluated.
     pub candidates: u64,
     /// Best ν after each step.
@@ -306,6 +326,8 @@ pub struct EvolveStage {
     max_traces: usize,
     holdout: f64,
     samples: usize,
+    dx: Dx,
+    accuracy_guard: Option<crate::search::AccuracyGuard>,
     convergence_per_bin: usize,
     max_edits: u32,
     output: Option<PathBuf>,
@@ -341,6 +363,12 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     if !p.delta.is_finite() {
         return Err(BuildError::param("delta", "delta must be a finite number"));
     }
+    if !(0.0..=1.0).contains(&p.max_f1_drop) {
+        return Err(BuildError::param(
+            "max_f1_drop",
+            format!("max_f1_drop must be in [0, 1], found {}", p.max_f1_drop),
+        ));
+    }
     if p.budget == 0 {
         return Err(BuildError::param("budget", "budget must be at least 1"));
     }
@@ -374,6 +402,11 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         max_traces: p.max_traces.max(2) as usize,
         holdout: p.holdout,
         samples: p.samples.max(2) as usize,
+        dx: p.dx,
+        accuracy_guard: p.accuracy_guard.then_some(crate::search::AccuracyGuard {
+            max_drop: p.max_f1_drop,
+            tolerance: 0.05,
+        }),
         convergence_per_bin: p.convergence_per_bin as usize,
         max_edits: p.max_edits.clamp(1, u64::from(u32::MAX)) as u32,
         llm,
@@ -573,7 +606,7 @@ impl EvolveStage {
         shard: &str,
     ) -> Result<(DistanceMatrix, String, bool), StageError> {
         let ids: Vec<String> = train.iter().map(|t| t.trace_id.clone()).collect();
-        let sid = set_id(&ids, self.samples);
+        let sid = set_id_with(&ids, self.samples, self.dx);
         let mut files: Vec<PathBuf> = ctx
             .run()
             .table("trace_distances")?
@@ -589,7 +622,7 @@ impl EvolveStage {
                 return Ok((m, sid, true));
             }
         }
-        let m = DistanceMatrix::compute(train, self.samples);
+        let m = DistanceMatrix::compute_with(train, self.samples, self.dx);
         let b = distances_batch(&sid, &m)?;
         ctx.write_batch("trace_distances", env, shard, &b)?;
         ctx.finish_shard(shard, &json!({"set_id": sid, "pairs": m.upper.len()}))?;
@@ -651,6 +684,10 @@ impl StagingCheckpoint<'_, '_> {
         )?;
         put("evolution_histograms", histograms_batch(t.stage, t.sets, r))?;
         put(
+            "evolution_samples",
+            samples_batch(t.stage, t.sets, &r.samples),
+        )?;
+        put(
             "evolution_convergence",
             convergence_batch(t.stage, &r.convergence),
         )?;
@@ -670,6 +707,7 @@ fn label_summary(r: &crate::search::LabelResult) -> (LabelSummary, String) {
         accepted: r.accepted,
         acceptance: r.acceptance,
         holdout_rho: r.holdout_rho,
+        guard: r.guard,
         candidates: o.records.len() as u64,
         best_by_step: o.best_by_step.clone(),
         wall_s: o.wall_s,
@@ -682,9 +720,13 @@ fn label_summary(r: &crate::search::LabelResult) -> (LabelSummary, String) {
         crate::search::Acceptance::Accepted => "",
         crate::search::Acceptance::BelowDelta => " (rejected: ν ≤ δ)",
         crate::search::Acceptance::NonpositiveRho => " (rejected: ρ ≤ 0)",
+        crate::search::Acceptance::AccuracyDrop => " (rejected: F1 fell)",
     };
+    let guard = r.guard.map_or(String::new(), |g| {
+        format!(", F1 {:.3} → {:.3}", g.seed_f1, g.best_f1)
+    });
     let line = format!(
-        "{}: ν {:.4} → {:.4}{rho}{verdict}",
+        "{}: ν {:.4} → {:.4}{rho}{guard}{verdict}",
         o.label, o.seed_nu, o.best.terms.nu,
     );
     (summary, line)
@@ -757,6 +799,7 @@ impl Stage for EvolveStage {
             };
         let sets = SetIds {
             dp: self.eval.dp,
+            dx: self.dx,
             train: train_set,
             train_ids: dx.ids.clone(),
             holdout: holdout_set,
@@ -785,6 +828,7 @@ impl Stage for EvolveStage {
             checkpoint: &checkpoint,
             source: format!("evolve:{stage}"),
             convergence_per_bin: self.convergence_per_bin,
+            accuracy_guard: self.accuracy_guard,
         };
         let mut rows: std::collections::BTreeMap<String, u64> = Default::default();
         let mut label_lines = Vec::new();
@@ -861,6 +905,7 @@ impl Stage for EvolveStage {
                 proposer: proposer.name().to_string(),
                 budget: config.budget,
                 dp: self.eval.dp,
+                dx_kind: self.dx,
                 train: train.len() as u64,
                 holdout: holdout.len() as u64,
                 dx: DxSummary {
