@@ -119,6 +119,12 @@ pub struct EvolveParams {
     pub dp: Dp,
     /// Proposals requested at once.
     pub parallel: u64,
+    /// Rounds between the database a round's prompts come from and the round: 0 samples round r's
+    /// parents after round r − 1 is scored; 1 after round r − 2, so round r's requests are in flight
+    /// while round r − 1 is scored (evaluation overlaps generation; the same seed and answers give
+    /// the same search). Default: 1 with the LLM proposer, 0 with mutate (docs/evolution.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lag: Option<u64>,
     /// Repair requests per failed child (proposers that repair).
     pub repair_attempts: u64,
     /// Training traces at most (and held-out traces at most).
@@ -175,6 +181,7 @@ impl EvolveParams {
             allow_nonpositive_rho: search.allow_nonpositive_rho,
             dp: eval.dp,
             parallel: search.parallel as u64,
+            lag: None,
             repair_attempts: search.repair_attempts as u64,
             max_traces: 100,
             holdout: 0.2,
@@ -245,10 +252,14 @@ pub struct EvolveSummary {
     pub library: String,
     /// Wall time of the stage (s).
     pub wall_s: f64,
-    /// Time spent waiting for proposals (s).
+    /// Wall time during which a proposal or repair was in flight (s), summed over the labels.
     pub propose_s: f64,
-    /// Share of wall time outside the proposer.
+    /// Share of the labels' search wall time outside the proposer (no proposal in flight).
     pub outside_proposer_share: f64,
+    /// The lag the search ran with (0: rounds alternate; 1: evaluation overlaps the next requests;
+    /// absent from summaries recorded before it was added).
+    #[serde(default)]
+    pub lag: u64,
     /// The sandbox layers the workers run under.
     pub sandbox: Value,
 }
@@ -287,7 +298,7 @@ pub struct LabelSummary {
     pub best_by_step: Vec<f64>,
     /// Wall time of the label's search (s).
     pub wall_s: f64,
-    /// Time spent waiting for proposals (s).
+    /// Wall time during which a proposal or repair was in flight (s).
     pub propose_s: f64,
 }
 
@@ -297,6 +308,8 @@ pub struct EvolveStage {
     setup: DetectorSetup,
     labels: Vec<String>,
     config: SearchConfig,
+    /// The `lag` parameter (`None`: by proposer).
+    lag: Option<u64>,
     seed: Option<u64>,
     eval: EvalSettings,
     proposer: ProposerChoice,
@@ -344,6 +357,12 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     if p.budget == 0 {
         return Err(BuildError::param("budget", "budget must be at least 1"));
     }
+    if let Some(lag) = p.lag.filter(|&l| l > 1) {
+        return Err(BuildError::param(
+            "lag",
+            format!("lag must be 0 or 1, found {lag}"),
+        ));
+    }
     let mut llm = p.llm.clone().unwrap_or_default();
     if let Some(r) = &llm.replay {
         llm.replay = Some(spec.project_dir.join(r));
@@ -359,10 +378,13 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
             delta: p.delta,
             allow_nonpositive_rho: p.allow_nonpositive_rho,
             parallel: p.parallel.max(1) as usize,
+            lag: p.lag.unwrap_or(0),
+            overlap: true,
             repair_attempts: p.repair_attempts.min(u64::from(u32::MAX)) as u32,
             temperatures: Temperatures::default(),
             seed: 0,
         },
+        lag: p.lag,
         seed: p.seed,
         eval: EvalSettings {
             bins: p.bins.max(1) as usize,
@@ -767,6 +789,8 @@ impl Stage for EvolveStage {
         limits.trace_cache = limits.trace_cache.max(train.len() + holdout.len() + 4);
         let pool = crate::detect::WorkerPool::new(limits)?;
         let (proposer, llm_client) = self.proposer(ctx, config.seed)?;
+        // Overlap by default when proposals are slow (a model), not with the offline proposer.
+        config.lag = self.lag.unwrap_or(u64::from(llm_client.is_some()));
         let checkpoint = StagingCheckpoint {
             ctx,
             failure: RefCell::new(None),
@@ -879,6 +903,7 @@ impl Stage for EvolveStage {
                 } else {
                     0.0
                 },
+                lag: config.lag,
                 sandbox: serde_json::to_value(pool.layers()).unwrap_or(Value::Null),
             })
             .unwrap_or(Value::Null),
