@@ -448,6 +448,10 @@ type ProposerAndClient = (Box<dyn Proposer>, Option<Arc<LlmClient>>);
 struct StagingCheckpoint<'a, 'b> {
     ctx: &'a StageContext<'b>,
     failure: RefCell<Option<StageError>>,
+    /// The LLM client, whose recorded calls are written out before each round is saved: every
+    /// answer a saved round or a round still in flight received is then in `llm_calls`, for a resumed
+    /// search to replay.
+    calls: Option<Arc<LlmClient>>,
 }
 
 impl StagingCheckpoint<'_, '_> {
@@ -483,6 +487,11 @@ impl Checkpoint for StagingCheckpoint<'_, '_> {
         }
     }
     fn save(&self, l: u32, r: u64, records: &[CandidateRecord]) -> Result<(), SearchError> {
+        if let Some(client) = &self.calls {
+            client
+                .flush()
+                .map_err(|e| SearchError::Checkpoint(format!("recording the LLM calls: {e}")))?;
+        }
         self.ctx.progress().advance(
             self.ctx.stage_id(),
             records.iter().filter(|r| r.step >= 0).count() as u64,
@@ -512,6 +521,16 @@ impl EvolveStage {
         }
         let mut settings = self.llm.clone();
         settings.seed = Some(settings.seed.unwrap_or(seed));
+        // A resumed search answers the requests its stopped attempt already had answered (the round
+        // being scored and the one in flight, which no saved round holds) from this run's
+        // `llm_calls`, and sends only the others to the endpoint.
+        let resuming = ctx
+            .finished_shard(&StagingCheckpoint::shard(0, 0))?
+            .is_some();
+        if resuming && settings.replay.is_none() {
+            settings.replay = Some(ctx.run().root().to_path_buf());
+            settings.strict_replay = Some(false);
+        }
         let config = LlmConfig::resolve(&settings, &|k| std::env::var(k).ok())?;
         let dir = self
             .prompts
@@ -794,6 +813,7 @@ impl Stage for EvolveStage {
         let checkpoint = StagingCheckpoint {
             ctx,
             failure: RefCell::new(None),
+            calls: llm_client.clone(),
         };
         let stage = ctx.stage_id().to_string();
         let discovery = Discovery {
