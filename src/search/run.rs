@@ -715,10 +715,10 @@ impl Busy {
         let end = Instant::now();
         let mut b = self.0.lock().unwrap_or_else(|p| p.into_inner());
         b.running -= 1;
-        if b.running == 0 {
-            if let Some(since) = b.since.take() {
-                b.total += end.duration_since(since).as_secs_f64();
-            }
+        if b.running == 0
+            && let Some(since) = b.since.take()
+        {
+            b.total += end.duration_since(since).as_secs_f64();
         }
         (out, end.duration_since(t).as_secs_f64())
     }
