@@ -8,7 +8,7 @@
 //! (the skeleton detector with a marker pattern at a step only that child marks, so every child is
 //! distinct and fully evaluated), then runs `annotrace evolve` for one label with `--parallel P
 //! --llm-parallel P` and `--lag 0` and `--lag 1`, `--rounds` rounds each, and prints per run the
-//! label's search wall time, the time a proposal or repair was in flight (`propose_s`), the share
+//! mean evaluation time per child (`candidates.eval_s`), the label's search wall time, the time a proposal or repair was in flight (`propose_s`), the share
 //! outside the proposer (`evolution_labels.outside_proposer_share`), the candidates by status and the
 //! most requests the server answered at once.
 
@@ -88,9 +88,9 @@ fn main() {
         t.elapsed().as_secs_f64()
     );
     println!(
-        "| parallel | lag | children | statuses | search wall (s) | proposer busy (s) | outside the proposer | most in flight |"
+        "| parallel | lag | children | statuses | evaluation per child (s) | search wall (s) | proposer busy (s) | outside the proposer | most in flight |"
     );
-    println!("|---:|---:|---:|---|---:|---:|---:|---:|");
+    println!("|---:|---:|---:|---|---:|---:|---:|---:|---:|");
     for &parallel in &parallels {
         for lag in &lags {
             let budget = (parallel * rounds).to_string();
@@ -153,6 +153,14 @@ fn main() {
                 .split(',')
                 .map(|x| x.parse().expect("a number"))
                 .collect();
+            let eval = q(&format!(
+                "SELECT avg(eval_s) AS e FROM candidates WHERE run_stage = '{stage}' AND step >= 0"
+            ));
+            let eval: f64 = eval
+                .lines()
+                .nth(1)
+                .and_then(|l| l.parse().ok())
+                .unwrap_or(f64::NAN);
             let statuses = q(&format!(
                 "SELECT status, count(*) AS n FROM candidates WHERE run_stage = '{stage}' \
                  AND step >= 0 GROUP BY status ORDER BY status"
@@ -163,8 +171,9 @@ fn main() {
                 .map(|l| l.replace(',', " "))
                 .collect();
             println!(
-                "| {parallel} | {lag} | {asked} | {} | {:.2} | {:.2} | {:.1} % | {} |",
+                "| {parallel} | {lag} | {asked} | {} | {:.3} | {:.2} | {:.2} | {:.1} % | {} |",
                 statuses.join(", "),
+                eval,
                 f[0],
                 f[1],
                 100.0 * f[2],
