@@ -4,8 +4,10 @@
 //! tables and the grown library as a folder.
 //!
 //! Resumable: each round of a label's search is a shard whose record holds the round's candidates, so a
-//! killed stage replays its finished rounds and continues; each label's tables are written by a last
-//! shard of that label. The D_x matrix of the training set is looked up in the run's
+//! killed stage replays its finished rounds and continues (an LLM search also answers the requests its
+//! stopped attempt had recorded in `llm_calls` from there); each label's tables are written by a last
+//! shard of that label. `lag` (unset: 1 with an LLM, 0 with mutate) decides whether the next round's
+//! requests are in flight while a round is scored (`search::run`). The D_x matrix of the training set is looked up in the run's
 //! `trace_distances` (any stage's) before it is computed.
 
 use std::cell::RefCell;
