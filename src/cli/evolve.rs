@@ -78,6 +78,11 @@ pub struct Args {
     /// Proposals requested at once.
     #[arg(long, default_value_t = D.parallel)]
     parallel: u64,
+    /// 0: a round's prompts come from the database after the previous round; 1: from the one
+    /// before, so the next round's requests are in flight while a round is scored (default: 1 with
+    /// an LLM, 0 with mutate).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(0..=1))]
+    lag: Option<u64>,
     /// Repair requests per failed child (proposers that repair).
     #[arg(long, default_value_t = D.repair_attempts)]
     repair_attempts: u64,
@@ -172,6 +177,7 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
         accuracy_guard: a.accuracy_guard,
         max_f1_drop: a.max_f1_drop,
         parallel: a.parallel,
+        lag: a.lag,
         repair_attempts: a.repair_attempts,
         max_traces: a.max_traces,
         holdout: a.holdout,
@@ -237,8 +243,9 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
         println!("proposals: {f}");
     }
     println!(
-        "wall time outside the proposer: {:.1} %",
-        100.0 * s.outside_proposer_share
+        "wall time outside the proposer: {:.1} % (lag {})",
+        100.0 * s.outside_proposer_share,
+        s.lag
     );
     println!(
         "library: {} (use it with: annotrace annotate --library <that folder>)",

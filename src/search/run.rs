@@ -1,16 +1,24 @@
 //! One label's search (FunSearch, Algorithm 1 of appendix F, or a baseline) and the discovery loop
 //! around it (Algorithm 2: one search per label, accept the best if ν > δ, grow the library).
 //!
-//! A search runs in *rounds* of `parallel` steps. At the start of a round, every step of it samples an
-//! island and its parents from the database as it stands, with a random generator seeded from
-//! (run seed, label index, step) — so step k's choices do not depend on how earlier steps were
-//! scheduled — and the proposer is asked for all of the round's children at once (concurrently: an LLM
-//! proposer's requests overlap). Children are then checked and scored in step order, each result is
-//! applied to the database, and every T_r steps the weaker half of the islands is reset. The round's
-//! records are handed to a [`Checkpoint`]; a resumed search *replays* saved rounds (applying their
-//! records without proposing or evaluating again) and continues with the first unsaved round. With a
-//! deterministic proposer (`mutate`) and a deterministic score (ψ off) a resumed search therefore equals
-//! an uninterrupted one record for record.
+//! A search runs in *rounds* of `parallel` steps. Every step of round r samples an island and its
+//! parents from the database after round r − 1 − `lag` ([`SearchConfig::lag`]), with a random generator
+//! seeded from (run seed, label index, step) — so step k's choices do not depend on how earlier steps
+//! were scheduled — and the proposer is asked for all of the round's children at once (concurrently:
+//! an LLM proposer's requests overlap). Children are then checked and scored in step order as their
+//! proposals come back, each result is applied to the database, and every T_r steps the weaker half of
+//! the islands is reset. With `lag` 1 the search is a pipeline, as FunSearch's samplers and
+//! evaluators are: round r + 1's requests are in flight while round r is evaluated, and since their
+//! prompts come from the database before round r, the search is the same whether the two phases
+//! overlap in time or not ([`SearchConfig::overlap`]). The round's records are handed to a
+//! [`Checkpoint`]; a resumed search *replays* saved rounds (applying their records without proposing
+//! or evaluating again) and continues with the first unsaved round. With a deterministic proposer
+//! (`mutate`) and a deterministic score (ψ off) a resumed search therefore equals an uninterrupted one
+//! record for record, under either lag.
+//!
+//! **Owns:** the round schedule, the search state rebuilt from records, checkpoints, the proposer's
+//! busy time. **Does not:** score (`search::evaluator`, `fitness/`), sample parents
+//! (`search::islands`), or make children (the [`Proposer`]).
 
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Mutex;
@@ -44,6 +52,15 @@ pub struct SearchConfig {
     pub allow_nonpositive_rho: bool,
     /// Proposals requested at once (one round).
     pub parallel: usize,
+    /// How many rounds old the database is that a round's prompts are built from: with 0, round r
+    /// samples its parents from the database after round r − 1 (proposals and evaluation alternate);
+    /// with 1, from the database after round r − 2, so round r's requests can be in flight while
+    /// round r − 1 is evaluated. Values above 1 count as 1.
+    pub lag: u64,
+    /// With `lag` 1: send round r + 1's requests before round r is evaluated (the pipeline). `false`
+    /// runs the same schedule one phase after the other: the same search, only slower (for tests and
+    /// measurements). Ignored with `lag` 0.
+    pub overlap: bool,
     /// Repair attempts per child that fails with a repairable error.
     pub repair_attempts: u32,
     /// Sampling temperatures.
@@ -64,6 +81,8 @@ impl SearchConfig {
         delta: 0.0,
         allow_nonpositive_rho: false,
         parallel: 4,
+        lag: 0,
+        overlap: true,
         repair_attempts: 2,
         temperatures: Temperatures::DEFAULT,
         seed: 0,
@@ -179,7 +198,8 @@ pub struct LabelOutcome {
     pub best_by_step: Vec<f64>,
     /// Wall time of the search (s), this process only.
     pub wall_s: f64,
-    /// Wall time spent waiting for the proposer (s), this process only.
+    /// Wall time during which at least one proposal or repair was in flight (s), this process only:
+    /// the time the proposer had work. `wall_s − propose_s` is the time outside the proposer.
     pub propose_s: f64,
     /// Whether the proposer's budget ran out before the step budget.
     pub budget_exhausted: bool,
@@ -410,11 +430,11 @@ impl LabelSearch<'_> {
     /// repairable error and the proposer offers repairs.
     fn settle(
         &self,
-        (step, island, parents, seed): (u64, usize, Vec<Program>, u64),
+        (step, island, parents, seed): Plan,
         proposal: Result<Proposal, ProposeError>,
         took: f64,
         state: &State,
-        propose_s: &mut f64,
+        busy: &Busy,
     ) -> Result<CandidateRecord, SearchError> {
         let cfg = self.config;
         // An unreachable or refusing backend ends the run.
@@ -450,11 +470,9 @@ impl LabelSearch<'_> {
             if !repairable(&err) {
                 break;
             }
-            let t = Instant::now();
-            let fixed = self.proposer.repair(&req, &rec.code, &err, rec.repairs + 1);
-            let dt = t.elapsed().as_secs_f64();
+            let (fixed, dt) =
+                busy.time(|| self.proposer.repair(&req, &rec.code, &err, rec.repairs + 1));
             rec.propose_s += dt;
-            *propose_s += dt;
             match fixed {
                 Ok(Some(p)) => {
                     rec.repairs += 1;
@@ -498,63 +516,82 @@ impl LabelSearch<'_> {
         Ok(out)
     }
 
-    /// One round of proposals for `steps`: parents are sampled per step from its own generator,
-    /// every proposal is requested at once, and each child is scored as soon as its proposal is
-    /// back (in step order) while later proposals are still in flight. Applies the records to
-    /// `state`; sets `exhausted` when the proposer's budget ran out.
-    fn round(
-        &self,
-        steps: std::ops::Range<u64>,
-        state: &mut State,
-        propose_s: &mut f64,
-        exhausted: &mut bool,
-    ) -> Result<Vec<CandidateRecord>, SearchError> {
+    /// The plan of every step of `steps`: its island, parents and request seed, sampled from `db` with
+    /// the step's own generator (so a plan depends only on the seed, the label, the step and `db`).
+    fn plan(&self, db: &Database, steps: std::ops::Range<u64>) -> Vec<Plan> {
         let cfg = self.config;
-        let db = state.db.as_ref().expect("seeded");
-        let plans: Vec<(u64, usize, Vec<Program>, u64)> = steps
+        steps
             .map(|step| {
                 let mut rng = step_rng(cfg.seed, self.label_index, step);
                 let (island, parents) = db.sample(cfg.prompt_size, &mut rng);
                 (step, island, parents, rng.next_u64())
             })
-            .collect();
+            .collect()
+    }
+
+    /// Sends every planned request at once, each on its own scoped thread (the proposer's own limits,
+    /// such as an LLM client's slots, decide how many are answered at the same time).
+    fn launch<'scope, 'env>(
+        &'env self,
+        sc: &'scope std::thread::Scope<'scope, 'env>,
+        plans: Vec<Plan>,
+        busy: &'env Busy,
+    ) -> Launched<'scope> {
         let proposer = self.proposer;
-        let mut records = Vec::new();
-        std::thread::scope(|sc| -> Result<(), SearchError> {
-            let handles: Vec<_> = plans
-                .iter()
-                .map(|(step, island, parents, seed)| {
-                    let req = self.request(*island, parents, *seed, *step);
-                    sc.spawn(move || {
-                        let t = Instant::now();
-                        (proposer.propose(&req), t.elapsed().as_secs_f64())
-                    })
-                })
-                .collect();
-            for (plan, handle) in plans.into_iter().zip(handles) {
-                let waited = Instant::now();
-                let (proposal, took) = handle.join().unwrap_or_else(|_| {
-                    (
-                        Err(ProposeError::Other("the proposer panicked".into())),
-                        0.0,
-                    )
-                });
-                *propose_s += waited.elapsed().as_secs_f64();
-                let rec = self.settle(plan, proposal, took, state, propose_s)?;
-                *exhausted |= rec.status == "budget_exhausted";
-                state.apply(&rec, cfg, self.label_index);
-                records.push(rec);
-            }
-            Ok(())
-        })?;
+        plans
+            .into_iter()
+            .map(|plan| {
+                let req = self.request(plan.1, &plan.2, plan.3, plan.0);
+                let handle = sc.spawn(move || busy.time(|| proposer.propose(&req)));
+                (plan, handle)
+            })
+            .collect()
+    }
+
+    /// Settles a launched round: each child is checked and scored as soon as its proposal is back,
+    /// in step order (later proposals, and with a lag the next round's, are still in flight), and
+    /// applied to `state`. Sets `exhausted` when the proposer's budget ran out.
+    fn settle_round(
+        &self,
+        launched: Launched<'_>,
+        state: &mut State,
+        busy: &Busy,
+        exhausted: &mut bool,
+    ) -> Result<Vec<CandidateRecord>, SearchError> {
+        let mut records = Vec::with_capacity(launched.len());
+        for (plan, handle) in launched {
+            let (proposal, took) = handle.join().unwrap_or_else(|_| {
+                (
+                    Err(ProposeError::Other("the proposer panicked".into())),
+                    0.0,
+                )
+            });
+            let rec = self.settle(plan, proposal, took, state, busy)?;
+            *exhausted |= rec.status == "budget_exhausted";
+            state.apply(&rec, self.config, self.label_index);
+            records.push(rec);
+        }
         Ok(records)
     }
 
+    /// The steps of round `round` (1-based).
+    fn steps(&self, round: u64) -> std::ops::Range<u64> {
+        let per_round = self.config.parallel.max(1) as u64;
+        (round - 1) * per_round..(round * per_round).min(self.config.budget)
+    }
+
     /// Runs (or resumes) the search.
+    ///
+    /// Round r's parents are sampled from the database after round r − 1 − `lag` (round 0 is the
+    /// seed programs; earlier rounds count as round 0). With `lag` 1 and `overlap`, round r + 1's
+    /// requests are sent as soon as round r's are all back, and round r is evaluated while they are
+    /// in flight. Saved rounds are replayed first (their records applied without proposing or
+    /// evaluating), keeping the database before the last of them, so a resumed search plans its next
+    /// rounds from the same databases as an uninterrupted one.
     pub fn run(&self) -> Result<LabelOutcome, SearchError> {
         let cfg = self.config;
         let started = Instant::now();
-        let mut propose_s = 0.0;
+        let busy = Busy::default();
         let mut state = State::empty();
         let mut all = Vec::new();
         let label = self.evaluator.label.clone();
@@ -571,26 +608,62 @@ impl LabelSearch<'_> {
             return Err(SearchError::Seed { label, message });
         };
         all.extend(seeds);
-        let per_round = cfg.parallel.max(1) as u64;
-        let rounds = cfg.budget.div_ceil(per_round);
+        let rounds = cfg.budget.div_ceil(cfg.parallel.max(1) as u64);
+        let lagged = cfg.lag >= 1;
         let mut exhausted = false;
-        for round in 1..=rounds {
-            if let Some(saved) = self.checkpoint.load(self.label_index, round)? {
-                for r in &saved {
-                    state.apply(r, cfg, self.label_index);
-                    exhausted |= r.status == "budget_exhausted";
-                }
-                all.extend(saved);
-                continue;
-            }
-            if exhausted {
+        // The database before the last applied round (the seeds' while no round is applied).
+        let mut before_last = state.db.clone().expect("seeded");
+        let mut first_live = 1;
+        while first_live <= rounds {
+            let Some(saved) = self.checkpoint.load(self.label_index, first_live)? else {
                 break;
+            };
+            before_last = state.db.clone().expect("seeded");
+            for r in &saved {
+                state.apply(r, cfg, self.label_index);
+                exhausted |= r.status == "budget_exhausted";
             }
-            let steps = (round - 1) * per_round..(round * per_round).min(cfg.budget);
-            let records = self.round(steps, &mut state, &mut propose_s, &mut exhausted)?;
-            self.checkpoint.save(self.label_index, round, &records)?;
-            all.extend(records);
+            all.extend(saved);
+            first_live += 1;
         }
+        std::thread::scope(|sc| -> Result<(), SearchError> {
+            let mut next: Option<Launched<'_>> = None;
+            let mut round = first_live;
+            while round <= rounds && !exhausted {
+                let current = match next.take() {
+                    Some(l) => l,
+                    None => {
+                        let db = if lagged && round == first_live {
+                            &before_last
+                        } else {
+                            state.db.as_ref().expect("seeded")
+                        };
+                        self.launch(sc, self.plan(db, self.steps(round)), &busy)
+                    }
+                };
+                // With a lag, round + 1 is planned from the database after round − 1: the one now.
+                let mut planned = None;
+                if lagged && round < rounds {
+                    let plans =
+                        self.plan(state.db.as_ref().expect("seeded"), self.steps(round + 1));
+                    if cfg.overlap {
+                        next = Some(self.launch(sc, plans, &busy));
+                    } else {
+                        planned = Some(plans);
+                    }
+                }
+                let records = self.settle_round(current, &mut state, &busy, &mut exhausted)?;
+                self.checkpoint.save(self.label_index, round, &records)?;
+                all.extend(records);
+                if let Some(plans) = planned.filter(|_| !exhausted) {
+                    next = Some(self.launch(sc, plans, &busy));
+                }
+                round += 1;
+            }
+            // Requests of a round that will not run (the budget ran out) are left to finish; their
+            // answers are not used.
+            Ok(())
+        })?;
         let db = state.db.as_ref().expect("seeded");
         Ok(LabelOutcome {
             label,
@@ -599,9 +672,61 @@ impl LabelSearch<'_> {
             records: all,
             best_by_step: state.best_by_step,
             wall_s: started.elapsed().as_secs_f64(),
-            propose_s,
+            propose_s: busy.total(),
             budget_exhausted: exhausted,
         })
+    }
+}
+
+/// One step's plan: (step, island, parents, request seed).
+type Plan = (u64, usize, Vec<Program>, u64);
+
+/// A round whose requests are in flight: each plan with the thread asking the proposer (the proposal
+/// and the seconds it took).
+type Launched<'scope> = Vec<(
+    Plan,
+    std::thread::ScopedJoinHandle<'scope, (Result<Proposal, ProposeError>, f64)>,
+)>;
+
+/// The wall time during which at least one call to the proposer was running: the union of the
+/// calls' intervals, whichever thread made them.
+#[derive(Debug, Default)]
+struct Busy(Mutex<BusyState>);
+
+#[derive(Debug, Default)]
+struct BusyState {
+    running: usize,
+    since: Option<Instant>,
+    total: f64,
+}
+
+impl Busy {
+    /// Runs `f` as a call to the proposer; returns its result and its own duration (s).
+    fn time<T>(&self, f: impl FnOnce() -> T) -> (T, f64) {
+        let t = Instant::now();
+        {
+            let mut b = self.0.lock().unwrap_or_else(|p| p.into_inner());
+            if b.running == 0 {
+                b.since = Some(t);
+            }
+            b.running += 1;
+        }
+        let out = f();
+        let end = Instant::now();
+        let mut b = self.0.lock().unwrap_or_else(|p| p.into_inner());
+        b.running -= 1;
+        if b.running == 0
+            && let Some(since) = b.since.take()
+        {
+            b.total += end.duration_since(since).as_secs_f64();
+        }
+        (out, end.duration_since(t).as_secs_f64())
+    }
+
+    /// The busy time so far, counting a call still running up to now.
+    fn total(&self) -> f64 {
+        let b = self.0.lock().unwrap_or_else(|p| p.into_inner());
+        b.total + b.since.map_or(0.0, |s| s.elapsed().as_secs_f64())
     }
 }
 
@@ -756,5 +881,159 @@ mod tests {
         let replay = search.run().unwrap();
         assert_eq!(replay.records, out.records);
         assert!(again.calls.lock().unwrap().is_empty());
+    }
+
+    /// A deterministic proposer whose child depends on its first parent and the request's seed (the
+    /// parent's `THRESHOLD` scaled), answering after a delay that varies with the seed when `delay`
+    /// is set; records the steps it was asked for.
+    struct FromParent {
+        delay: bool,
+        asked: Mutex<Vec<u64>>,
+    }
+
+    impl FromParent {
+        fn new(delay: bool) -> Self {
+            FromParent {
+                delay,
+                asked: Mutex::new(Vec::new()),
+            }
+        }
+    }
+
+    impl Proposer for FromParent {
+        fn name(&self) -> &str {
+            "from-parent"
+        }
+        fn propose(&self, req: &ProposalRequest) -> Result<Proposal, ProposeError> {
+            self.asked.lock().unwrap().push(req.step);
+            if self.delay {
+                std::thread::sleep(std::time::Duration::from_millis(req.seed % 7 * 15));
+            }
+            let parent = &req.parents[0].code;
+            let (head, rest) = parent.split_once("THRESHOLD = ").expect("a threshold");
+            let (value, tail) = rest.split_once('\n').expect("a line");
+            let t: f64 = value.parse().expect("a number");
+            let factor = 0.4 + (req.seed % 1000) as f64 / 800.0;
+            Ok(Proposal {
+                code: format!("{head}THRESHOLD = {:.6}\n{tail}", t * factor),
+                ..Proposal::default()
+            })
+        }
+        fn repair(
+            &self,
+            _: &ProposalRequest,
+            _: &str,
+            _: &DetectorError,
+            _: u32,
+        ) -> Result<Option<Proposal>, ProposeError> {
+            Ok(None)
+        }
+    }
+
+    /// What a search decided, without the wall times.
+    fn decisions(records: &[CandidateRecord]) -> Vec<String> {
+        records
+            .iter()
+            .map(|r| {
+                format!(
+                    "{} {} {:?} {} {} {:?} {:?}",
+                    r.step, r.island, r.parents, r.code_hash, r.status, r.terms, r.signature
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_lagged_search_is_the_same_overlapped_or_not_and_resumes_without_asking_again() {
+        let traces = traces();
+        let pool = WorkerPool::new(SandboxLimits {
+            workers: 2,
+            ..SandboxLimits::default()
+        })
+        .unwrap();
+        let dx = DistanceMatrix::compute(&traces, 16);
+        let library = LibraryView::default();
+        let evaluator = Evaluator {
+            pool: &pool,
+            env: Env::Pooltool,
+            label: "moving".into(),
+            traces: &traces,
+            dx: &dx,
+            library: &library,
+            settings: EvalSettings {
+                probe: 2,
+                time_penalty: false,
+                ..EvalSettings::default()
+            },
+        };
+        let run = |config: &SearchConfig, proposer: &FromParent, checkpoint: &MemoryCheckpoint| {
+            LabelSearch {
+                config,
+                label_index: 0,
+                evaluator: &evaluator,
+                proposer,
+                seeds: vec![skeleton(Env::Pooltool, "moving")],
+                library_labels: Vec::new(),
+                checkpoint,
+            }
+            .run()
+        };
+        let lagged = SearchConfig {
+            budget: 12,
+            parallel: 3,
+            islands: 2,
+            lag: 1,
+            seed: 5,
+            ..SearchConfig::default()
+        };
+        // Overlapped, with answers arriving in a different order than they were asked.
+        let slow = FromParent::new(true);
+        let overlapped = run(&lagged, &slow, &MemoryCheckpoint::default()).unwrap();
+        assert_eq!(overlapped.records.len(), 13);
+        assert!(overlapped.propose_s > 0.0 && overlapped.propose_s <= overlapped.wall_s);
+        // The same schedule one phase after the other: the same search.
+        let sequential = SearchConfig {
+            overlap: false,
+            ..lagged.clone()
+        };
+        let fast = FromParent::new(false);
+        let plain = run(&sequential, &fast, &MemoryCheckpoint::default()).unwrap();
+        assert_eq!(decisions(&plain.records), decisions(&overlapped.records));
+        assert_eq!(plain.best.hash, overlapped.best.hash);
+        assert_eq!(plain.best_by_step, overlapped.best_by_step);
+        // Killed when round 2 is saved (round 3's requests are in flight): the resumed search
+        // replays rounds 0–2 (steps 0–5), asks for rounds 3 and 4 only (round 3 again), and ends
+        // where the uninterrupted one did.
+        let checkpoint = MemoryCheckpoint {
+            stop_after: Some(3),
+            ..MemoryCheckpoint::default()
+        };
+        let first = FromParent::new(true);
+        assert!(matches!(
+            run(&lagged, &first, &checkpoint),
+            Err(SearchError::Checkpoint(_))
+        ));
+        let checkpoint = MemoryCheckpoint {
+            rounds: Mutex::new(checkpoint.rounds.into_inner().unwrap()),
+            stop_after: None,
+        };
+        let again = FromParent::new(true);
+        let resumed = run(&lagged, &again, &checkpoint).unwrap();
+        assert_eq!(decisions(&resumed.records), decisions(&overlapped.records));
+        let mut asked = again.asked.into_inner().unwrap();
+        asked.sort_unstable();
+        assert_eq!(asked, (6..12).collect::<Vec<u64>>());
+        // Lag 0 plans every round from the round before: round 2 already sees round 1's children.
+        let unlagged = SearchConfig {
+            lag: 0,
+            ..lagged.clone()
+        };
+        let zero = run(
+            &unlagged,
+            &FromParent::new(false),
+            &MemoryCheckpoint::default(),
+        )
+        .unwrap();
+        assert_eq!(zero.records.len(), 13);
     }
 }

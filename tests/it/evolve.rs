@@ -592,10 +592,109 @@ fn an_endpoint_refusing_the_request_ends_evolve_as_bad_configuration() {
         .code(2)
         .stderr_has("proposer refused")
         .stderr_has("401");
-    // `evolve_with` runs two proposals in parallel: each asked once, neither retried.
-    assert!(
-        refusing.seen().len() <= 2,
-        "{} requests",
-        refusing.seen().len()
+    // `evolve_with` runs two proposals per round, and with lag 1 (the LLM default) the next round's
+    // two are sent before the first round is scored: each asked once, none retried.
+    let seen = refusing.seen();
+    let bodies: std::collections::BTreeSet<String> =
+        seen.iter().map(|s| s.body.to_string()).collect();
+    assert!(seen.len() <= 4, "{} requests", seen.len());
+    assert_eq!(bodies.len(), seen.len(), "a request was retried");
+}
+
+/// A scripted model answering each evolve request with the skeleton of the prompt's label, its
+/// threshold set by the prompt's search step, after `ms` milliseconds: the same request always gets
+/// the same child.
+fn stepwise_model(ms: u64) -> crate::common::chat_server::ChatServer {
+    use crate::common::chat_server::{ChatServer, Reply};
+    use annotrace::search::skeleton::skeleton;
+    use annotrace::trace::Env;
+    ChatServer::responder(move |seen| {
+        let prompt = seen.last_message();
+        let field = |name: &str| {
+            prompt
+                .lines()
+                .find_map(|l| l.strip_prefix(name))
+                .unwrap_or_default()
+                .trim()
+                .to_string()
+        };
+        let step: u64 = field("Search step:").parse().unwrap_or(0);
+        let code = skeleton(Env::Pooltool, &field("Pattern to detect:")).replace(
+            "THRESHOLD = 0.05",
+            &format!("THRESHOLD = {:.3}", 0.02 + 0.037 * step as f64),
+        );
+        Reply::slow(ms, Reply::chat(&format!("```python\n{code}```\n")))
+    })
+}
+
+/// The search steps a scripted model was asked for after its first `skip` requests, sorted.
+fn steps_asked(server: &crate::common::chat_server::ChatServer, skip: usize) -> Vec<u64> {
+    let mut steps: Vec<u64> = server
+        .seen()
+        .iter()
+        .skip(skip)
+        .filter_map(|s| {
+            s.last_message()
+                .lines()
+                .find_map(|l| l.strip_prefix("Search step:"))
+                .and_then(|v| v.trim().parse().ok())
+        })
+        .collect();
+    steps.sort_unstable();
+    steps
+}
+
+/// With `lag = 1` an LLM search sends round r + 1's requests while round r is scored; killed after
+/// round 1 is saved (round 2 being scored or in flight), it resumes without asking the model for
+/// saved rounds or for calls its stopped attempt recorded in `llm_calls`, and ends with exactly the
+/// candidates of an uninterrupted run.
+#[test]
+fn an_overlapped_llm_search_resumes_without_asking_again_and_equals_an_uninterrupted_one() {
+    let stage = |url: &str| {
+        pipeline(&format!(
+            "proposer = \"llm\"\nlag = 1\nllm = {{ base_url = \"{url}\", model = \"scripted\" }}"
+        ))
+        .replace(
+            "labels = [\"ball slowing\", \"cushion rebound\"]",
+            "labels = [\"ball slowing\"]",
+        )
+        .replace("budget = 8", "budget = 12")
+    };
+    let whole = TestRun::new();
+    let server = stepwise_model(50);
+    whole.write("p.toml", &stage(&server.url()));
+    whole.run(&["run", "p.toml"]).ok();
+    assert_eq!(steps_asked(&server, 0), (0..12).collect::<Vec<u64>>());
+    let expected = candidates(&whole);
+    assert_eq!(expected.len(), 1 + 1 + 12, "{expected:?}");
+
+    let t = TestRun::new();
+    let model = stepwise_model(50);
+    t.write("p.toml", &stage(&model.url()));
+    // Shards: dx, then rounds 0 (seed) and 1: the process aborts after saving round 1.
+    let r = t.run_env(
+        &["run", "p.toml"],
+        &[("ANNOTRACE_FAULT", "evo:after-shards=3")],
     );
+    assert_ne!(r.code, Some(0), "the fault should stop the run");
+    assert!(steps_asked(&model, 0).starts_with(&[0, 1, 2, 3]));
+    // The steps whose answers the stopped attempt recorded (its last second's may be lost).
+    let calls = t.csv(
+        "runs/evt",
+        "SELECT request_json FROM llm_calls WHERE status = 'ok'",
+    );
+    let recorded: std::collections::BTreeSet<u64> = calls
+        .split("Search step: ")
+        .skip(1)
+        .filter_map(|rest| {
+            let digits: String = rest.chars().take_while(char::is_ascii_digit).collect();
+            digits.parse().ok()
+        })
+        .collect();
+    assert!(recorded.is_superset(&(0..4).collect()), "{recorded:?}");
+    let before = model.seen().len();
+    t.run(&["run", "p.toml"]).ok().stderr_has("resuming");
+    let unrecorded: Vec<u64> = (4..12).filter(|s| !recorded.contains(s)).collect();
+    assert_eq!(steps_asked(&model, before), unrecorded);
+    assert_eq!(candidates(&t), expected);
 }

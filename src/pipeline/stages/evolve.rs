@@ -4,8 +4,10 @@
 //! tables and the grown library as a folder.
 //!
 //! Resumable: each round of a label's search is a shard whose record holds the round's candidates, so a
-//! killed stage replays its finished rounds and continues; each label's tables are written by a last
-//! shard of that label. The D_x matrix of the training set is looked up in the run's
+//! killed stage replays its finished rounds and continues (an LLM search also answers the requests its
+//! stopped attempt had recorded in `llm_calls` from there); each label's tables are written by a last
+//! shard of that label. `lag` (unset: 1 with an LLM, 0 with mutate) decides whether the next round's
+//! requests are in flight while a round is scored (`search::run`). The D_x matrix of the training set is looked up in the run's
 //! `trace_distances` (any stage's) before it is computed.
 
 use std::cell::RefCell;
@@ -130,6 +132,12 @@ pub struct EvolveParams {
     pub max_f1_drop: f64,
     /// Proposals requested at once.
     pub parallel: u64,
+    /// Rounds between the database a round's prompts come from and the round: 0 samples round r's
+    /// parents after round r − 1 is scored; 1 after round r − 2, so round r's requests are in flight
+    /// while round r − 1 is scored (evaluation overlaps generation; the same seed and answers give
+    /// the same search). Default: 1 with the LLM proposer, 0 with mutate (docs/evolution.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lag: Option<u64>,
     /// Repair requests per failed child (proposers that repair).
     pub repair_attempts: u64,
     /// Training traces at most (and held-out traces at most).
@@ -189,6 +197,7 @@ impl EvolveParams {
             accuracy_guard: false,
             max_f1_drop: 0.1,
             parallel: search.parallel as u64,
+            lag: None,
             repair_attempts: search.repair_attempts as u64,
             max_traces: 100,
             holdout: 0.2,
@@ -262,10 +271,14 @@ pub struct EvolveSummary {
     pub library: String,
     /// Wall time of the stage (s).
     pub wall_s: f64,
-    /// Time spent waiting for proposals (s).
+    /// Wall time during which a proposal or repair was in flight (s), summed over the labels.
     pub propose_s: f64,
-    /// Share of wall time outside the proposer.
+    /// Share of the labels' search wall time outside the proposer (no proposal in flight).
     pub outside_proposer_share: f64,
+    /// The lag the search ran with (0: rounds alternate; 1: evaluation overlaps the next requests;
+    /// absent from summaries recorded before it was added).
+    #[serde(default)]
+    pub lag: u64,
     /// The sandbox layers the workers run under.
     pub sandbox: Value,
 }
@@ -307,7 +320,7 @@ pub struct LabelSummary {
     pub best_by_step: Vec<f64>,
     /// Wall time of the label's search (s).
     pub wall_s: f64,
-    /// Time spent waiting for proposals (s).
+    /// Wall time during which a proposal or repair was in flight (s).
     pub propose_s: f64,
 }
 
@@ -317,6 +330,8 @@ pub struct EvolveStage {
     setup: DetectorSetup,
     labels: Vec<String>,
     config: SearchConfig,
+    /// The `lag` parameter (`None`: by proposer).
+    lag: Option<u64>,
     seed: Option<u64>,
     eval: EvalSettings,
     proposer: ProposerChoice,
@@ -372,6 +387,12 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     if p.budget == 0 {
         return Err(BuildError::param("budget", "budget must be at least 1"));
     }
+    if let Some(lag) = p.lag.filter(|&l| l > 1) {
+        return Err(BuildError::param(
+            "lag",
+            format!("lag must be 0 or 1, found {lag}"),
+        ));
+    }
     let mut llm = p.llm.clone().unwrap_or_default();
     if let Some(r) = &llm.replay {
         llm.replay = Some(spec.project_dir.join(r));
@@ -387,10 +408,13 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
             delta: p.delta,
             allow_nonpositive_rho: p.allow_nonpositive_rho,
             parallel: p.parallel.max(1) as usize,
+            lag: p.lag.unwrap_or(0),
+            overlap: true,
             repair_attempts: p.repair_attempts.min(u64::from(u32::MAX)) as u32,
             temperatures: Temperatures::default(),
             seed: 0,
         },
+        lag: p.lag,
         seed: p.seed,
         eval: EvalSettings {
             bins: p.bins.max(1) as usize,
@@ -459,6 +483,10 @@ type ProposerAndClient = (Box<dyn Proposer>, Option<Arc<LlmClient>>);
 struct StagingCheckpoint<'a, 'b> {
     ctx: &'a StageContext<'b>,
     failure: RefCell<Option<StageError>>,
+    /// The LLM client, whose recorded calls are written out before each round is saved: every
+    /// answer a saved round or a round still in flight received is then in `llm_calls`, for a resumed
+    /// search to replay.
+    calls: Option<Arc<LlmClient>>,
 }
 
 impl StagingCheckpoint<'_, '_> {
@@ -494,6 +522,11 @@ impl Checkpoint for StagingCheckpoint<'_, '_> {
         }
     }
     fn save(&self, l: u32, r: u64, records: &[CandidateRecord]) -> Result<(), SearchError> {
+        if let Some(client) = &self.calls {
+            client
+                .flush()
+                .map_err(|e| SearchError::Checkpoint(format!("recording the LLM calls: {e}")))?;
+        }
         self.ctx.progress().advance(
             self.ctx.stage_id(),
             records.iter().filter(|r| r.step >= 0).count() as u64,
@@ -523,6 +556,16 @@ impl EvolveStage {
         }
         let mut settings = self.llm.clone();
         settings.seed = Some(settings.seed.unwrap_or(seed));
+        // A resumed search answers the requests its stopped attempt already had answered (the round
+        // being scored and the one in flight, which no saved round holds) from this run's
+        // `llm_calls`, and sends only the others to the endpoint.
+        let resuming = ctx
+            .finished_shard(&StagingCheckpoint::shard(0, 0))?
+            .is_some();
+        if resuming && settings.replay.is_none() {
+            settings.replay = Some(ctx.run().root().to_path_buf());
+            settings.strict_replay = Some(false);
+        }
         let config = LlmConfig::resolve(&settings, &|k| std::env::var(k).ok())?;
         let dir = self
             .prompts
@@ -810,9 +853,12 @@ impl Stage for EvolveStage {
         limits.trace_cache = limits.trace_cache.max(train.len() + holdout.len() + 4);
         let pool = crate::detect::WorkerPool::new(limits)?;
         let (proposer, llm_client) = self.proposer(ctx, config.seed)?;
+        // Overlap by default when proposals are slow (a model), not with the offline proposer.
+        config.lag = self.lag.unwrap_or(u64::from(llm_client.is_some()));
         let checkpoint = StagingCheckpoint {
             ctx,
             failure: RefCell::new(None),
+            calls: llm_client.clone(),
         };
         let stage = ctx.stage_id().to_string();
         let discovery = Discovery {
@@ -924,6 +970,7 @@ impl Stage for EvolveStage {
                 } else {
                     0.0
                 },
+                lag: config.lag,
                 sandbox: serde_json::to_value(pool.layers()).unwrap_or(Value::Null),
             })
             .unwrap_or(Value::Null),
