@@ -50,6 +50,9 @@ pub struct Args {
     /// new to it.
     #[arg(long)]
     whole_library: bool,
+    /// With example traces: size of the initial images (px).
+    #[arg(long, default_value_t = 512)]
+    image_size: u64,
     /// With example traces: the offline baseline (built-in labels the library lacks, then frequent
     /// pairs of the examples' annotations) instead of a model.
     #[arg(long)]
@@ -147,6 +150,7 @@ fn run_stage(args: &Args, library: &Library, quiet: bool) -> CliResult {
         seed: Some(args.seed),
         llm: (!args.offline).then_some(llm),
         prompts: args.llm.prompts.as_deref().map(absolute).transpose()?,
+        image_size: args.image_size,
         ..SuggestLabelsParams::default()
     };
     // A replay gives the same table under the same stage id.

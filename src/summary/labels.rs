@@ -84,7 +84,8 @@ pub struct LabelAsk {
 pub struct Suggested {
     /// The labels, at most `k`, in the model's (or the baseline's) order.
     pub labels: Vec<ProposedLabel>,
-    /// `llm_calls` ids, in order (empty offline).
+    /// The `llm_calls.request_hash` of each call, in order (empty offline): stable across replays,
+    /// unlike call ids, which name the session.
     pub calls: Vec<String>,
     /// The problems of each rejected answer (`answer n: …`), in order.
     pub problems: Vec<String>,
@@ -307,10 +308,11 @@ impl LlmLabeller<'_> {
         loop {
             let reply = self.client.chat(&req)?;
             answers += 1;
-            out.calls.push(reply.call_id.clone());
+            out.calls.push(reply.request_hash.clone());
             out.tokens_in += reply.tokens_in;
             out.tokens_out += reply.tokens_out;
-            out.seconds += reply.latency.as_secs_f64();
+            // Microseconds: a replayed latency comes back from the recorded milliseconds.
+            out.seconds += (reply.latency.as_secs_f64() * 1e6).round() / 1e6;
             let (labels, problems) = parse_strict(&reply.content, ask.k, &ask.known);
             if problems.is_empty() || answers > self.max_repairs {
                 if labels.is_empty() {

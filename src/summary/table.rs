@@ -198,7 +198,7 @@ pub struct LabelSetting {
     pub library: String,
     /// The example traces shown, in order.
     pub examples: Vec<String>,
-    /// The calls, in order.
+    /// The calls' `llm_calls.request_hash`, in order.
     pub calls: Vec<String>,
     /// The problems of rejected answers.
     pub problems: Vec<String>,
@@ -227,7 +227,7 @@ pub fn suggested_labels_schema() -> SchemaRef {
         field("k", DataType::Int64, false),
         field("library", DataType::Utf8, false),
         field("examples", DataType::Utf8, false),
-        field("calls", DataType::Utf8, false),
+        field("requests", DataType::Utf8, false),
         field("problems", DataType::Utf8, false),
         field("prompt_tokens", DataType::Int64, false),
         field("completion_tokens", DataType::Int64, false),
