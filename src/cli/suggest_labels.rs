@@ -112,18 +112,17 @@ fn run_has_traces(args: &Args, env: Env) -> Result<bool, CliError> {
     if args.examples == 0 || !run.join("manifest.json").is_file() {
         return Ok(false);
     }
-    let ids = annotrace::store::trace_ids(&RunDir::new(run)).map_err(|e| {
-        CliError::new(annotrace::pipeline::Categorize::category(&e), anyhow!(e))
-    })?;
+    let ids = annotrace::store::trace_ids(&RunDir::new(run))
+        .map_err(|e| CliError::new(annotrace::pipeline::Categorize::category(&e), anyhow!(e)))?;
     Ok(ids.iter().any(|(e, _)| *e == env))
 }
 
 /// The `suggest-labels` stage on `--run`'s traces.
 fn run_stage(args: &Args, library: &Library, quiet: bool) -> CliResult {
+    use super::one_stage::{OneStage, absolute, params_id, summary};
     use annotrace::pipeline::stages::suggest_labels::{
         KIND, SuggestLabelsParams, SuggestLabelsSummary, SuggestMode,
     };
-    use super::one_stage::{OneStage, absolute, params_id, summary};
     let run = args.run.as_ref().expect("checked by the caller");
     let mut llm = args.llm.settings();
     if let Some(r) = &llm.replay {

@@ -425,7 +425,10 @@ mod tests {
         ];
         let s = check(PlotKind::IdentificationSize, &rows, 2, "<polyline", 2);
         assert_eq!(count(&s, "class=\"band\""), 2);
-        assert!(s.contains("identification accuracy (%, ± standard error)"), "{s}");
+        assert!(
+            s.contains("identification accuracy (%, ± standard error)"),
+            "{s}"
+        );
     }
 
     #[test]

@@ -29,9 +29,9 @@ use crate::llm::{
 };
 use crate::trace::{Env, Trace};
 
+use super::SummaryError;
 use super::images::TraceImages;
 use super::llm::with_images;
-use super::SummaryError;
 
 /// The templates of label suggestion (name, built-in text); [`super::add_templates`] adds them.
 pub const LABEL_TEMPLATES: [(&str, &str); 2] = [
@@ -226,7 +226,11 @@ pub fn parse_strict(
 
 /// The text of the first request: `examples` are `{image, annotated}` (the image's caption and the
 /// example's annotated trace).
-pub fn prompt_text(prompts: &Prompts, ask: &LabelAsk, examples: &[Value]) -> Result<String, LlmError> {
+pub fn prompt_text(
+    prompts: &Prompts,
+    ask: &LabelAsk,
+    examples: &[Value],
+) -> Result<String, LlmError> {
     prompts.render(
         "summary/labels.j2",
         json!({
@@ -444,9 +448,7 @@ fn mined_pairs(traces: &[Trace], annotations: &[Annotation], order: &[String]) -
                 if shared.is_empty() && !a.objects.is_empty() && !b.objects.is_empty() {
                     continue;
                 }
-                let e = tally
-                    .entry((a.label.clone(), b.label.clone()))
-                    .or_default();
+                let e = tally.entry((a.label.clone(), b.label.clone())).or_default();
                 e.traces.insert(t.trace_id.clone());
                 e.count += 1;
                 for o in shared {
@@ -521,7 +523,10 @@ mod tests {
             "item 2 (\"spin\") has no \"description\" sentence".to_string(),
             "the array has 11 item(s); exactly 12 were asked for".to_string(),
         ];
-        insta::assert_snapshot!("labels_repair", repair_text(&prompts, 12, &problems).unwrap());
+        insta::assert_snapshot!(
+            "labels_repair",
+            repair_text(&prompts, 12, &problems).unwrap()
+        );
     }
 
     #[test]

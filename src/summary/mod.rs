@@ -40,7 +40,9 @@ pub use self::identify::{
     trial as identify_trial,
 };
 pub use self::images::TraceImages;
-pub use self::labels::{LabelAsk, LabelsError, LlmLabeller, ProposedLabel, Suggested, offline_labels};
+pub use self::labels::{
+    LabelAsk, LabelsError, LlmLabeller, ProposedLabel, Suggested, offline_labels,
+};
 pub use self::llm::{LlmMode, LlmSummariser, TEMPLATES, add_templates};
 pub use self::offline::{OfflineSummariser, offline_summary};
 

@@ -75,8 +75,23 @@ fn a_malformed_answer_is_repaired_recorded_and_replayed_byte_for_byte() {
     simulate(&t, "run");
     let url = server.url();
     let args = [
-        "suggest-labels", "--run", "run", "--env", "pooltool", "-k", "3", "--examples", "2",
-        "--seed", "3", "--image-size", "128", "--llm-model", "vlm", "--llm-retries", "0",
+        "suggest-labels",
+        "--run",
+        "run",
+        "--env",
+        "pooltool",
+        "-k",
+        "3",
+        "--examples",
+        "2",
+        "--seed",
+        "3",
+        "--image-size",
+        "128",
+        "--llm-model",
+        "vlm",
+        "--llm-retries",
+        "0",
     ];
     let mut first = args.to_vec();
     first.extend(["--llm-base-url", &url]);
@@ -93,7 +108,10 @@ fn a_malformed_answer_is_repaired_recorded_and_replayed_byte_for_byte() {
     let m = messages(&seen[0]);
     let (text, images) = parts(&m[0]);
     assert_eq!(images, 2);
-    assert!(text.contains("Example 2 (image: example 2: initial scene)"), "{text}");
+    assert!(
+        text.contains("Example 2 (image: example 2: initial scene)"),
+        "{text}"
+    );
     assert!(text.contains("patterns (steps, time, label"), "{text}");
     assert!(text.contains("- cushion rebound (also:"), "{text}");
     assert!(text.contains("Propose exactly 3 patterns."), "{text}");
@@ -102,11 +120,16 @@ fn a_malformed_answer_is_repaired_recorded_and_replayed_byte_for_byte() {
     assert_eq!(m.len(), 3);
     assert_eq!(m[1]["role"], "assistant");
     let (repair, _) = parts(&m[2]);
-    assert!(repair.contains("no JSON array of patterns found"), "{repair}");
-    let calls = t.csv("run", "SELECT purpose, status FROM llm_calls ORDER BY started_at");
+    assert!(
+        repair.contains("no JSON array of patterns found"),
+        "{repair}"
+    );
+    let calls = t.csv(
+        "run",
+        "SELECT purpose, status FROM llm_calls ORDER BY started_at",
+    );
     assert_eq!(
-        calls,
-        "purpose,status\nsuggest_labels_examples,ok\nsuggest_labels_examples,ok\n",
+        calls, "purpose,status\nsuggest_labels_examples,ok\nsuggest_labels_examples,ok\n",
         "{calls}"
     );
     let rows = t.csv(
@@ -143,19 +166,45 @@ fn unusable_answers_fail_with_exit_1_and_the_offline_baseline_needs_no_model() {
     simulate(&t, "run");
     let url = server.url();
     t.run(&[
-        "suggest-labels", "--run", "run", "--env", "pooltool", "-k", "2", "--examples", "1",
-        "--max-repairs", "1", "--image-size", "64", "--llm-model", "vlm", "--llm-retries", "0",
-        "--llm-base-url", &url,
+        "suggest-labels",
+        "--run",
+        "run",
+        "--env",
+        "pooltool",
+        "-k",
+        "2",
+        "--examples",
+        "1",
+        "--max-repairs",
+        "1",
+        "--image-size",
+        "64",
+        "--llm-model",
+        "vlm",
+        "--llm-retries",
+        "0",
+        "--llm-base-url",
+        &url,
     ])
     .code(1)
     .stderr_has("no usable label in 2 answer(s)");
     assert_eq!(server.seen().len(), 2);
     // The offline baseline: every built-in label is in the library, so pairs mined from the examples.
     let r = t.run(&[
-        "suggest-labels", "--run", "run", "--env", "pooltool", "-k", "4", "--examples", "4",
-        "--offline", "--json",
+        "suggest-labels",
+        "--run",
+        "run",
+        "--env",
+        "pooltool",
+        "-k",
+        "4",
+        "--examples",
+        "4",
+        "--offline",
+        "--json",
     ]);
-    r.ok().stderr_has("from the offline baseline after 4 pooltool example trace(s)");
+    r.ok()
+        .stderr_has("from the offline baseline after 4 pooltool example trace(s)");
     let lines: Vec<Value> = r
         .stdout
         .lines()
@@ -168,10 +217,19 @@ fn unusable_answers_fail_with_exit_1_and_the_offline_baseline_needs_no_model() {
     }
     // Whole-library mode: the built-in labels come first.
     let r = t.run(&[
-        "suggest-labels", "--run", "run", "--env", "pooltool", "-k", "2", "--offline",
+        "suggest-labels",
+        "--run",
+        "run",
+        "--env",
+        "pooltool",
+        "-k",
+        "2",
+        "--offline",
         "--whole-library",
     ]);
-    r.ok().stdout_has("1. cue strike").stdout_has("2. ball collision");
+    r.ok()
+        .stdout_has("1. cue strike")
+        .stdout_has("2. ball collision");
 }
 
 #[test]
@@ -249,16 +307,19 @@ workers = 1
         "label,acceptance\nlong rail run,accepted\nstop shot,accepted\nball cluster break,accepted\n",
         "{labels}"
     );
-    let lib = std::fs::read_to_string(t.path("out/exports/evolve_llm/library/library.toml")).unwrap();
+    let lib =
+        std::fs::read_to_string(t.path("out/exports/evolve_llm/library/library.toml")).unwrap();
     assert!(lib.contains("name = \"pooltool-evolve_llm\""), "{lib}");
-    assert!(!lib.contains("cue strike"), "an empty start keeps no built-in label: {lib}");
+    assert!(
+        !lib.contains("cue strike"),
+        "an empty start keeps no built-in label: {lib}"
+    );
     let bench = t.csv(
         "out",
         "SELECT DISTINCT library, patterns, feedback FROM benchmark",
     );
     assert_eq!(
-        bench,
-        "library,patterns,feedback\npooltool-evolve_llm,3,annotations\n",
+        bench, "library,patterns,feedback\npooltool-evolve_llm,3,annotations\n",
         "{bench}"
     );
     // A library_from that is not an input is the pipeline's error, at its line.

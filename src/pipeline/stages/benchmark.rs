@@ -447,8 +447,7 @@ impl BenchmarkStage {
                     "`library_from`: stage {id:?} has not finished in this run or names no library"
                 ))
             })?;
-        let library =
-            crate::detect::Library::open(&crate::builtin::Location::Disk(path.clone()))?;
+        let library = crate::detect::Library::open(&crate::builtin::Location::Disk(path.clone()))?;
         if library.env != self.env {
             return Err(StageError::Input(format!(
                 "`library_from`: the library of stage {id:?} ({}) is for {}, not {}",
