@@ -301,3 +301,14 @@ pub fn suggested_labels_of(batches: &[RecordBatch], stage: &str) -> Vec<String> 
     out.sort();
     out.into_iter().map(|(_, l)| l).collect()
 }
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_suggested_labels_columns_are_documented() {
+        crate::testutil::assert_documented_columns(
+            super::SUGGESTED_LABELS,
+            &super::suggested_labels_schema(),
+        );
+    }
+}
