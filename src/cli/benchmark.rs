@@ -126,6 +126,7 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
         keyframes: a.keyframes,
         image_size: a.image_size,
         library: a.library.as_deref().map(absolute).transpose()?,
+        library_from: None,
         labels: (!a.labels.is_empty()).then(|| a.labels.clone()),
         llm,
         prompts: a.llm.prompts.as_deref().map(absolute).transpose()?,

@@ -162,6 +162,8 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
         env: a.env,
         library: a.library.as_deref().map(absolute).transpose()?,
         labels: (!a.labels.is_empty()).then_some(labels),
+        labels_from: None,
+        start_empty: false,
         strategy,
         proposer,
         llm: llm_settings(&a.llm)?,

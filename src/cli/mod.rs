@@ -168,13 +168,13 @@ enum Command {
     Summarise(summarise::Args),
     /// Print a trace with its annotations as compact text for language models, with a token count.
     Show(show::Args),
-    /// Draw a figure of a run as SVG and PNG (success-budget, convergence, library-size, fitness, learning-stats, annotation-examples).
+    /// Draw a figure of a run as SVG and PNG (success-budget, convergence, library-size, identification-size, fitness, learning-stats, annotation-examples).
     Plot(plot::Args),
     /// Write a run's static web report: trace list, trace player, pattern timeline, annotated text.
     Report(report::Args),
     /// Reward programs: check one, evaluate it on a trace, or synthesise one from a goal sentence.
     Reward(reward::Args),
-    /// Ask the configured LLM for K new pattern labels given a library (ANNOTRACE_LLM_* endpoint).
+    /// Ask the configured LLM for K pattern labels, shown example traces of --run (or --offline: a baseline).
     SuggestLabels(suggest_labels::Args),
     /// Write one trace of a run back in the paper's JSON format.
     Export(export::Args),

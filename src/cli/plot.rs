@@ -14,7 +14,7 @@ pub struct Args {
     /// Run folder.
     #[arg(long)]
     run: PathBuf,
-    /// The figure: success-budget, convergence, library-size, fitness, learning-stats,
+    /// The figure: success-budget, convergence, library-size, identification-size, fitness, learning-stats,
     /// annotation-examples.
     kind: String,
     /// File name stem under <run>/exports/ (default: the figure's name).
@@ -51,6 +51,7 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
         title: args.title,
         trace: args.trace,
         frames: args.frames,
+        skip_empty: false,
     };
     let stage = OneStage {
         run: &args.run,

@@ -124,6 +124,7 @@ impl Categorize for StageError {
             // A scene, task or click list the environment refuses: the input's fault.
             StageError::Simulation { .. } => ErrorCategory::Input,
             StageError::Injected(_) => ErrorCategory::Failed,
+            StageError::Labels(_) => ErrorCategory::Failed,
         }
     }
 }

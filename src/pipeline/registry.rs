@@ -57,6 +57,7 @@ pub static STAGE_KINDS: &[&StageKind] = &[
     &stages::optimise::KIND,
     &stages::benchmark::KIND,
     &stages::summarise::KIND,
+    &stages::suggest_labels::KIND,
     &stages::evolve::KIND,
     &stages::ensemble::KIND,
     &stages::sql::KIND,

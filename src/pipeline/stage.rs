@@ -151,6 +151,10 @@ pub enum StageError {
     /// A fault injected for testing.
     #[error("injected fault: {0}")]
     Injected(String),
+    /// Label suggestion gave no usable label (a model's answers after every repair, or the offline
+    /// baseline on these examples).
+    #[error("suggest-labels: {0}")]
+    Labels(String),
 }
 
 impl From<crate::llm::LlmError> for StageError {

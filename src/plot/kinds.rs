@@ -28,6 +28,9 @@ pub enum PlotKind {
     /// Benchmark success with annotation feedback against the number of patterns in the library, mean
     /// ± std over seeds (`benchmark`, sql/benchmark_library_size.sql).
     LibrarySize,
+    /// Identification accuracy against the number of patterns that annotated, ± its standard error
+    /// over trials (`identification`, the offline half of the library-size ablation).
+    IdentificationSize,
     /// The best fitness ν found so far over each label's candidates (`candidates`).
     Fitness,
     /// Learning statistics per environment: executable and activation shares of the candidates
@@ -39,10 +42,11 @@ pub enum PlotKind {
 
 impl PlotKind {
     /// Every kind.
-    pub const ALL: [PlotKind; 6] = [
+    pub const ALL: [PlotKind; 7] = [
         PlotKind::SuccessBudget,
         PlotKind::Convergence,
         PlotKind::LibrarySize,
+        PlotKind::IdentificationSize,
         PlotKind::Fitness,
         PlotKind::LearningStats,
         PlotKind::AnnotationExamples,
@@ -54,6 +58,7 @@ impl PlotKind {
             PlotKind::SuccessBudget => "success-budget",
             PlotKind::Convergence => "convergence",
             PlotKind::LibrarySize => "library-size",
+            PlotKind::IdentificationSize => "identification-size",
             PlotKind::Fitness => "fitness",
             PlotKind::LearningStats => "learning-stats",
             PlotKind::AnnotationExamples => "annotation-examples",
@@ -66,6 +71,7 @@ impl PlotKind {
             PlotKind::SuccessBudget => "optimisation",
             PlotKind::Convergence => "evolution_convergence",
             PlotKind::LibrarySize => "benchmark",
+            PlotKind::IdentificationSize => "identification",
             PlotKind::Fitness | PlotKind::LearningStats => "candidates",
             PlotKind::AnnotationExamples => "annotations",
         }
@@ -95,6 +101,14 @@ impl PlotKind {
                     .collect::<Vec<_>>()
                     .join("\n")
             ),
+            PlotKind::IdentificationSize => "WITH t AS (\
+                 SELECT env, CASE WHEN chooser_model = '' THEN chooser ELSE chooser || ': ' || chooser_model END AS chooser, \
+                        library, patterns, avg(CASE WHEN success THEN 1.0 ELSE 0.0 END) AS p, count(*) AS n \
+                 FROM identification GROUP BY env, chooser, chooser_model, library, patterns) \
+                 SELECT env || ' ' || chooser || ' ' || library AS series, CAST(patterns AS DOUBLE) AS x, \
+                        100.0 * p AS y, 100.0 * sqrt(p * (1.0 - p) / n) AS err \
+                 FROM t ORDER BY series, x"
+                .into(),
             PlotKind::Fitness => "SELECT label AS series, CAST(step AS DOUBLE) AS x, \
                  max(nu) OVER (PARTITION BY run_stage, label ORDER BY step \
                      ROWS BETWEEN UNBOUNDED PRECEDING AND CURRENT ROW) AS y, 0.0 AS err \
@@ -130,6 +144,12 @@ impl PlotKind {
                 "Benchmark success against library size",
                 Axis::new("patterns in the library", "labels"),
                 Axis::new("success rate", "%").range(0.0, 100.0),
+                Mark::Line,
+            ),
+            PlotKind::IdentificationSize => (
+                "Identification accuracy against library size",
+                Axis::new("patterns in the library", "labels"),
+                Axis::new("identification accuracy", "%, ± standard error").range(0.0, 100.0),
                 Mark::Line,
             ),
             PlotKind::Fitness => (
@@ -392,6 +412,23 @@ mod tests {
         ];
         let s = check(PlotKind::LibrarySize, &rows, 1, "<polyline", 1);
         assert!(s.contains("success rate (%)") && s.contains("patterns in the library (labels)"));
+    }
+
+    #[test]
+    fn identification_size_has_a_curve_per_environment_with_its_error_band() {
+        let rows = [
+            num("pooltool offline pooltool-human", 1.0, 15.0, 8.0),
+            num("pooltool offline pooltool-human", 3.0, 95.0, 4.9),
+            num("pooltool offline pooltool-human", 12.0, 100.0, 0.0),
+            num("phyre offline phyre-human", 1.0, 100.0, 0.0),
+            num("phyre offline phyre-human", 12.0, 95.0, 4.9),
+        ];
+        let s = check(PlotKind::IdentificationSize, &rows, 2, "<polyline", 2);
+        assert_eq!(count(&s, "class=\"band\""), 2);
+        assert!(
+            s.contains("identification accuracy (%, ± standard error)"),
+            "{s}"
+        );
     }
 
     #[test]

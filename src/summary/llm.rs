@@ -30,9 +30,9 @@ pub const TEMPLATES: [(&str, &str); 2] = [
     ),
 ];
 
-/// Adds the summary templates (a prompts folder's own files win).
+/// Adds the summary and label-suggestion templates (a prompts folder's own files win).
 pub fn add_templates(prompts: &mut Prompts) -> Result<(), LlmError> {
-    for (name, text) in TEMPLATES {
+    for (name, text) in TEMPLATES.into_iter().chain(super::labels::LABEL_TEMPLATES) {
         prompts.add_template(name, text)?;
     }
     Ok(())

@@ -8,8 +8,10 @@
 //! the trace's own, and picks one; its accuracy is the objective the ensemble calibration maximises)
 //! with its choosers ([`OfflineChooser`], a clearly labelled annotation-overlap baseline, and
 //! [`LlmChooser`], images as image content parts), and the `summaries` and `identification` tables
-//! ([`table`]), and the identification task as the ensemble calibration's objective
-//! ([`IdentificationObjective`]).
+//! ([`table`]), the identification task as the ensemble calibration's objective
+//! ([`IdentificationObjective`]), and pattern labels suggested from example traces ([`labels`]: an LLM
+//! shown initial images and annotated traces, with strict parsing and repair, or a deterministic offline
+//! baseline).
 //!
 //! **Does not:** run detectors (callers pass the annotations, from the worker pool or the
 //! `annotations` table), read the process environment (callers build the [`crate::llm::LlmClient`]),
@@ -28,6 +30,7 @@ mod choose;
 mod error;
 mod identify;
 mod images;
+pub mod labels;
 mod llm;
 mod objective;
 mod offline;
@@ -40,6 +43,9 @@ pub use self::identify::{
     trial as identify_trial,
 };
 pub use self::images::TraceImages;
+pub use self::labels::{
+    LabelAsk, LabelsError, LlmLabeller, ProposedLabel, Suggested, offline_labels,
+};
 pub use self::llm::{LlmMode, LlmSummariser, TEMPLATES, add_templates};
 pub use self::objective::IdentificationObjective;
 pub use self::offline::{OfflineSummariser, offline_summary};

@@ -1,5 +1,6 @@
 //! The `summaries` table (one row per trace and summariser) and the `identification` table (one row
-//! per trial), their Arrow schemas and batches (`docs/schema.md`).
+//! per trial), and the `suggested_labels` table (one row per suggested label), their Arrow schemas and
+//! batches (`docs/schema.md`).
 
 use std::sync::Arc;
 
@@ -177,4 +178,137 @@ pub fn identification_batch(
             s(|t| t.call_id.clone()),
         ],
     )
+}
+
+/// The suggested-labels table's name (one row per label of a `suggest-labels` stage).
+pub const SUGGESTED_LABELS: &str = "suggested_labels";
+
+/// What every row of a `suggested_labels` batch says about its suggestion.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LabelSetting {
+    /// The stage that suggested them.
+    pub run_stage: String,
+    /// `llm` or `offline`.
+    pub origin: String,
+    /// The model (empty offline).
+    pub model: String,
+    /// Labels asked for.
+    pub k: i64,
+    /// The library whose annotations the examples showed.
+    pub library: String,
+    /// The example traces shown, in order.
+    pub examples: Vec<String>,
+    /// The calls' `llm_calls.request_hash`, in order.
+    pub calls: Vec<String>,
+    /// The problems of rejected answers.
+    pub problems: Vec<String>,
+    /// Prompt tokens of all calls.
+    pub prompt_tokens: i64,
+    /// Completion tokens of all calls.
+    pub completion_tokens: i64,
+    /// Model seconds of all calls.
+    pub seconds: f64,
+    /// The stage's seed.
+    pub seed: i64,
+}
+
+/// The Arrow schema of `suggested_labels`.
+pub fn suggested_labels_schema() -> SchemaRef {
+    Arc::new(Schema::new(vec![
+        field("run_stage", DataType::Utf8, false),
+        field("rank", DataType::Int64, false),
+        field("label", DataType::Utf8, false),
+        field("description", DataType::Utf8, false),
+        field("objects", DataType::Utf8, false),
+        field("reason", DataType::Utf8, false),
+        field("source", DataType::Utf8, false),
+        field("origin", DataType::Utf8, false),
+        field("model", DataType::Utf8, false),
+        field("k", DataType::Int64, false),
+        field("library", DataType::Utf8, false),
+        field("examples", DataType::Utf8, false),
+        field("requests", DataType::Utf8, false),
+        field("problems", DataType::Utf8, false),
+        field("prompt_tokens", DataType::Int64, false),
+        field("completion_tokens", DataType::Int64, false),
+        field("seconds", DataType::Float64, false),
+        field("seed", DataType::Int64, false),
+    ]))
+}
+
+/// `labels` (rank 1, 2, … in order) as a `suggested_labels` batch.
+pub fn suggested_labels_batch(
+    s: &LabelSetting,
+    labels: &[super::ProposedLabel],
+) -> Result<RecordBatch, ArrowError> {
+    let n = labels.len();
+    let col = |f: fn(&super::ProposedLabel) -> String| {
+        Arc::new(StringArray::from_iter_values(labels.iter().map(f)))
+    };
+    let list = |v: &[String]| serde_json::to_string(v).unwrap_or_default();
+    RecordBatch::try_new(
+        suggested_labels_schema(),
+        vec![
+            strings(n, &s.run_stage),
+            Arc::new(Int64Array::from_iter_values(1..=n as i64)),
+            col(|l| l.label.clone()),
+            col(|l| l.description.clone()),
+            col(|l| serde_json::to_string(&l.objects).unwrap_or_default()),
+            col(|l| l.reason.clone()),
+            col(|l| l.source.clone()),
+            strings(n, &s.origin),
+            strings(n, &s.model),
+            ints(n, s.k),
+            strings(n, &s.library),
+            strings(n, &list(&s.examples)),
+            strings(n, &list(&s.calls)),
+            strings(n, &list(&s.problems)),
+            ints(n, s.prompt_tokens),
+            ints(n, s.completion_tokens),
+            Arc::new(Float64Array::from_iter_values(std::iter::repeat_n(
+                s.seconds, n,
+            ))),
+            ints(n, s.seed),
+        ],
+    )
+}
+
+/// The labels a `suggest-labels` stage wrote (its `run_stage` rows of `batches`), by rank.
+pub fn suggested_labels_of(batches: &[RecordBatch], stage: &str) -> Vec<String> {
+    use arrow::array::AsArray;
+    let mut out: Vec<(i64, String)> = Vec::new();
+    for b in batches {
+        let (Some(st), Some(rank), Some(label)) = (
+            b.column_by_name("run_stage"),
+            b.column_by_name("rank"),
+            b.column_by_name("label"),
+        ) else {
+            continue;
+        };
+        let (Some(st), Some(rank), Some(label)) = (
+            st.as_string_opt::<i32>(),
+            rank.as_primitive_opt::<arrow::datatypes::Int64Type>(),
+            label.as_string_opt::<i32>(),
+        ) else {
+            continue;
+        };
+        for i in 0..b.num_rows() {
+            if st.value(i) == stage {
+                out.push((rank.value(i), label.value(i).to_string()));
+            }
+        }
+    }
+    out.sort();
+    out.into_iter().map(|(_, l)| l).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_suggested_labels_columns_are_documented() {
+        crate::testutil::assert_documented_columns(
+            super::SUGGESTED_LABELS,
+            &super::suggested_labels_schema(),
+        );
+    }
 }

@@ -28,4 +28,5 @@ mod sandbox;
 mod simulate;
 mod snapshots_cli;
 mod sql_guard;
+mod suggest_labels;
 mod summarise;

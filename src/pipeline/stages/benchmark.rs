@@ -81,6 +81,11 @@ pub struct BenchmarkParams {
     /// Detector library of the annotations (default: the built-in library of the environment).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub library: Option<String>,
+    /// The library an `evolve` or `ensemble` stage grew (its id; it must be one of this stage's inputs),
+    /// instead of `library`: e.g. the library evolved from a `suggest-labels` stage's labels (the paper's
+    /// LLM-Labels rows). Read when the stage runs.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub library_from: Option<String>,
     /// Only these labels of the library annotate (a single one: the -SP ablation; growing subsets: the
     /// library-size ablation). Default: every label.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -120,6 +125,7 @@ impl Default for BenchmarkParams {
             keyframes: 5,
             image_size: 256,
             library: None,
+            library_from: None,
             labels: None,
             llm: None,
             prompts: None,
@@ -241,6 +247,8 @@ pub struct BenchmarkStage {
     image_size: u32,
     setup: Option<DetectorSetup>,
     detectors: Vec<crate::detect::Detector>,
+    library_from: Option<String>,
+    labels: Option<Vec<String>>,
     llm: LlmSettings,
     prompts: Option<PathBuf>,
     project: PathBuf,
@@ -264,6 +272,35 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         (Env::Pooltool, PoolAction::Deepphy) => Format::PoolDeepphy,
         (Env::Pooltool, PoolAction::Free) => Format::PoolFree,
     };
+    if let Some(from) = &p.library_from {
+        if p.feedback != FeedbackMode::Annotations {
+            return Err(BuildError::param(
+                "library_from",
+                "`library_from` is only used with feedback = \"annotations\"",
+            ));
+        }
+        if p.library.is_some() {
+            return Err(BuildError::param(
+                "library_from",
+                "give `library` or `library_from`, not both",
+            ));
+        }
+        if !def.inputs.contains(from) {
+            return Err(BuildError::param(
+                "library_from",
+                format!("`library_from` = {from:?} must be one of the stage's inputs"),
+            ));
+        }
+        match spec.stages.iter().find(|s| &s.id == from) {
+            Some(s) if ["evolve", "ensemble"].contains(&s.kind.name) => {}
+            _ => {
+                return Err(BuildError::param(
+                    "library_from",
+                    format!("`library_from` = {from:?} must name an evolve or ensemble stage"),
+                ));
+            }
+        }
+    }
     let setup = if p.feedback == FeedbackMode::Annotations {
         let sandbox = SandboxParams {
             env: p.env,
@@ -287,30 +324,12 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         }
         None
     };
-    let detectors = match (&setup, &p.labels) {
-        (None, _) => Vec::new(),
-        (Some(s), None) => s.library.detectors.clone(),
-        (Some(s), Some(labels)) => {
-            let known = s.library.labels();
-            let norm = |l: &str| crate::detect::normalise_label(l);
-            if labels.is_empty() {
-                return Err(BuildError::param("labels", "give at least one label"));
-            }
-            if let Some(bad) = labels
-                .iter()
-                .find(|l| !known.iter().any(|k| norm(k) == norm(l)))
-            {
-                return Err(BuildError::param(
-                    "labels",
-                    format!(
-                        "library {} has no label {bad:?} (it has: {})",
-                        s.library.name,
-                        known.join(", ")
-                    ),
-                ));
-            }
-            crate::reward::annotate::detectors_for(&s.library, labels)
-        }
+    let detectors = match &setup {
+        // The grown library is read when the stage runs; its labels are checked then.
+        _ if p.library_from.is_some() => Vec::new(),
+        None => Vec::new(),
+        Some(s) => select_detectors(&s.library, p.labels.as_deref())
+            .map_err(|e| BuildError::param("labels", e))?,
     };
     let mut llm = p.llm.clone().unwrap_or_default();
     if let Some(r) = &llm.replay {
@@ -350,6 +369,8 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         image_size: at_least("image_size", p.image_size, 64, 1024)? as u32,
         setup,
         detectors,
+        library_from: p.library_from.clone(),
+        labels: p.labels.clone(),
         llm,
         prompts: p.prompts.as_ref().map(|d| spec.project_dir.join(d)),
         project: spec.project_dir.clone(),
@@ -358,6 +379,33 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     let sims = Simulators::new().map_err(|e| BuildError::param("env", e.to_string()))?;
     choose_tasks(&sims, &stage.choice).map_err(|e| BuildError::param("task_ids", e.to_string()))?;
     Ok(Box::new(stage))
+}
+
+/// The detectors of `library` that annotate: those of `labels` (each must be a label of the library),
+/// or all.
+fn select_detectors(
+    library: &crate::detect::Library,
+    labels: Option<&[String]>,
+) -> Result<Vec<crate::detect::Detector>, String> {
+    let Some(labels) = labels else {
+        return Ok(library.detectors.clone());
+    };
+    let known = library.labels();
+    let norm = |l: &str| crate::detect::normalise_label(l);
+    if labels.is_empty() {
+        return Err("give at least one label".into());
+    }
+    if let Some(bad) = labels
+        .iter()
+        .find(|l| !known.iter().any(|k| norm(k) == norm(l)))
+    {
+        return Err(format!(
+            "library {} has no label {bad:?} (it has: {})",
+            library.name,
+            known.join(", ")
+        ));
+    }
+    Ok(crate::reward::annotate::detectors_for(library, labels))
 }
 
 /// An agent and, for the LLM agent, its client (flushed after every task).
@@ -376,6 +424,43 @@ fn bench_error(task: &str, e: BenchError) -> StageError {
 }
 
 impl BenchmarkStage {
+    /// The library (name) and detectors that annotate: `library_from`'s grown library, read from the
+    /// manifest summary of that finished stage, or the one loaded when the stage was built.
+    fn annotating(
+        &self,
+        ctx: &StageContext<'_>,
+    ) -> Result<(String, Vec<crate::detect::Detector>), StageError> {
+        let Some(setup) = &self.setup else {
+            return Ok((String::new(), Vec::new()));
+        };
+        let Some(id) = &self.library_from else {
+            return Ok((setup.library.name.clone(), self.detectors.clone()));
+        };
+        let manifest = crate::store::manifest::Manifest::load(ctx.run())?;
+        let path = manifest
+            .as_ref()
+            .and_then(|m| m.stages.get(id))
+            .filter(|r| r.status == crate::store::manifest::StageStatus::Finished)
+            .and_then(|r| r.summary["library"].as_str().map(PathBuf::from))
+            .ok_or_else(|| {
+                StageError::Input(format!(
+                    "`library_from`: stage {id:?} has not finished in this run or names no library"
+                ))
+            })?;
+        let library = crate::detect::Library::open(&crate::builtin::Location::Disk(path.clone()))?;
+        if library.env != self.env {
+            return Err(StageError::Input(format!(
+                "`library_from`: the library of stage {id:?} ({}) is for {}, not {}",
+                path.display(),
+                library.env,
+                self.env
+            )));
+        }
+        let detectors = select_detectors(&library, self.labels.as_deref())
+            .map_err(|e| StageError::Input(format!("`labels`: {e}")))?;
+        Ok((library.name, detectors))
+    }
+
     /// Whether an endpoint or a replay run is configured for the LLM agent.
     fn endpoint_configured(&self) -> bool {
         self.llm.base_url.is_some()
@@ -461,12 +546,8 @@ impl Stage for BenchmarkStage {
                 ..StageOutput::default()
             });
         }
+        let (library, detectors) = self.annotating(ctx)?;
         let (agent, client) = self.agent(ctx, &sims)?;
-        let library = self
-            .setup
-            .as_ref()
-            .map(|s| s.library.name.clone())
-            .unwrap_or_default();
         let settings = Settings {
             format: self.format,
             feedback: self.feedback,
@@ -475,7 +556,7 @@ impl Stage for BenchmarkStage {
             image_size: self.image_size,
             seed: self.seed.unwrap_or(ctx.seed()),
             library: library.clone(),
-            patterns: self.detectors.len(),
+            patterns: detectors.len(),
         };
         let pool = match &self.setup {
             Some(s) => Some(s.pool()?),
@@ -484,7 +565,7 @@ impl Stage for BenchmarkStage {
         let annotator = match (&pool, &self.setup) {
             (Some(p), Some(_)) => Some(Annotator {
                 pool: p,
-                detectors: &self.detectors,
+                detectors: &detectors,
             }),
             _ => None,
         };

@@ -93,6 +93,14 @@ pub struct EvolveParams {
     /// Labels to learn, in order (default: the library's labels).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub labels: Option<Vec<String>>,
+    /// Learn the labels a `suggest-labels` stage wrote (its id; it must be one of this stage's inputs)
+    /// instead of `labels`, in their rank order.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub labels_from: Option<String>,
+    /// Start from an empty library instead of `library`'s detectors: the grown library then holds
+    /// only the accepted detectors of the learned labels (the paper's LLM-Labels libraries); `library`
+    /// still names the environment's sandbox defaults.
+    pub start_empty: bool,
     /// Search strategy.
     pub strategy: Strategy,
     /// Where children come from: syntax-tree edits (mutate) or an LLM; auto = llm when an endpoint
@@ -182,6 +190,8 @@ impl EvolveParams {
             env: sandbox.env,
             library: None,
             labels: None,
+            labels_from: None,
+            start_empty: false,
             strategy: search.strategy,
             proposer: ProposerChoice::Auto,
             llm: None,
@@ -329,6 +339,8 @@ pub struct LabelSummary {
 pub struct EvolveStage {
     setup: DetectorSetup,
     labels: Vec<String>,
+    labels_from: Option<String>,
+    start_empty: bool,
     config: SearchConfig,
     /// The `lag` parameter (`None`: by proposer).
     lag: Option<u64>,
@@ -351,8 +363,32 @@ pub struct EvolveStage {
 fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
     let p: EvolveParams = def.params()?;
     let setup = DetectorSetup::new(&p.sandbox(), spec)?;
+    if let Some(from) = &p.labels_from {
+        if p.labels.is_some() {
+            return Err(BuildError::param(
+                "labels_from",
+                "give `labels` or `labels_from`, not both",
+            ));
+        }
+        if !def.inputs.contains(from) {
+            return Err(BuildError::param(
+                "labels_from",
+                format!("`labels_from` = {from:?} must be one of the stage's inputs"),
+            ));
+        }
+        match spec.stages.iter().find(|s| &s.id == from) {
+            Some(s) if s.kind.name == super::suggest_labels::KIND.name => {}
+            _ => {
+                return Err(BuildError::param(
+                    "labels_from",
+                    format!("`labels_from` = {from:?} must name a suggest-labels stage"),
+                ));
+            }
+        }
+    }
     let labels: Vec<String> = match &p.labels {
         Some(a) => a.clone(),
+        None if p.labels_from.is_some() => vec!["(from suggest-labels)".to_string()],
         None => setup
             .library
             .labels()
@@ -399,6 +435,8 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     }
     Ok(Box::new(EvolveStage {
         labels,
+        labels_from: p.labels_from.clone(),
+        start_empty: p.start_empty,
         config: SearchConfig {
             strategy: p.strategy,
             islands: p.islands.max(1) as usize,
@@ -625,10 +663,16 @@ impl EvolveStage {
             .output
             .clone()
             .unwrap_or_else(|| ctx.run().exports_dir().join(stage).join("library"));
-        let name = format!("{}-evolved", self.setup.library.name);
+        let (name, from) = if self.start_empty {
+            (format!("{env}-{stage}"), "an empty library".to_string())
+        } else {
+            (
+                format!("{}-evolved", self.setup.library.name),
+                self.setup.library.name.clone(),
+            )
+        };
         let description = format!(
-            "{} grown by evolve stage {stage} (seed {}, {} strategy, {} proposer, budget {} per label)",
-            self.setup.library.name,
+            "{from} grown by evolve stage {stage} (seed {}, {} strategy, {} proposer, budget {} per label)",
             config.seed,
             config.strategy.as_str(),
             proposer,
@@ -824,9 +868,21 @@ impl Stage for EvolveStage {
         let env = self.setup.env;
         let mut config = self.config.clone();
         config.seed = self.seed.unwrap_or(ctx.seed());
+        let labels = match &self.labels_from {
+            None => self.labels.clone(),
+            Some(id) => {
+                let l = super::suggest_labels::read_suggested_labels(ctx.run(), id)?;
+                if l.is_empty() {
+                    return Err(StageError::Input(format!(
+                        "`labels_from`: stage {id:?} wrote no suggested_labels rows"
+                    )));
+                }
+                l
+            }
+        };
         let (train, holdout) = self.load_split(ctx, env, config.seed)?;
         ctx.progress()
-            .set_total(ctx.stage_id(), config.budget * self.labels.len() as u64);
+            .set_total(ctx.stage_id(), config.budget * labels.len() as u64);
         let t_dx = std::time::Instant::now();
         let (dx, train_set, reused) = self.training_distances(ctx, env, &train, "dx")?;
         let (holdout_dx, holdout_set, holdout_reused) =
@@ -892,9 +948,13 @@ impl Stage for EvolveStage {
             };
             checkpoint.write_label(&tables, m, r, &mut rows)
         };
-        let base = self.setup.library.detectors.clone();
+        let base = if self.start_empty {
+            Vec::new()
+        } else {
+            self.setup.library.detectors.clone()
+        };
         let result = with_wait_notices(ctx, llm_client.as_deref(), || {
-            discovery.run(base, &self.labels, &mut after)
+            discovery.run(base, &labels, &mut after)
         });
         if let Some(c) = &llm_client {
             c.flush()?;
@@ -924,6 +984,13 @@ impl Stage for EvolveStage {
         }
         if !holdout_reused {
             *rows.entry("trace_distances".into()).or_default() += holdout_dx.upper.len() as u64;
+        }
+        if library.is_empty() {
+            return Err(StageError::Input(format!(
+                "start_empty: none of the {} label(s) was accepted, so the grown library would be empty; \
+                 raise `budget`, lower `delta` or set allow_nonpositive_rho = true",
+                labels.len()
+            )));
         }
         let out_dir = self.write_evolved(ctx, &config, proposer.name(), &library)?;
         let wall: f64 = results.iter().map(|r| r.outcome.wall_s).sum();

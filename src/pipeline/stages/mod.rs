@@ -4,7 +4,8 @@
 //! `annotate` (a detector library run over the traces), `accuracy` (its event-grounded labels scored
 //! against simulator events), `synthesise` (goal sentences to reward programs through an LLM),
 //! `optimise` (annealing actions for reward programs), `benchmark` (DeepPHY's agent loop), `summarise`
-//! (summaries of traces, their cost and the identification task), `evolve` (the evolutionary search for
+//! (summaries of traces, their cost and the identification task), `suggest-labels` (pattern labels
+//! suggested from example traces, for an evolve stage), `evolve` (the evolutionary search for
 //! detectors), `ensemble` (an ensemble library from the candidates of several evolve stages, paper
 //! section 3.3), `sql` (a query over the run stored as a table), `export` (a table or query written to
 //! `exports/`), `report` (the static web report of the run) and `plot` (a figure of the run as SVG/PNG).
@@ -27,6 +28,7 @@ pub mod plot;
 pub mod report;
 pub mod simulate;
 pub mod sql;
+pub mod suggest_labels;
 pub mod summarise;
 pub mod synthesise;
 mod trace_files;

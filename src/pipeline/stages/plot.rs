@@ -27,10 +27,12 @@ pub static KIND: StageKind = StageKind {
     doc: "Draws one figure (`plot`) into exports/<file>.svg and/or .png, with axis labels and units: \
           success-budget (optimisation: success rate against budget, mean ± std over seeds), convergence \
           (evolution_convergence: similarity of each 10 % budget bin to the final bin), library-size \
-          (benchmark: success with annotation feedback against patterns in the library), fitness \
+          (benchmark: success with annotation feedback against patterns in the library), identification-size \
+          (identification: accuracy against patterns, ± standard error over trials), fitness \
           (candidates: best ν so far per label), learning-stats (candidates: executable and activation \
           shares per environment), annotation-examples (frames of a trace above its pattern timeline). \
-          The SVG carries every label; the PNG is the same figure without text.",
+          The SVG carries every label; the PNG is the same figure without text. With `skip_empty`, a query \
+          without rows writes nothing instead of failing.",
     writes: "exports/<file>.svg, exports/<file>.png",
     params: ParamsOf::of::<PlotParams>(),
     build,
@@ -53,8 +55,8 @@ pub enum PlotFormat {
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default)]
 pub struct PlotParams {
-    /// The figure: success-budget, convergence, library-size, fitness, learning-stats or
-    /// annotation-examples.
+    /// The figure: success-budget, convergence, library-size, identification-size, fitness,
+    /// learning-stats or annotation-examples.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub plot: Option<PlotKind>,
     /// File name stem under exports/ (default: the figure's name).
@@ -70,6 +72,9 @@ pub struct PlotParams {
     pub trace: Option<String>,
     /// annotation-examples: frames drawn above the timeline.
     pub frames: u32,
+    /// When the query gives no rows (e.g. library-size before any LLM benchmark ran), write no figure
+    /// and say so instead of failing.
+    pub skip_empty: bool,
 }
 
 impl Default for PlotParams {
@@ -81,6 +86,7 @@ impl Default for PlotParams {
             title: None,
             trace: None,
             frames: 5,
+            skip_empty: false,
         }
     }
 }
@@ -114,6 +120,7 @@ fn build(def: &StageDef, _spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildEr
         title: p.title,
         trace: p.trace,
         frames: p.frames as usize,
+        skip_empty: p.skip_empty,
     }))
 }
 
@@ -126,6 +133,7 @@ pub struct PlotStage {
     title: Option<String>,
     trace: Option<String>,
     frames: usize,
+    skip_empty: bool,
 }
 
 /// What a `plot` stage records in the manifest.
@@ -137,6 +145,9 @@ pub struct PlotSummary {
     pub files: Vec<String>,
     /// Series drawn (annotation-examples: timeline rows).
     pub series: usize,
+    /// Why nothing was drawn (`skip_empty` with no rows).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub skipped: Option<String>,
 }
 
 impl PlotStage {
@@ -181,6 +192,18 @@ impl PlotStage {
         Ok((s, p, labels.len()))
     }
 
+    /// Whether the kind's query gives no rows (or its table is missing).
+    fn empty(&self, ctx: &StageContext<'_>) -> Result<bool, StageError> {
+        let q = RunQuery::open(ctx.run())?;
+        if !q.has_table(self.kind.table()) {
+            return Ok(true);
+        }
+        let sql = self.kind.sql().unwrap_or_default();
+        Ok(rows_of(self.kind, &q.sql(&sql)?)
+            .map_err(|e| StageError::Input(e.to_string()))?
+            .is_empty())
+    }
+
     fn table_figure(
         &self,
         ctx: &StageContext<'_>,
@@ -214,6 +237,23 @@ impl PlotStage {
 
 impl Stage for PlotStage {
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
+        if self.skip_empty && self.kind != PlotKind::AnnotationExamples && self.empty(ctx)? {
+            let why = format!(
+                "the {} table gives no rows to draw (skip_empty)",
+                self.kind.table()
+            );
+            let summary = PlotSummary {
+                plot: self.kind.name().to_string(),
+                files: Vec::new(),
+                series: 0,
+                skipped: Some(why.clone()),
+            };
+            return Ok(StageOutput {
+                summary: serde_json::to_value(&summary).unwrap_or(Value::Null),
+                line: format!("{}: skipped: {why}", self.kind),
+                ..StageOutput::default()
+            });
+        }
         let (svg_text, png_bytes, series) = match self.kind {
             PlotKind::AnnotationExamples => self.examples(ctx)?,
             _ => self.table_figure(ctx)?,
@@ -243,6 +283,7 @@ impl Stage for PlotStage {
             plot: self.kind.name().to_string(),
             files: shown.clone(),
             series,
+            skipped: None,
         };
         Ok(StageOutput {
             rows: Default::default(),
