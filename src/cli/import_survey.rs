@@ -4,7 +4,10 @@
 
 use std::path::PathBuf;
 
-use annotrace::pipeline::stages::import_survey::{ImportSurveyParams, ImportSurveySummary, KIND};
+use annotrace::pipeline::stages::import_survey::{
+    ImportSurveyParams, ImportSurveySummary, KIND, read_responses,
+};
+use annotrace::store::RunDir;
 
 use super::CliResult;
 use super::one_stage::{OneStage, absolute, existing_run, summary};
@@ -30,6 +33,9 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
             .collect::<Result<_, _>>()?,
         allow_empty: false,
     };
+    // Check every file before the stage reruns (a rerun first unpublishes the previous import).
+    let paths: Vec<PathBuf> = params.files.iter().map(PathBuf::from).collect();
+    read_responses(&RunDir::new(&args.run), &paths, false)?;
     let stage = OneStage {
         run: &args.run,
         id: "import-survey".into(),
@@ -40,7 +46,7 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
     let s: ImportSurveySummary = summary(&stage, "import-survey")?;
     println!(
         "{} rating(s) of {} participant(s) from {} file(s) -> table survey_responses \
-         (annotrace query --run {} \"$(cat sql/survey_ratings.sql)\")",
+         (ratings per condition: annotrace query --run {} -- \"$(cat sql/survey_ratings.sql)\")",
         s.responses,
         s.participants,
         s.files,

@@ -99,7 +99,7 @@ impl Animation {
             let mut enc = Encoder::new(&mut out, w, h);
             enc.set_color(ColorType::Rgba);
             enc.set_depth(BitDepth::Eight);
-            enc.set_compression(png::Compression::Best);
+            enc.set_compression(png::Compression::Default);
             enc.set_animated(self.frames.len() as u32, 0)?;
             enc.set_frame_delay(self.delay_ms, 1000)?;
             enc.set_blend_op(BlendOp::Source)?;

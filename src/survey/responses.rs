@@ -42,7 +42,7 @@ pub const CSV_COLUMNS: [&str; 9] = [
 ];
 
 /// The lowest and highest rating (a 1–7 Likert scale).
-pub const RATINGS: (i64, i64) = (1, 7);
+pub(crate) const RATINGS: (i64, i64) = (1, 7);
 
 /// One item of a survey: a trace and its summary in every condition.
 #[derive(Clone, Debug, PartialEq)]

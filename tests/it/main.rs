@@ -29,3 +29,4 @@ mod simulate;
 mod snapshots_cli;
 mod sql_guard;
 mod summarise;
+mod survey;

@@ -3,7 +3,8 @@
 //! condition each participant saw at each position), and writes the `survey_responses` table.
 //!
 //! All files are read and checked before anything is written, so a bad row (named by file, line and
-//! field) leaves the table as it was. The files' contents are part of the fingerprint: a new or changed
+//! field) writes nothing; `annotrace import-survey` checks them ([`read_responses`]) before it reruns
+//! the stage, so the table of the previous import stays as it was. The files' contents are part of the fingerprint: a new or changed
 //! CSV reruns the stage and the stages after it.
 
 use std::path::{Path, PathBuf};
@@ -16,9 +17,9 @@ use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
-use crate::store::read_file;
+use crate::store::{RunDir, read_file};
 use crate::survey::responses::{responses_batch, responses_schema};
-use crate::survey::{Design, SURVEY_ITEMS, SURVEY_RESPONSES, parse_csv};
+use crate::survey::{Design, Response, SURVEY_ITEMS, SURVEY_RESPONSES, parse_csv};
 
 /// The `import-survey` stage kind.
 pub static KIND: StageKind = StageKind {
@@ -40,8 +41,8 @@ pub static KIND: StageKind = StageKind {
 pub struct ImportSurveyParams {
     /// Response CSV files, or folders whose `*.csv` files are read, relative to the project folder.
     pub files: Vec<String>,
-    /// When the folders hold no CSV yet (a study still running): write an empty table and say so,
-    /// instead of failing.
+    /// While a study runs: a folder that does not exist yet or holds no CSV gives an empty table (the
+    /// stage says so) instead of failing.
     pub allow_empty: bool,
 }
 
@@ -77,30 +78,71 @@ pub struct ImportSurveySummary {
     pub participants: u64,
 }
 
-impl ImportSurveyStage {
-    /// Every CSV named, sorted within each folder; a missing path is an error.
-    fn csv_files(&self) -> Result<Vec<PathBuf>, StageError> {
-        let mut out = Vec::new();
-        for p in &self.paths {
-            let meta = std::fs::metadata(p).map_err(|e| StageError::io(p, e))?;
-            if meta.is_dir() {
-                let mut found: Vec<PathBuf> = std::fs::read_dir(p)
-                    .map_err(|e| StageError::io(p, e))?
-                    .filter_map(|e| e.ok().map(|e| e.path()))
-                    .filter(|f| {
-                        f.is_file()
-                            && f.extension()
-                                .is_some_and(|x| x.eq_ignore_ascii_case("csv"))
-                    })
-                    .collect();
-                found.sort();
-                out.extend(found);
-            } else {
-                out.push(p.clone());
-            }
+/// Every CSV named (a folder's `*.csv` sorted by name); a missing path is an error unless
+/// `allow_empty`.
+fn csv_files(paths: &[PathBuf], allow_empty: bool) -> Result<Vec<PathBuf>, StageError> {
+    let mut out = Vec::new();
+    for p in paths {
+        let meta = match std::fs::metadata(p) {
+            Err(e) if allow_empty && e.kind() == std::io::ErrorKind::NotFound => continue,
+            m => m.map_err(|e| StageError::io(p, e))?,
+        };
+        if meta.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
+                .map_err(|e| StageError::io(p, e))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|f| {
+                    f.is_file()
+                        && f.extension()
+                            .is_some_and(|x| x.eq_ignore_ascii_case("csv"))
+                })
+                .collect();
+            found.sort();
+            out.extend(found);
+        } else {
+            out.push(p.clone());
         }
-        Ok(out)
     }
+    Ok(out)
+}
+
+/// Reads every response CSV of `paths` (files, or folders of `*.csv`) and checks each row against the
+/// run's surveys, writing nothing: the files read and their rows. `annotrace import-survey` calls it
+/// before running the stage, so a bad file leaves the run's table as it was.
+pub fn read_responses(
+    run: &RunDir,
+    paths: &[PathBuf],
+    allow_empty: bool,
+) -> Result<(Vec<PathBuf>, Vec<Response>), StageError> {
+    let files = csv_files(paths, allow_empty)?;
+    if files.is_empty() && !allow_empty {
+        return Err(StageError::Input(format!(
+            "import-survey: no response CSV in {} (set allow_empty while the study runs)",
+            paths
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )));
+    }
+    let mut design = Design::default();
+    for f in run.table(SURVEY_ITEMS)?.files {
+        for b in read_file(&f.path)? {
+            design.add_batch(&f.path, &b)?;
+        }
+    }
+    if design.is_empty() && !files.is_empty() {
+        return Err(StageError::Input(
+            "import-survey: the run has no survey (`survey_items` is empty): run `annotrace survey` first"
+                .into(),
+        ));
+    }
+    let mut rows = Vec::new();
+    for f in &files {
+        rows.extend(parse_csv(f, &read(f)?)?);
+    }
+    design.check(&rows)?;
+    Ok((files, rows))
 }
 
 fn read(path: &Path) -> Result<Vec<u8>, StageError> {
@@ -109,7 +151,7 @@ fn read(path: &Path) -> Result<Vec<u8>, StageError> {
 
 impl Stage for ImportSurveyStage {
     fn fingerprint_extra(&self) -> Result<Value, StageError> {
-        let files = self.csv_files()?;
+        let files = csv_files(&self.paths, self.allow_empty)?;
         let hashes: Vec<Value> = files
             .iter()
             .map(|f| {
@@ -123,35 +165,7 @@ impl Stage for ImportSurveyStage {
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
-        let run = ctx.run();
-        let mut design = Design::default();
-        for f in run.table(SURVEY_ITEMS)?.files {
-            for b in read_file(&f.path)? {
-                design.add_batch(&f.path, &b)?;
-            }
-        }
-        let files = self.csv_files()?;
-        if files.is_empty() && !self.allow_empty {
-            return Err(StageError::Input(format!(
-                "import-survey: no response CSV in {} (set allow_empty while the study runs)",
-                self.paths
-                    .iter()
-                    .map(|p| p.display().to_string())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )));
-        }
-        if design.is_empty() && !files.is_empty() {
-            return Err(StageError::Input(
-                "import-survey: the run has no survey (`survey_items` is empty): run `annotrace survey` first"
-                    .into(),
-            ));
-        }
-        let mut rows = Vec::new();
-        for f in &files {
-            rows.extend(parse_csv(f, &read(f)?)?);
-        }
-        design.check(&rows)?;
+        let (files, rows) = read_responses(ctx.run(), &self.paths, self.allow_empty)?;
         let batch = responses_batch(&rows)?;
         let mut sink = ctx
             .staging()

@@ -8,8 +8,8 @@
 // then one draw for the condition offset. Ratings are kept in localStorage under
 // "annotrace-survey:<id>:<participant>" and exported as CSV (the columns of `columns`).
 //
-// Test hook: #test=1&p=ID clears that participant's answers, checks that the first animation plays
-// (two canvas snapshots a second apart differ), rates every item (position k gets 1 + (k mod 7)),
+// Test hook: #test=1&p=ID clears that participant's answers, restarts the first animation and decodes
+// it with the browser's ImageDecoder (frame count; first and last frames differ), rates every item (position k gets 1 + (k mod 7)),
 // reads the CSV the download button would save, goes back to the first item and writes what it saw
 // as JSON into <pre id="test-result">.
 (function () {
@@ -188,16 +188,34 @@
   });
 
   // ---------- the test hook ----------
-  function snapshot() {
-    var img = $("video"), c = document.createElement("canvas");
-    c.width = img.naturalWidth; c.height = img.naturalHeight;
+  // The browser's own decoder (WebCodecs ImageDecoder; reading the file needs Chromium's
+  // --allow-file-access-from-files, which the browser test passes) reports the animation's frames.
+  function hashOf(image) {
+    var c = document.createElement("canvas");
+    c.width = image.displayWidth || image.naturalWidth; c.height = image.displayHeight || image.naturalHeight;
     var g = c.getContext("2d");
-    g.drawImage(img, 0, 0);
-    try {
-      var d = g.getImageData(0, 0, c.width, c.height).data, h = 0;
-      for (var i = 0; i < d.length; i += 4) h = (h * 31 + d[i] + 7 * d[i + 1] + 13 * d[i + 2]) | 0;
-      return h;
-    } catch (e) { return "tainted: " + e.name; }
+    g.drawImage(image, 0, 0);
+    var d = g.getImageData(0, 0, c.width, c.height).data, h = 0;
+    for (var i = 0; i < d.length; i += 4) h = (h * 31 + d[i] + 7 * d[i + 1] + 13 * d[i + 2]) | 0;
+    return h;
+  }
+  function decodeFrames(src, done) {
+    if (!window.ImageDecoder) { done({ error: "no ImageDecoder" }); return; }
+    var x = new XMLHttpRequest();
+    x.open("GET", src);
+    x.responseType = "arraybuffer";
+    x.onerror = function () { done({ error: "cannot read " + src }); };
+    x.onload = function () {
+      var d = new ImageDecoder({ data: x.response, type: "image/png" });
+      d.tracks.ready.then(function () {
+        var n = d.tracks.selectedTrack.frameCount;
+        return Promise.all([d.decode({ frameIndex: 0 }), d.decode({ frameIndex: n - 1 })]).then(function (r) {
+          done({ frames: n, animated: d.tracks.selectedTrack.animated, first_differs_from_last: hashOf(r[0].image) !== hashOf(r[1].image),
+            width: r[0].image.displayWidth, height: r[0].image.displayHeight });
+        });
+      }).catch(function (e) { done({ error: String(e) }); });
+    };
+    x.send();
   }
   function runTest(participant) {
     var out = { participant: participant, items: S.items.length, conditions: S.conditions };
@@ -212,10 +230,9 @@
       out.video = { width: img.naturalWidth, height: img.naturalHeight, src: img.getAttribute("src") };
       $("replay").click();
       whenLoaded(function () {
-        var a = snapshot();
-        setTimeout(function () {
-          var b = snapshot();
-          out.animated = typeof a === "number" ? a !== b : a;
+        out.replayed = img.complete && img.naturalWidth > 0;
+        decodeFrames(img.getAttribute("src"), function (decoded) {
+          out.decoded = decoded;
           // Rate every item, moving with the next button.
           for (var k = 0; k < st.order.length; k++) {
             $("rating-" + (1 + (k % 7))).click();
@@ -232,7 +249,7 @@
           var pre = $("test-result");
           pre.textContent = JSON.stringify(out);
           pre.dataset.done = "1";
-        }, 1000);
+        });
       });
     });
   }
