@@ -22,8 +22,8 @@ use std::path::PathBuf;
 
 pub use payload::{LibraryAnnotations, TraceViews, index_row, trace_payload};
 pub use scene::{Scene, SceneError, SceneObject, scene};
-pub use site::{SiteWriter, trace_file};
 pub(crate) use site::swap_in;
+pub use site::{SiteWriter, trace_file};
 
 /// The page's script (part of the `report` stage's fingerprint: a new viewer rewrites reports).
 pub const VIEWER_JS: &str = include_str!("assets/viewer.js");

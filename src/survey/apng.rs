@@ -48,7 +48,9 @@ fn changed_rect(a: &[u8], b: &[u8], width: u32, height: u32) -> Option<(u32, u32
             continue;
         }
         let first = (0..w).find(|&x| ra[x * 4..x * 4 + 4] != rb[x * 4..x * 4 + 4]);
-        let last = (0..w).rev().find(|&x| ra[x * 4..x * 4 + 4] != rb[x * 4..x * 4 + 4]);
+        let last = (0..w)
+            .rev()
+            .find(|&x| ra[x * 4..x * 4 + 4] != rb[x * 4..x * 4 + 4]);
         if let (Some(f), Some(l)) = (first, last) {
             x0 = x0.min(f);
             x1 = x1.max(l);
@@ -88,7 +90,12 @@ impl Animation {
                 self.frames.len()
             )));
         }
-        if let Some((i, f)) = self.frames.iter().enumerate().find(|(_, f)| f.len() != size) {
+        if let Some((i, f)) = self
+            .frames
+            .iter()
+            .enumerate()
+            .find(|(_, f)| f.len() != size)
+        {
             return Err(ApngError::Shape(format!(
                 "frame {i} holds {} bytes, expected {size} ({w}×{h} RGBA)",
                 f.len()
@@ -216,7 +223,9 @@ mod tests {
             delay_ms: 40,
             frames,
         };
-        let moving = anim((0..60).map(|k| at(k % 50)).collect()).encode().unwrap();
+        let moving = anim((0..60).map(|k| at(k % 50)).collect())
+            .encode()
+            .unwrap();
         let still = anim(vec![at(0)]).encode().unwrap();
         assert!(
             moving.len() < 2 * still.len(),

@@ -22,7 +22,7 @@ use std::path::PathBuf;
 pub use apng::{Animation, ApngError};
 pub use assign::{MAX_PARTICIPANT, Shown, assignment, fnv1a64, valid_participant};
 pub use responses::{
-    CSV_COLUMNS, Design, Item, Response, SURVEY_ITEMS, SURVEY_RESPONSES, Survey, SummaryRef,
+    CSV_COLUMNS, Design, Item, Response, SURVEY_ITEMS, SURVEY_RESPONSES, SummaryRef, Survey,
     parse_csv,
 };
 pub use site::{PageText, SurveyWriter, survey_id};

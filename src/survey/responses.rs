@@ -283,7 +283,10 @@ impl Design {
             if r.position < 1 || r.position as usize > n {
                 return Err(err(
                     "position",
-                    format!("{} is outside 1..={n} (the survey has {n} items)", r.position),
+                    format!(
+                        "{} is outside 1..={n} (the survey has {n} items)",
+                        r.position
+                    ),
                 ));
             }
             let shown =
@@ -301,7 +304,10 @@ impl Design {
             if r.env != item.env {
                 return Err(err(
                     "env",
-                    format!("trace {} is a {} trace, not {}", item.trace_id, item.env, r.env),
+                    format!(
+                        "trace {} is a {} trace, not {}",
+                        item.trace_id, item.env, r.env
+                    ),
                 ));
             }
             let condition = &s.conditions[shown.condition];
@@ -396,10 +402,7 @@ pub fn parse_csv(file: &Path, bytes: &[u8]) -> Result<Vec<Response>, SurveyError
         return Err(csv_err(
             1,
             None,
-            format!(
-                "the header must be `{}` ({detail})",
-                CSV_COLUMNS.join(",")
-            ),
+            format!("the header must be `{}` ({detail})", CSV_COLUMNS.join(",")),
         ));
     }
     let mut out = Vec::new();
@@ -407,7 +410,9 @@ pub fn parse_csv(file: &Path, bytes: &[u8]) -> Result<Vec<Response>, SurveyError
         let rec = rec.map_err(|e| {
             let line = e.position().map_or(0, |p| p.line());
             let message = match e.kind() {
-                csv::ErrorKind::UnequalLengths { expected_len, len, .. } => {
+                csv::ErrorKind::UnequalLengths {
+                    expected_len, len, ..
+                } => {
                     format!("{len} fields, expected {expected_len}")
                 }
                 _ => e.to_string(),
@@ -438,9 +443,7 @@ pub fn parse_csv(file: &Path, bytes: &[u8]) -> Result<Vec<Response>, SurveyError
             return Err(csv_err(
                 line,
                 Some("participant"),
-                format!(
-                    "{participant:?} is not a participant id (1–64 of A–Z a–z 0–9 _ . -)"
-                ),
+                format!("{participant:?} is not a participant id (1–64 of A–Z a–z 0–9 _ . -)"),
             ));
         }
         let seed = get(2).parse::<u64>().map_err(|_| {
@@ -498,7 +501,8 @@ pub fn responses_batch(rows: &[Response]) -> Result<RecordBatch, ArrowError> {
     let s = |f: &dyn Fn(&Response) -> String| {
         Arc::new(StringArray::from_iter_values(rows.iter().map(f)))
     };
-    let i = |f: &dyn Fn(&Response) -> i64| Arc::new(Int64Array::from_iter_values(rows.iter().map(f)));
+    let i =
+        |f: &dyn Fn(&Response) -> i64| Arc::new(Int64Array::from_iter_values(rows.iter().map(f)));
     RecordBatch::try_new(
         responses_schema(),
         vec![
@@ -608,7 +612,10 @@ mod tests {
         let e = parse_err(&good.replacen(",4,2026", ",9,2026", 1));
         assert_eq!(e, "r.csv:2: field `rating`: 9 is outside the scale 1–7");
         let e = parse_err(&good.replacen(",4,2026", ",four,2026", 1));
-        assert!(e.starts_with("r.csv:2: field `rating`: \"four\" is not a rating"), "{e}");
+        assert!(
+            e.starts_with("r.csv:2: field `rating`: \"four\" is not a rating"),
+            "{e}"
+        );
         let e = parse_err(&good.replacen(",P1,", ",P 1,", 2));
         assert!(e.starts_with("r.csv:2: field `participant`"), "{e}");
         let e = parse_err(&format!("{good}x,y\n"));
@@ -643,7 +650,10 @@ mod tests {
         // The same rows twice.
         let twice = format!("{good}{}", good.lines().nth(1).unwrap());
         let e = check(twice + "\n");
-        assert!(e.contains("rated position 1 twice (first at r.csv:2)"), "{e}");
+        assert!(
+            e.contains("rated position 1 twice (first at r.csv:2)"),
+            "{e}"
+        );
         // Another participant's CSV is valid on its own.
         let rows = parse_csv(Path::new("o.csv"), other.as_bytes()).unwrap();
         d.check(&rows).unwrap();

@@ -114,12 +114,18 @@ impl SurveyWriter {
     /// (absolute paths), the page first.
     pub fn finish(mut self, survey: &Survey, page: &PageText) -> Result<Vec<PathBuf>, SurveyError> {
         let guide = |env: &str| match env {
-            "pooltool" => "A billiards table seen from above. The cue ball (white) is struck once; \
-                           balls roll, collide, rebound from the cushions and may drop into pockets.",
-            "phyre" => "PHYRE: a 2D physics puzzle. A red ball is placed in the scene so that, once \
-                        everything falls, the green object touches the blue (or purple) one.",
-            "iphyre" => "I-PHYRE: a 2D physics puzzle. Gray blocks are removed at chosen moments so \
-                         that the red ball falls off the bottom of the screen.",
+            "pooltool" => {
+                "A billiards table seen from above. The cue ball (white) is struck once; \
+                           balls roll, collide, rebound from the cushions and may drop into pockets."
+            }
+            "phyre" => {
+                "PHYRE: a 2D physics puzzle. A red ball is placed in the scene so that, once \
+                        everything falls, the green object touches the blue (or purple) one."
+            }
+            "iphyre" => {
+                "I-PHYRE: a 2D physics puzzle. Gray blocks are removed at chosen moments so \
+                         that the red ball falls off the bottom of the screen."
+            }
             _ => "",
         };
         let data = json!({

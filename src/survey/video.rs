@@ -8,15 +8,15 @@
 
 use rayon::prelude::*;
 
-use super::apng::Animation;
 use super::SurveyError;
+use super::apng::Animation;
+use crate::envs::EnvError;
 use crate::envs::iphyre::Games;
 use crate::envs::iphyre::render as iphyre_render;
-use crate::envs::phyre::{Task, TaskSet};
 use crate::envs::phyre::render as phyre_render;
+use crate::envs::phyre::{Task, TaskSet};
 use crate::envs::pool::PoolConfig;
 use crate::envs::pool::render as pool_render;
-use crate::envs::EnvError;
 use crate::trace::{Env, Trace};
 
 /// How a rollout becomes an animation.
@@ -100,12 +100,9 @@ impl Videos {
         let pool = &self.pool;
         let png = |t: f64| -> Result<Vec<u8>, EnvError> {
             match trace.env {
-                Env::Pooltool => pool_render::render_png(
-                    trace,
-                    pool,
-                    t,
-                    &pool_render::RenderOptions { size },
-                ),
+                Env::Pooltool => {
+                    pool_render::render_png(trace, pool, t, &pool_render::RenderOptions { size })
+                }
                 Env::Iphyre => iphyre_render::render_png(
                     trace,
                     game,

@@ -55,7 +55,9 @@ fn survey_run(t: &TestRun) -> PathBuf {
         "--quiet",
     ])
     .ok()
-    .stdout_has("4 item(s) (4 pooltool), conditions: offline:pooltool-human:1, offline:pooltool-human:12");
+    .stdout_has(
+        "4 item(s) (4 pooltool), conditions: offline:pooltool-human:1, offline:pooltool-human:12",
+    );
     t.path("site")
 }
 
@@ -75,7 +77,10 @@ fn apng_frames(bytes: &[u8]) -> u32 {
     let r = png::Decoder::new(std::io::Cursor::new(bytes))
         .read_info()
         .unwrap();
-    r.info().animation_control.expect("an animated PNG").num_frames
+    r.info()
+        .animation_control
+        .expect("an animated PNG")
+        .num_frames
 }
 
 #[test]
@@ -93,7 +98,10 @@ fn participants_rate_animations_and_their_csv_becomes_the_ratings_table() {
         assert_eq!(it["summaries"].as_array().unwrap().len(), 2);
     }
     // The survey's items are a table of the run.
-    let rows = t.csv("r", "SELECT count(*) AS n, count(DISTINCT trace_id) AS t FROM survey_items");
+    let rows = t.csv(
+        "r",
+        "SELECT count(*) AS n, count(DISTINCT trace_id) AS t FROM survey_items",
+    );
     assert_eq!(rows, "n,t\n8,4\n");
     // The files are in the manifest.
     t.run(&["verify", "--run", "r"]).ok();
@@ -183,7 +191,10 @@ fn participants_rate_animations_and_their_csv_becomes_the_ratings_table() {
     for (g, (env, c, n, mean, std)) in got.iter().zip(&want) {
         assert_eq!((&g[0], &g[1], g[2].as_str()), (env, c, "1"), "{table}");
         assert_eq!(g[3].parse::<usize>().unwrap(), *n, "{table}");
-        assert!((g[4].parse::<f64>().unwrap() - mean).abs() < 1e-3, "{table}");
+        assert!(
+            (g[4].parse::<f64>().unwrap() - mean).abs() < 1e-3,
+            "{table}"
+        );
         assert!((g[5].parse::<f64>().unwrap() - std).abs() < 1e-3, "{table}");
     }
     // A bad CSV names its file, line and field, exits 2 and leaves the table as it was.

@@ -92,9 +92,7 @@ fn csv_files(paths: &[PathBuf], allow_empty: bool) -> Result<Vec<PathBuf>, Stage
                 .map_err(|e| StageError::io(p, e))?
                 .filter_map(|e| e.ok().map(|e| e.path()))
                 .filter(|f| {
-                    f.is_file()
-                        && f.extension()
-                            .is_some_and(|x| x.eq_ignore_ascii_case("csv"))
+                    f.is_file() && f.extension().is_some_and(|x| x.eq_ignore_ascii_case("csv"))
                 })
                 .collect();
             found.sort();
@@ -167,9 +165,9 @@ impl Stage for ImportSurveyStage {
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
         let (files, rows) = read_responses(ctx.run(), &self.paths, self.allow_empty)?;
         let batch = responses_batch(&rows)?;
-        let mut sink = ctx
-            .staging()
-            .sink(SURVEY_RESPONSES, None, "responses", responses_schema())?;
+        let mut sink =
+            ctx.staging()
+                .sink(SURVEY_RESPONSES, None, "responses", responses_schema())?;
         sink.write(&batch)?;
         let (_, n) = sink.commit()?;
         let participants = rows

@@ -27,7 +27,7 @@ use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
 use crate::rng::SplitMix64;
 use crate::store::{RunDir, read_file};
 use crate::survey::{
-    Item, PageText, SURVEY_ITEMS, Survey, SurveyError, SurveyWriter, SummaryRef, VideoOptions,
+    Item, PageText, SURVEY_ITEMS, SummaryRef, Survey, SurveyError, SurveyWriter, VideoOptions,
     Videos, survey_id, valid_participant,
 };
 use crate::trace::Env;
@@ -311,7 +311,12 @@ impl SurveyStage {
         let conditions: Vec<String> = if self.p.conditions.is_empty() {
             found.iter().map(|s| s.to_string()).collect()
         } else {
-            if let Some(c) = self.p.conditions.iter().find(|c| !found.contains(c.as_str())) {
+            if let Some(c) = self
+                .p
+                .conditions
+                .iter()
+                .find(|c| !found.contains(c.as_str()))
+            {
                 return Err(StageError::Input(format!(
                     "survey: condition {c:?} has no summaries in the run (its conditions: {})",
                     if found.is_empty() {
@@ -393,7 +398,9 @@ impl SurveyStage {
                 Item {
                     trace_id,
                     env: env.as_str().to_string(),
-                    summaries: (0..conditions.len()).map(|c| m[&c].summary.clone()).collect(),
+                    summaries: (0..conditions.len())
+                        .map(|c| m[&c].summary.clone())
+                        .collect(),
                 }
             })
             .collect();
