@@ -102,20 +102,23 @@ pub fn items_schema() -> SchemaRef {
     ]))
 }
 
+/// One `survey_items` row before it becomes columns: item index, condition index, item, summary.
+type ItemRow<'a> = (usize, usize, &'a Item, &'a SummaryRef);
+
 impl Survey {
     /// Its rows of `survey_items` (items in order, conditions in order within each).
     pub fn items_batch(&self) -> Result<RecordBatch, ArrowError> {
-        let mut rows: Vec<(usize, usize, &Item, &SummaryRef)> = Vec::new();
+        let mut rows: Vec<ItemRow<'_>> = Vec::new();
         for (i, item) in self.items.iter().enumerate() {
             for (c, s) in item.summaries.iter().enumerate() {
                 rows.push((i, c, item, s));
             }
         }
         let n = rows.len();
-        let strs = |f: &dyn Fn(&(usize, usize, &Item, &SummaryRef)) -> String| {
+        let strs = |f: &dyn Fn(&ItemRow<'_>) -> String| {
             Arc::new(StringArray::from_iter_values(rows.iter().map(f)))
         };
-        let ints = |f: &dyn Fn(&(usize, usize, &Item, &SummaryRef)) -> i64| {
+        let ints = |f: &dyn Fn(&ItemRow<'_>) -> i64| {
             Arc::new(Int64Array::from_iter_values(rows.iter().map(f)))
         };
         RecordBatch::try_new(
