@@ -24,6 +24,8 @@
 //! - [`reward`]: the reward-program DSL over annotated traces, goal files, verification rules, synthesis;
 //! - [`optimise`]: simulated annealing of actions for reward programs and the billiards experiment;
 //! - [`report`]: the static web report of a run (trace player, pattern timeline, annotated text);
+//! - [`survey`]: the survey kit (rollout animations beside summaries rated 1–7, seeded per-participant
+//!   shuffle, response CSVs and their tables);
 //! - [`pipeline`]: pipeline files, the stage registry and every stage kind, fingerprints, the runner and
 //!   its manifest.
 //!
@@ -51,6 +53,7 @@ pub mod rng;
 pub mod search;
 pub mod store;
 pub mod summary;
+pub mod survey;
 pub mod trace;
 
 #[doc(hidden)]

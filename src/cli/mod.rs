@@ -27,6 +27,7 @@ mod ensemble;
 mod evolve;
 mod export;
 mod import;
+mod import_survey;
 mod llm_args;
 mod one_stage;
 mod plot;
@@ -41,6 +42,7 @@ mod simulate;
 mod stages;
 mod suggest_labels;
 mod summarise;
+mod survey;
 mod tables;
 mod verify;
 
@@ -172,6 +174,10 @@ enum Command {
     Plot(plot::Args),
     /// Write a run's static web report: trace list, trace player, pattern timeline, annotated text.
     Report(report::Args),
+    /// Write a survey page: rollout animations beside one summary each, rated 1–7 (seeded per participant).
+    Survey(survey::Args),
+    /// Read the survey page's response CSVs into the survey_responses table (checked against the survey).
+    ImportSurvey(import_survey::Args),
     /// Reward programs: check one, evaluate it on a trace, or synthesise one from a goal sentence.
     Reward(reward::Args),
     /// Ask the configured LLM for K pattern labels, shown example traces of --run (or --offline: a baseline).
@@ -211,6 +217,8 @@ pub fn main() -> ExitCode {
         Command::Show(a) => show::run(a),
         Command::Plot(a) => plot::run(a, cli.quiet),
         Command::Report(a) => report::run(a, cli.quiet),
+        Command::Survey(a) => survey::run(a, cli.quiet),
+        Command::ImportSurvey(a) => import_survey::run(a, cli.quiet),
         Command::Reward(a) => reward::run(a),
         Command::SuggestLabels(a) => suggest_labels::run(a, cli.quiet),
         Command::Export(a) => export::run(a),

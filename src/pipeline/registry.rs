@@ -64,6 +64,8 @@ pub static STAGE_KINDS: &[&StageKind] = &[
     &stages::export::KIND,
     &stages::report::KIND,
     &stages::plot::KIND,
+    &stages::survey::KIND,
+    &stages::import_survey::KIND,
 ];
 
 /// The kind with this name.

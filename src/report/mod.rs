@@ -22,6 +22,7 @@ use std::path::PathBuf;
 
 pub use payload::{LibraryAnnotations, TraceViews, index_row, trace_payload};
 pub use scene::{Scene, SceneError, SceneObject, scene};
+pub(crate) use site::swap_in;
 pub use site::{SiteWriter, trace_file};
 
 /// The page's script (part of the `report` stage's fingerprint: a new viewer rewrites reports).

@@ -134,26 +134,34 @@ impl SiteWriter {
         }
         files.push(PathBuf::from("data/index.js"));
         files.append(&mut self.files);
-        let parent = self.target.parent().unwrap_or(Path::new(".")).to_path_buf();
-        let old = parent.join(format!(
-            ".{}.old-{}",
-            self.target
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default(),
-            std::process::id()
-        ));
-        let had_old = self.target.exists();
-        if had_old {
-            fs::rename(&self.target, &old).map_err(io(&self.target))?;
-        }
-        fs::rename(&self.tmp, &self.target).map_err(io(&self.target))?;
-        crate::store::sync_dir(Some(&parent)).map_err(io(&parent))?;
-        if had_old {
-            fs::remove_dir_all(&old).map_err(io(&old))?;
-        }
+        swap_in(&self.tmp, &self.target)?;
         Ok(files.into_iter().map(|f| self.target.join(f)).collect())
     }
+}
+
+/// Replaces `target` with the finished folder `tmp` (a sibling of it): the old folder is renamed aside,
+/// the new one renamed in, the parent synced, the old one removed, so a reader sees one or the other.
+/// The survey page (`crate::survey`) is swapped in the same way.
+pub(crate) fn swap_in(tmp: &Path, target: &Path) -> Result<(), ReportError> {
+    let parent = target.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let old = parent.join(format!(
+        ".{}.old-{}",
+        target
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        std::process::id()
+    ));
+    let had_old = target.exists();
+    if had_old {
+        fs::rename(target, &old).map_err(io(target))?;
+    }
+    fs::rename(tmp, target).map_err(io(target))?;
+    crate::store::sync_dir(Some(&parent)).map_err(io(&parent))?;
+    if had_old {
+        fs::remove_dir_all(&old).map_err(io(&old))?;
+    }
+    Ok(())
 }
 
 impl Drop for SiteWriter {

@@ -30,3 +30,4 @@ mod snapshots_cli;
 mod sql_guard;
 mod suggest_labels;
 mod summarise;
+mod survey;

@@ -17,7 +17,7 @@ use serde_json::Value;
 use crate::common::{TestRun, repo};
 
 /// The Chromium binary, or `None` when the browser test may be skipped.
-fn chromium() -> Option<String> {
+pub(crate) fn chromium() -> Option<String> {
     let bin = std::env::var("ANNOTRACE_CHROMIUM").unwrap_or_else(|_| "chromium".into());
     let found = Command::new(&bin)
         .arg("--version")
@@ -43,7 +43,7 @@ fn chromium() -> Option<String> {
 
 /// Runs Chromium headless on `url` with a virtual-time budget; `extra` adds `--dump-dom` or
 /// `--screenshot=…`. Returns stdout.
-fn browse(bin: &str, url: &str, extra: &[&str], profile: &Path) -> String {
+pub(crate) fn browse(bin: &str, url: &str, extra: &[&str], profile: &Path) -> String {
     let out = Command::new(bin)
         .args([
             "--headless",
@@ -155,7 +155,7 @@ fn payload(site: &Path, n: u64) -> Value {
 }
 
 /// The JSON the test hook wrote into `<pre id="test-result" …>`.
-fn test_result(dom: &str) -> Value {
+pub(crate) fn test_result(dom: &str) -> Value {
     let start = dom
         .find("id=\"test-result\"")
         .unwrap_or_else(|| panic!("no test result in the DOM:\n{dom}"));
@@ -177,7 +177,7 @@ fn test_result(dom: &str) -> Value {
 
 /// Share of pixels whose largest channel difference exceeds 48 (images of equal size), or 1.0 when
 /// the sizes differ.
-fn differing_share(a: &[u8], b: &[u8]) -> f64 {
+pub(crate) fn differing_share(a: &[u8], b: &[u8]) -> f64 {
     let (a, b) = (
         tiny_skia::Pixmap::decode_png(a).unwrap(),
         tiny_skia::Pixmap::decode_png(b).unwrap(),
@@ -195,7 +195,7 @@ fn differing_share(a: &[u8], b: &[u8]) -> f64 {
 }
 
 /// Most pixels may differ from the committed screenshot (fonts, anti-aliasing, a ball a pixel off).
-const MAX_DIFFERING: f64 = 0.02;
+pub(crate) const MAX_DIFFERING: f64 = 0.02;
 
 #[test]
 fn the_viewer_plays_each_environment_and_clicking_an_annotation_seeks_the_player() {

@@ -8,7 +8,9 @@
 //! suggested from example traces, for an evolve stage), `evolve` (the evolutionary search for
 //! detectors), `ensemble` (an ensemble library from the candidates of several evolve stages, paper
 //! section 3.3), `sql` (a query over the run stored as a table), `export` (a table or query written to
-//! `exports/`), `report` (the static web report of the run) and `plot` (a figure of the run as SVG/PNG).
+//! `exports/`), `report` (the static web report of the run), `plot` (a figure of the run as SVG/PNG), `survey` (the
+//! survey page of rollout animations and summaries rated 1–7) and `import-survey` (its response CSVs
+//! into `survey_responses`).
 //!
 //! Helpers shared by kinds: `detector_setup` (the library, environment and sandbox parameters of every
 //! kind that runs detectors), `trace_files` (reading a run's traces file by file for `annotate` and
@@ -23,6 +25,7 @@ pub mod ensemble;
 pub mod evolve;
 pub mod export;
 pub mod import;
+pub mod import_survey;
 pub mod optimise;
 pub mod plot;
 pub mod report;
@@ -30,6 +33,7 @@ pub mod simulate;
 pub mod sql;
 pub mod suggest_labels;
 pub mod summarise;
+pub mod survey;
 pub mod synthesise;
 mod trace_files;
 
