@@ -7,7 +7,7 @@ use std::process::{Child, Stdio};
 
 use crate::common::{Ran, TestRun};
 
-/// simulate (12 scenes in 6 units of 2) → annotate → SQL.
+/// simulate (12 scenes in 6 units of 2) → annotate, accuracy → SQL.
 const PIPELINE: &str = r#"[pipeline]
 name = "p"
 seed = 5
@@ -23,6 +23,12 @@ scenes_per_shard = 2
 [[stage]]
 id = "ann"
 kind = "annotate"
+env = "pooltool"
+inputs = ["sim"]
+
+[[stage]]
+id = "acc"
+kind = "accuracy"
 env = "pooltool"
 inputs = ["sim"]
 
@@ -85,6 +91,7 @@ fn tables_and_rows(t: &TestRun, run: &str) -> (String, Vec<String>) {
         "events",
         "detectors",
         "annotations",
+        "accuracy",
         "counts",
     ] {
         rows.push(sorted(t.csv(run, &format!("SELECT * FROM {name}"))));
@@ -203,6 +210,17 @@ fn three_shard_processes_one_killed_then_finalize_equal_the_single_process_run()
     );
     for ((p, x), (_, y)) in a.iter().zip(&b) {
         assert!(x == y, "{p} differs from the single-process run");
+    }
+    // The summaries summed from the slices' records are the single process's.
+    let summary = |run: &str, stage: &str| {
+        crate::common::read_json(&t.path(run).join("manifest.json"))["stages"][stage]["summary"]
+            .clone()
+    };
+    for stage in ["sim", "acc"] {
+        assert_eq!(
+            summary("runs/sharded", stage),
+            summary("runs/single", stage)
+        );
     }
     t.run(&["verify", "--run", "runs/sharded"]).ok();
     // Nothing of the protocol is left but the locks.
