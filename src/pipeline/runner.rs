@@ -104,12 +104,12 @@ pub enum RunError {
         /// Which slices are missing (`slices 1/3, 2/3 not finished`).
         missing: String,
     },
-    /// A sharded run waited for an input stage that failed.
-    #[error("stage {id} cannot run: its input stage {input} failed: {error}")]
+    /// A sharded run waited for an earlier stage that failed.
+    #[error("stage {id} cannot run: stage {input} before it failed: {error}")]
     InputFailed {
         /// The waiting stage.
         id: String,
-        /// The failed input.
+        /// The failed stage.
         input: String,
         /// The input's recorded error.
         error: String,

@@ -19,11 +19,12 @@
 //! - the manifest is written only under the run's `.lock`, held for one short step at a time: the first
 //!   shard to reach a stage records it `running` (unpublishing an older version of it), the shard that
 //!   finds every slice of it done commits it (the runner's commit steps; a second committer finds it
-//!   `finished` and does nothing), and unshardable stages that a shardable one needs run whole under
-//!   the lock, once;
-//! - a stage waits until its inputs are `finished` (polling the manifest);
-//! - unshardable stages downstream of every shardable one (SQL, exports, plots, reports) are left to
-//!   `--finalize`, an ordinary run that refuses to compute a shardable stage whose slices are missing.
+//!   `finished` and does nothing), and unshardable stages before a shardable one run whole under the
+//!   lock, once;
+//! - a stage waits until every stage before it in the run order is `finished` (polling the manifest),
+//!   so each stage sees the run the single-process run would show it;
+//! - stages after the last shardable one (SQL, exports, plots, reports) are left to `--finalize`, an
+//!   ordinary run that refuses to compute a shardable stage whose slices are missing.
 
 use std::collections::BTreeSet;
 use std::fs;
@@ -198,23 +199,26 @@ fn missing_slices(done: &[(usize, usize)]) -> Option<String> {
     })
 }
 
-/// The stages a shard process runs: every selected shardable stage, and every selected unshardable
-/// stage upstream of one (run whole, once, by whichever shard gets there first). The rest is left to
-/// `--finalize`.
-fn shard_stages(spec: &PipelineSpec, opts: &RunOptions, built: &Built) -> BTreeSet<String> {
+/// The stages a shard process runs, in run order: every selected stage up to the last selected
+/// shardable one (unshardable ones run whole, once, by whichever shard gets there first). The rest is
+/// left to `--finalize`.
+fn shard_stages(spec: &PipelineSpec, opts: &RunOptions, built: &Built) -> Vec<usize> {
     let selected = opts.until.as_ref().map(|u| spec.upstream(u));
-    let is_selected = |id: &str| selected.as_ref().is_none_or(|s| s.contains(id));
-    let mut out = BTreeSet::new();
-    for (i, def) in spec.stages.iter().enumerate() {
-        if built.stages[i].shardable() && is_selected(&def.id) {
-            out.extend(
-                spec.upstream(&def.id)
-                    .into_iter()
-                    .filter(|u| is_selected(u)),
-            );
-        }
+    let in_run: Vec<usize> = built
+        .order
+        .iter()
+        .copied()
+        .filter(|&i| {
+            selected
+                .as_ref()
+                .is_none_or(|s| s.contains(&spec.stages[i].id))
+        })
+        .collect();
+    let last = in_run.iter().rposition(|&i| built.stages[i].shardable());
+    match last {
+        Some(last) => in_run[..=last].to_vec(),
+        None => Vec::new(),
     }
-    out
 }
 
 /// One shard process.
@@ -246,7 +250,7 @@ pub fn run_shard(
             FileLock::acquire(&lock_path, true)?.expect("a blocking lock is taken")
         }
     };
-    let needed = shard_stages(spec, opts, &built);
+    let stages = shard_stages(spec, opts, &built);
     let shard = Shard {
         session: Session {
             spec,
@@ -259,12 +263,8 @@ pub fn run_shard(
         waiting_noted: std::cell::Cell::new(false),
     };
     let mut reports = Vec::new();
-    for &i in &built.order {
-        let def = &spec.stages[i];
-        if !needed.contains(&def.id) {
-            continue;
-        }
-        shard.wait_for_inputs(i)?;
+    for (k, &i) in stages.iter().enumerate() {
+        shard.wait_for(i, &stages[..k])?;
         let report = if built.stages[i].shardable() {
             shard.slice_stage(i)?
         } else {
@@ -461,17 +461,19 @@ impl Shard<'_> {
         })))
     }
 
-    /// Waits until every input of stage `i` is finished. Meanwhile, computes the slices of inputs
-    /// whose shard process is not running (its lock is free) and commits an input whose slices are
-    /// all done; fails when an input failed.
-    fn wait_for_inputs(&self, i: usize) -> Result<(), RunError> {
+    /// Waits until every stage before stage `i` in the run order (`earlier`) is finished — not only
+    /// its inputs: a stage reading "every trace of the run" must see what the single-process run, which
+    /// goes in this order, would show it, and every shard must cut the same work list. Meanwhile,
+    /// computes the slices of those stages whose shard process is not running (its lock is free) and
+    /// commits one whose slices are all done; fails when one of them failed.
+    fn wait_for(&self, i: usize, earlier: &[usize]) -> Result<(), RunError> {
         let s = &self.session;
         let def = &s.spec.stages[i];
         self.waiting_noted.set(false);
         loop {
             let manifest = Manifest::load(s.run)?.unwrap_or_default();
             let mut pending = Vec::new();
-            for input in &def.inputs {
+            for input in earlier.iter().map(|&e| &s.spec.stages[e].id) {
                 let fp = &s.built.fingerprints[input];
                 match manifest.stages.get(input) {
                     Some(r) if &r.fingerprint == fp && r.status == StageStatus::Finished => {}
