@@ -625,3 +625,56 @@ pub fn remove_files(files: &[PathBuf]) -> Result<(), StoreError> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_slice_discards_only_its_own_unfinished_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let run = RunDir::new(dir.path());
+        let staging = run.staging("sim");
+        let part = |unit: &str| {
+            staging
+                .dir
+                .join("traces/env=pooltool")
+                .join(shard_file_name("sim", unit))
+        };
+        let temp = |unit: &str| {
+            staging
+                .dir
+                .join("frames/env=pooltool")
+                .join(format!(".sim.{unit}.parquet.4242-0.tmp"))
+        };
+        for unit in ["00000", "00001", "00002", "00003"] {
+            for p in [part(unit), temp(unit)] {
+                fs::create_dir_all(p.parent().unwrap()).unwrap();
+                fs::write(&p, b"x").unwrap();
+            }
+        }
+        staging.mark_done("00001", &serde_json::json!({})).unwrap();
+        // Slice 1 of 2 owns units 1 and 3: 3 is unfinished, 1 is done.
+        let owns = |u: &str| u.parse::<u64>().is_ok_and(|n| n % 2 == 1);
+        assert_eq!(staging.discard_unfinished_where(owns).unwrap(), 1);
+        assert!(part("00000").exists() && part("00001").exists() && part("00002").exists());
+        assert!(!part("00003").exists());
+        assert!(temp("00000").exists() && temp("00002").exists());
+        assert!(!temp("00001").exists() && !temp("00003").exists());
+        assert_eq!(staging.shard_of_temp(".00007.json.1-2.tmp"), "00007");
+        assert_eq!(staging.shard_of_temp(".sim.00007.parquet.1-2.tmp"), "00007");
+        assert_eq!(staging.shard_of_temp(".other.tmp"), "");
+    }
+
+    #[test]
+    fn slices_are_recorded_per_fingerprint() {
+        let dir = tempfile::tempdir().unwrap();
+        let staging = RunDir::new(dir.path()).staging("sim");
+        staging.mark_slice(1, 3, "aaa").unwrap();
+        staging.mark_slice(0, 3, "aaa").unwrap();
+        staging.mark_slice(2, 3, "bbb").unwrap();
+        assert_eq!(staging.slices_done("aaa").unwrap(), vec![(0, 3), (1, 3)]);
+        assert_eq!(staging.slices_done("bbb").unwrap(), vec![(2, 3)]);
+        assert!(staging.slices_done("ccc").unwrap().is_empty());
+    }
+}
