@@ -243,8 +243,28 @@ fn shards_resume_wait_for_missing_slices_and_take_over_absent_ones() {
     run(&["--finalize"])
         .code(1)
         .stderr_has("stage sim: slice(s) 1/2 not finished");
-    // The same index again does nothing new.
-    run(&["--shard", "0/2", "--until", "sim"]).ok();
+    // Two processes with the same index at once: the second waits for the first, then finds its own
+    // slice done.
+    let twice = |_| {
+        spawn(
+            &t,
+            &[
+                "run",
+                "pipelines/p.toml",
+                "--run-dir",
+                "runs/r",
+                "--shard",
+                "0/2",
+                "--until",
+                "sim",
+            ],
+            &[],
+        )
+    };
+    let duplicates: Vec<Child> = (0..2).map(twice).collect();
+    for child in duplicates {
+        wait(child).ok();
+    }
     // A shard that needs `sim` while slice 1/2 has no process computes that slice itself, commits
     // `sim`, and goes on with its slice of `ann` (whose other slice it leaves: no one waits for it).
     run(&["--shard", "0/2"])
