@@ -266,14 +266,17 @@ fn shards_resume_wait_for_missing_slices_and_take_over_absent_ones() {
         wait(child).ok();
     }
     // A shard that needs `sim` while slice 1/2 has no process computes that slice itself, commits
-    // `sim`, and goes on with its slice of `ann` (whose other slice it leaves: no one waits for it).
+    // `sim`, does the same for `ann` (which `acc` waits for, being after it in the run order), and
+    // computes its slice of `acc`, the last shardable stage, whose other slice it leaves: no one
+    // waits for it.
     run(&["--shard", "0/2"])
         .ok()
         .stderr_has("[sim] shard 0/2: slice 1/2 has no running process; computing it here")
-        .stderr_has("[sim] done: 12 pool trace(s)");
+        .stderr_has("[sim] done: 12 pool trace(s)")
+        .stderr_has("[ann] shard 0/2: slice 1/2 has no running process; computing it here");
     run(&["--finalize"])
         .code(1)
-        .stderr_has("stage ann: slice(s) 1/2 not finished");
+        .stderr_has("stage acc: slice(s) 1/2 not finished");
     // `--shard auto` from a Slurm array numbered 1..2: task 2 is slice 1/2.
     t.run_env(
         &[
@@ -292,7 +295,7 @@ fn shards_resume_wait_for_missing_slices_and_take_over_absent_ones() {
     )
     .ok()
     .stderr_has("(shard 1/2)")
-    .stderr_has("[ann] done");
+    .stderr_has("[acc] done");
     run(&["--finalize"]).ok().stderr_has("[counts] done");
     assert_eq!(
         t.csv("runs/r", "SELECT count(*) AS n FROM traces"),
