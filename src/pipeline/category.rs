@@ -79,6 +79,9 @@ impl Categorize for RunError {
             RunError::Locked { .. } => ErrorCategory::Locked,
             RunError::Store(e) => e.category(),
             RunError::Stage { source, .. } => source.category(),
+            RunError::ShardsUnfinished { .. } | RunError::InputFailed { .. } => {
+                ErrorCategory::Failed
+            }
         }
     }
 }

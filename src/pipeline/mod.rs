@@ -12,6 +12,7 @@ mod params;
 mod progress;
 mod registry;
 mod runner;
+mod sharded;
 mod spec;
 mod stage;
 pub mod stages;
@@ -28,6 +29,7 @@ pub use runner::{
     Action, PlannedStage, RunError, RunOptions, RunReason, RunReport, StageReport, error_chain,
     explain, run,
 };
+pub use sharded::{Slice, run_shard};
 pub use spec::{PipelineSpec, StageDef, project_dir_of, valid_id};
 pub use stage::{FaultAction, FaultPlan, FaultPoint, Stage, StageContext, StageError, StageOutput};
 

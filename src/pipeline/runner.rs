@@ -62,6 +62,10 @@ pub struct RunOptions {
     /// commands such as `annotrace import`, which must leave nothing behind when they fail). Pipelines
     /// keep the folder, so the manifest shows the failed stage and its error.
     pub remove_new_run_on_failure: bool,
+    /// `--finalize` after a sharded run: commit each shardable stage whose slices are all done (an
+    /// error names the slices that are not), then run the rest as usual. A shardable stage is never
+    /// computed here.
+    pub finalize: bool,
 }
 
 /// A run could not complete.
@@ -90,6 +94,26 @@ pub enum RunError {
     /// The run folder could not be read or written.
     #[error(transparent)]
     Store(#[from] StoreError),
+    /// `--finalize`: a shardable stage's slices are not all done.
+    #[error(
+        "stage {id}: {missing}; run the missing shards (`annotrace run PIPELINE --shard i/n`), then --finalize again"
+    )]
+    ShardsUnfinished {
+        /// The stage.
+        id: String,
+        /// Which slices are missing (`slices 1/3, 2/3 not finished`).
+        missing: String,
+    },
+    /// A sharded run waited for an earlier stage that failed.
+    #[error("stage {id} cannot run: stage {input} before it failed: {error}")]
+    InputFailed {
+        /// The waiting stage.
+        id: String,
+        /// The failed stage.
+        input: String,
+        /// The input's recorded error.
+        error: String,
+    },
     /// A stage failed.
     #[error("stage {id} failed")]
     Stage {
@@ -238,10 +262,10 @@ fn canonical(v: &Value) -> Value {
     }
 }
 
-struct Built {
-    stages: Vec<Box<dyn Stage>>,
-    fingerprints: BTreeMap<String, String>,
-    order: Vec<usize>,
+pub(super) struct Built {
+    pub(super) stages: Vec<Box<dyn Stage>>,
+    pub(super) fingerprints: BTreeMap<String, String>,
+    pub(super) order: Vec<usize>,
 }
 
 fn build(spec: &PipelineSpec) -> Result<Built, RunError> {
@@ -304,7 +328,7 @@ fn check_stage_option(
     }
 }
 
-fn plan_with(
+pub(super) fn plan_with(
     spec: &PipelineSpec,
     opts: &RunOptions,
     built: &Built,
@@ -438,7 +462,7 @@ fn record_missing_checksums(run: &RunDir, manifest: &mut Manifest) -> Result<usi
 }
 
 /// Checks the options, builds every stage with its fingerprint, and finds the run folder.
-fn prepare(spec: &PipelineSpec, opts: &RunOptions) -> Result<(Built, RunDir), RunError> {
+pub(super) fn prepare(spec: &PipelineSpec, opts: &RunOptions) -> Result<(Built, RunDir), RunError> {
     check_stage_option(spec, "--force", &opts.force)?;
     check_stage_option(spec, "--until", &opts.until)?;
     let built = build(spec)?;
@@ -507,12 +531,12 @@ pub fn run(
 }
 
 /// One invocation of the runner over a locked run folder: what every step of a stage needs.
-struct Session<'a> {
-    spec: &'a PipelineSpec,
-    opts: &'a RunOptions,
-    progress: &'a dyn Progress,
-    built: &'a Built,
-    run: &'a RunDir,
+pub(super) struct Session<'a> {
+    pub(super) spec: &'a PipelineSpec,
+    pub(super) opts: &'a RunOptions,
+    pub(super) progress: &'a dyn Progress,
+    pub(super) built: &'a Built,
+    pub(super) run: &'a RunDir,
 }
 
 fn run_locked(
@@ -577,6 +601,9 @@ fn run_locked(
         }
         let staging = run.staging(&def.id);
         let previous = manifest.stages.get(&def.id).cloned();
+        if opts.finalize && built.stages[i].shardable() {
+            super::sharded::check_slices(run, &def.id, &planned.fingerprint, previous.as_ref())?;
+        }
         let mut resuming = previous.as_ref().is_some_and(|p| {
             p.fingerprint == planned.fingerprint && planned.action == Action::Run(RunReason::Resume)
         });
@@ -606,7 +633,7 @@ impl Session<'_> {
     /// A stage killed during its commit: finishes moving its files into place, checks that every
     /// output has its recorded size, and records it finished. `None` when an output is missing or
     /// damaged (the stage must run again).
-    fn finish_commit(
+    pub(super) fn finish_commit(
         &self,
         manifest: &mut Manifest,
         staging: &Staging,
@@ -650,7 +677,7 @@ impl Session<'_> {
     /// Prepares the staging folder: a resumed stage keeps its finished shards, any other starts empty.
     /// Outputs of an earlier attempt are unpublished first (the manifest records the stage `running`,
     /// still listing them), then deleted, so a reader never sees a finished stage with files missing.
-    fn reset_staging(
+    pub(super) fn reset_staging(
         &self,
         manifest: &mut Manifest,
         staging: &Staging,
@@ -691,22 +718,25 @@ impl Session<'_> {
         i: usize,
         staging: Staging,
     ) -> Result<StageReport, RunError> {
-        let Session {
-            spec,
-            opts,
-            progress,
-            built,
-            run,
-        } = *self;
-        let def = &spec.stages[i];
-        let started = Instant::now();
-        let mut record = StageRecord {
+        let record = self.begin(manifest, planned, i)?;
+        self.run_and_commit(manifest, record, i, staging)
+    }
+
+    /// Records stage number `i` `running` with its fingerprint (a fresh record) and returns it.
+    pub(super) fn begin(
+        &self,
+        manifest: &mut Manifest,
+        planned: &PlannedStage,
+        i: usize,
+    ) -> Result<StageRecord, RunError> {
+        let def = &self.spec.stages[i];
+        let record = StageRecord {
             kind: def.kind.name.to_string(),
             status: StageStatus::Running,
             fingerprint: planned.fingerprint.clone(),
             params: Value::Object(def.params.clone()),
             inputs: def.inputs.clone(),
-            seed: spec.seed,
+            seed: self.spec.seed,
             annotrace_version: crate::VERSION.to_string(),
             started: Some(now()),
             finished: None,
@@ -717,19 +747,52 @@ impl Session<'_> {
             error: None,
         };
         manifest.stages.insert(def.id.clone(), record.clone());
-        manifest.save(run)?;
+        manifest.save(self.run)?;
+        Ok(record)
+    }
 
-        let ctx = StageContext {
-            run,
+    /// The context stage number `i` runs in; `slice` when this process computes one slice of it.
+    pub(super) fn context(
+        &self,
+        i: usize,
+        staging: Staging,
+        slice: Option<super::sharded::Slice>,
+    ) -> StageContext<'_> {
+        let def = &self.spec.stages[i];
+        StageContext {
+            run: self.run,
             stage_id: &def.id,
-            seed: spec.seed,
-            project_dir: &spec.project_dir,
-            staging: staging.clone(),
-            progress,
-            fault: opts.fault.as_ref(),
+            seed: self.spec.seed,
+            project_dir: &self.spec.project_dir,
+            staging,
+            progress: self.progress,
+            fault: self.opts.fault.as_ref(),
             shards_finished: AtomicUsize::new(0),
             shards_started: AtomicUsize::new(0),
-        };
+            slice,
+        }
+    }
+
+    /// Runs stage number `i` (recorded `running` as `record`) over its whole work list and commits its
+    /// outputs, recording each step in the manifest. A stage whose units were computed by shards only
+    /// computes what no slice owns and sums the shards' records here.
+    pub(super) fn run_and_commit(
+        &self,
+        manifest: &mut Manifest,
+        mut record: StageRecord,
+        i: usize,
+        staging: Staging,
+    ) -> Result<StageReport, RunError> {
+        let Session {
+            spec,
+            opts,
+            progress,
+            built,
+            run,
+        } = *self;
+        let def = &spec.stages[i];
+        let started = Instant::now();
+        let ctx = self.context(i, staging.clone(), None);
         progress.stage_started(&def.id, def.kind.name, None);
         let output = match built.stages[i].run(&ctx) {
             Ok(out) => out,

@@ -22,6 +22,16 @@ pub trait Stage: Send + Sync {
     /// Does the work: writes tables through `ctx.staging()` (committed by the runner) or files under
     /// `exports/` (listed in the output).
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError>;
+
+    /// Whether the stage can run as slices in separate processes (`annotrace run --shard i/n`): its
+    /// work is a deterministic list of units named `NNNNN…` (the leading number is the unit's index),
+    /// each written to its own files and recorded with [`StageContext::finish_shard`], and
+    /// [`StageContext::owns`] is asked before a unit is computed. The run without a slice (the commit)
+    /// finds every unit done, computes the units without a leading number and sums the records.
+    /// Default: no.
+    fn shardable(&self) -> bool {
+        false
+    }
 }
 
 /// What a finished stage reports.
@@ -290,6 +300,8 @@ pub struct StageContext<'a> {
     pub(crate) fault: Option<&'a FaultPlan>,
     pub(crate) shards_finished: AtomicUsize,
     pub(crate) shards_started: AtomicUsize,
+    /// The slice of the work this process computes (`--shard i/n`); `None`: all of it.
+    pub(crate) slice: Option<super::sharded::Slice>,
 }
 
 impl<'a> StageContext<'a> {
@@ -331,6 +343,19 @@ impl<'a> StageContext<'a> {
         sink.write(batch)?;
         let (_, n) = sink.commit()?;
         Ok(n as u64)
+    }
+
+    /// Whether this process computes the unit named `shard` (a [`Stage::shardable`] stage asks before
+    /// computing a unit): always, unless the process runs one slice of the stage (`--shard i/n`); then
+    /// only units whose leading number is `i` modulo `n`. A unit name without a leading number belongs
+    /// to no slice: the commit computes it.
+    pub fn owns(&self, shard: &str) -> bool {
+        self.slice.is_none_or(|s| s.owns(shard))
+    }
+
+    /// The slice this process computes, if it runs one (`--shard i/n`).
+    pub fn slice(&self) -> Option<super::sharded::Slice> {
+        self.slice
     }
 
     /// Progress reporting.

@@ -456,6 +456,19 @@ impl Staging {
     /// Removes staged files of shards that did not finish (a killed run's leftovers), so that they are
     /// written again from the start.
     pub fn discard_unfinished(&self) -> Result<usize, StoreError> {
+        let removed = self.discard_unfinished_where(|_| true)?;
+        // Spilled rows of a trace that was being read.
+        let _ = fs::remove_dir_all(self.scratch_dir());
+        Ok(removed)
+    }
+
+    /// Like [`Staging::discard_unfinished`], for the shards `owns` accepts only (a process computing
+    /// one slice of a stage while other processes write theirs): their unfinished files and the
+    /// temporary files of their killed writers are removed, every other file is left alone.
+    pub fn discard_unfinished_where(
+        &self,
+        owns: impl Fn(&str) -> bool,
+    ) -> Result<usize, StoreError> {
         let mut removed = 0;
         for (staged, _) in self.staged_files()? {
             let name = staged
@@ -466,13 +479,11 @@ impl Staging {
                 .strip_prefix(&format!("{}.", self.stage_id))
                 .and_then(|s| s.strip_suffix(".parquet"))
                 .unwrap_or_default();
-            if self.shard_record(shard)?.is_none() {
+            if owns(shard) && self.shard_record(shard)?.is_none() {
                 fs::remove_file(&staged).map_err(|e| StoreError::io(&staged, e))?;
                 removed += 1;
             }
         }
-        // Spilled rows of a trace that was being read.
-        let _ = fs::remove_dir_all(self.scratch_dir());
         // Temporary files of a killed writer.
         let mut stack = vec![self.dir.clone()];
         while let Some(dir) = stack.pop() {
@@ -481,14 +492,80 @@ impl Staging {
             };
             for entry in entries.flatten() {
                 let path = entry.path();
+                let name = entry.file_name().to_string_lossy().into_owned();
                 if path.is_dir() {
                     stack.push(path);
-                } else if is_temp_name(&entry.file_name().to_string_lossy()) {
+                } else if is_temp_name(&name) && owns(&self.shard_of_temp(&name)) {
                     let _ = fs::remove_file(&path);
                 }
             }
         }
         Ok(removed)
+    }
+
+    /// The shard a temporary file belongs to: `.<stage>.<shard>.parquet.<pid>-<n>.tmp` (a table file)
+    /// or `.<shard>.json.<pid>-<n>.tmp` (a shard record); empty when it is neither.
+    fn shard_of_temp(&self, name: &str) -> String {
+        let target = name
+            .strip_prefix('.')
+            .and_then(|n| n.strip_suffix(".tmp"))
+            .and_then(|n| n.rsplit_once('.'))
+            .map_or("", |(target, _)| target);
+        target
+            .strip_prefix(&format!("{}.", self.stage_id))
+            .and_then(|s| s.strip_suffix(".parquet"))
+            .or_else(|| target.strip_suffix(".json"))
+            .unwrap_or_default()
+            .to_string()
+    }
+
+    fn slices_dir(&self) -> PathBuf {
+        self.dir.join("_slices")
+    }
+
+    /// Records that slice `index` of `count` of the stage with `fingerprint` is done (every unit it
+    /// owns has its record): `_slices/<index>-of-<count>.json`.
+    pub fn mark_slice(
+        &self,
+        index: usize,
+        count: usize,
+        fingerprint: &str,
+    ) -> Result<(), StoreError> {
+        let path = self.slices_dir().join(format!("{index}-of-{count}.json"));
+        let record =
+            serde_json::json!({"index": index, "count": count, "fingerprint": fingerprint});
+        write_atomic(&path, record.to_string().as_bytes())
+            .map(|_| ())
+            .map_err(|e| StoreError::io(&path, e))
+    }
+
+    /// The slices recorded done for `fingerprint`, as (index, count), sorted.
+    pub fn slices_done(&self, fingerprint: &str) -> Result<Vec<(usize, usize)>, StoreError> {
+        let dir = self.slices_dir();
+        let entries = match fs::read_dir(&dir) {
+            Ok(e) => e,
+            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(Vec::new()),
+            Err(e) => return Err(StoreError::io(&dir, e)),
+        };
+        let mut out = Vec::new();
+        for entry in entries {
+            let entry = entry.map_err(|e| StoreError::io(&dir, e))?;
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if name.starts_with('.') || !name.ends_with(".json") {
+                continue;
+            }
+            let path = entry.path();
+            let bytes = fs::read(&path).map_err(|e| StoreError::io(&path, e))?;
+            let v: serde_json::Value = serde_json::from_slice(&bytes)
+                .map_err(|source| StoreError::Json { path, source })?;
+            if v["fingerprint"].as_str() == Some(fingerprint)
+                && let (Some(i), Some(n)) = (v["index"].as_u64(), v["count"].as_u64())
+            {
+                out.push((i as usize, n as usize));
+            }
+        }
+        out.sort();
+        Ok(out)
     }
 
     /// Moves every staged file into the run's table folders, one rename (and folder sync) at a time,
@@ -547,4 +624,57 @@ pub fn remove_files(files: &[PathBuf]) -> Result<(), StoreError> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_slice_discards_only_its_own_unfinished_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let run = RunDir::new(dir.path());
+        let staging = run.staging("sim");
+        let part = |unit: &str| {
+            staging
+                .dir
+                .join("traces/env=pooltool")
+                .join(shard_file_name("sim", unit))
+        };
+        let temp = |unit: &str| {
+            staging
+                .dir
+                .join("frames/env=pooltool")
+                .join(format!(".sim.{unit}.parquet.4242-0.tmp"))
+        };
+        for unit in ["00000", "00001", "00002", "00003"] {
+            for p in [part(unit), temp(unit)] {
+                fs::create_dir_all(p.parent().unwrap()).unwrap();
+                fs::write(&p, b"x").unwrap();
+            }
+        }
+        staging.mark_done("00001", &serde_json::json!({})).unwrap();
+        // Slice 1 of 2 owns units 1 and 3: 3 is unfinished, 1 is done.
+        let owns = |u: &str| u.parse::<u64>().is_ok_and(|n| n % 2 == 1);
+        assert_eq!(staging.discard_unfinished_where(owns).unwrap(), 1);
+        assert!(part("00000").exists() && part("00001").exists() && part("00002").exists());
+        assert!(!part("00003").exists());
+        assert!(temp("00000").exists() && temp("00002").exists());
+        assert!(!temp("00001").exists() && !temp("00003").exists());
+        assert_eq!(staging.shard_of_temp(".00007.json.1-2.tmp"), "00007");
+        assert_eq!(staging.shard_of_temp(".sim.00007.parquet.1-2.tmp"), "00007");
+        assert_eq!(staging.shard_of_temp(".other.tmp"), "");
+    }
+
+    #[test]
+    fn slices_are_recorded_per_fingerprint() {
+        let dir = tempfile::tempdir().unwrap();
+        let staging = RunDir::new(dir.path()).staging("sim");
+        staging.mark_slice(1, 3, "aaa").unwrap();
+        staging.mark_slice(0, 3, "aaa").unwrap();
+        staging.mark_slice(2, 3, "bbb").unwrap();
+        assert_eq!(staging.slices_done("aaa").unwrap(), vec![(0, 3), (1, 3)]);
+        assert_eq!(staging.slices_done("bbb").unwrap(), vec![(2, 3)]);
+        assert!(staging.slices_done("ccc").unwrap().is_empty());
+    }
 }

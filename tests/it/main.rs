@@ -25,6 +25,7 @@ mod report;
 mod reward;
 mod run;
 mod sandbox;
+mod shard;
 mod simulate;
 mod snapshots_cli;
 mod sql_guard;

@@ -209,12 +209,19 @@ impl Stage for AccuracyStage {
         }))
     }
 
+    /// Its units are the trace file sets, named by index, each recording its label counts; the
+    /// `accuracy` table is summed from them at the commit.
+    fn shardable(&self) -> bool {
+        true
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
         let lib = &self.setup.library;
         let sets = trace_file_sets(ctx.run(), self.setup.env)?;
         ctx.progress().set_total(ctx.stage_id(), sets.len() as u64);
         let mut pool: Option<WorkerPool> = None;
-        let mut stored = if self.use_annotations {
+        // A run without annotations is an error even when it has no traces to score.
+        let mut stored = if self.use_annotations && sets.is_empty() {
             Some(stored_annotations(ctx, self.setup.env, lib)?)
         } else {
             None
@@ -224,63 +231,30 @@ impl Stage for AccuracyStage {
         let mut misses: Vec<Miss> = Vec::new();
         let mut n_traces = 0usize;
         let mut unscored = 0usize;
-        for set in &sets {
-            let traces = read_traces(ctx.run(), set)?;
-            let anns = match stored.as_mut() {
-                Some(all) => traces
-                    .iter()
-                    .flat_map(|t| all.remove(&t.trace_id).unwrap_or_default())
-                    .collect(),
+        for (i, set) in sets.iter().enumerate() {
+            let unit = format!("{i:05}");
+            if !ctx.owns(&unit) {
+                // Another process's slice (`--shard`): its record is summed at the commit.
+                continue;
+            }
+            let record = match ctx.finished_shard(&unit)? {
+                Some(r) => r,
                 None => {
-                    if pool.is_none() {
-                        pool = Some(self.setup.pool()?);
+                    if self.use_annotations && stored.is_none() {
+                        stored = Some(stored_annotations(ctx, self.setup.env, lib)?);
                     }
-                    let pool = pool.as_ref().expect("just started");
-                    let batch = if self.hide_events {
-                        let blind: Vec<Trace> = traces
-                            .iter()
-                            .map(|t| Trace {
-                                events: Vec::new(),
-                                ..t.clone()
-                            })
-                            .collect();
-                        pool.run(&lib.detectors, &blind)
-                    } else {
-                        pool.run(&lib.detectors, &traces)
-                    };
-                    for (k, v) in status_counts(&batch) {
-                        *statuses.entry(k).or_default() += v;
-                    }
-                    annotations_of(lib, &traces, &batch)
+                    let r = self.score_set(ctx, set, stored.as_mut(), &mut pool)?;
+                    ctx.finish_shard(&unit, &r)?;
+                    r
                 }
             };
-            for trace in &traces {
-                if !scorable(self.setup.env, trace) {
-                    unscored += 1;
-                    continue;
-                }
-                let mine: Vec<&Annotation> = anns
-                    .iter()
-                    .filter(|a| a.trace_id == trace.trace_id)
-                    .collect();
-                let truth = truth(self.setup.env, trace, self.merge);
-                let found = score_trace_listing(
-                    &trace.trace_id,
-                    grounded(self.setup.env),
-                    &truth,
-                    &mine,
-                    self.tolerance,
-                    &mut scores,
-                );
-                for m in found {
-                    let listed = misses.iter().filter(|x| x.label == m.label).count() as u64;
-                    if listed < self.list {
-                        misses.push(m);
-                    }
-                }
-            }
-            n_traces += traces.len();
+            add_unit(&record, &mut scores, &mut statuses, &mut misses, self.list)?;
+            n_traces += record["traces"].as_u64().unwrap_or(0) as usize;
+            unscored += record["unscored"].as_u64().unwrap_or(0) as usize;
             ctx.progress().advance(ctx.stage_id(), 1);
+        }
+        if ctx.slice().is_some() {
+            return Ok(StageOutput::default());
         }
         let ordered: Vec<LabelScore> = grounded(self.setup.env)
             .iter()
@@ -330,6 +304,135 @@ impl Stage for AccuracyStage {
             ),
         })
     }
+}
+
+impl AccuracyStage {
+    /// Scores the traces of one file set: its unit record (label counts, call statuses, the first
+    /// `list` misses per label, traces scored and not).
+    fn score_set(
+        &self,
+        ctx: &StageContext<'_>,
+        set: &super::trace_files::TraceFileSet,
+        stored: Option<&mut std::collections::HashMap<String, Vec<Annotation>>>,
+        pool: &mut Option<WorkerPool>,
+    ) -> Result<Value, StageError> {
+        let lib = &self.setup.library;
+        let traces = read_traces(ctx.run(), set)?;
+        let mut statuses: BTreeMap<String, u64> = BTreeMap::new();
+        let anns = match stored {
+            Some(all) => traces
+                .iter()
+                .flat_map(|t| all.remove(&t.trace_id).unwrap_or_default())
+                .collect(),
+            None => {
+                if pool.is_none() {
+                    *pool = Some(self.setup.pool()?);
+                }
+                let pool = pool.as_ref().expect("just started");
+                let batch = if self.hide_events {
+                    let blind: Vec<Trace> = traces
+                        .iter()
+                        .map(|t| Trace {
+                            events: Vec::new(),
+                            ..t.clone()
+                        })
+                        .collect();
+                    pool.run(&lib.detectors, &blind)
+                } else {
+                    pool.run(&lib.detectors, &traces)
+                };
+                for (k, v) in status_counts(&batch) {
+                    *statuses.entry(k).or_default() += v;
+                }
+                annotations_of(lib, &traces, &batch)
+            }
+        };
+        let mut scores: BTreeMap<String, LabelScore> = BTreeMap::new();
+        let mut misses: Vec<Miss> = Vec::new();
+        let mut unscored = 0u64;
+        for trace in &traces {
+            if !scorable(self.setup.env, trace) {
+                unscored += 1;
+                continue;
+            }
+            let mine: Vec<&Annotation> = anns
+                .iter()
+                .filter(|a| a.trace_id == trace.trace_id)
+                .collect();
+            let truth = truth(self.setup.env, trace, self.merge);
+            let found = score_trace_listing(
+                &trace.trace_id,
+                grounded(self.setup.env),
+                &truth,
+                &mine,
+                self.tolerance,
+                &mut scores,
+            );
+            for m in found {
+                let listed = misses.iter().filter(|x| x.label == m.label).count() as u64;
+                if listed < self.list {
+                    misses.push(m);
+                }
+            }
+        }
+        let counts: Vec<Value> = scores
+            .values()
+            .map(|s| {
+                json!([
+                    s.label,
+                    s.events,
+                    s.detections,
+                    s.true_positives,
+                    s.false_positives,
+                    s.false_negatives
+                ])
+            })
+            .collect();
+        Ok(json!({
+            "traces": traces.len(),
+            "unscored": unscored,
+            "scores": counts,
+            "statuses": statuses,
+            "misses": misses,
+        }))
+    }
+}
+
+/// Adds one unit's record (of [`AccuracyStage::score_set`]) to the stage's sums; misses stay in unit
+/// order, at most `list` per label, as one pass over every trace would list them.
+fn add_unit(
+    record: &Value,
+    scores: &mut BTreeMap<String, LabelScore>,
+    statuses: &mut BTreeMap<String, u64>,
+    misses: &mut Vec<Miss>,
+    list: u64,
+) -> Result<(), StageError> {
+    let bad = || StageError::Internal(format!("an accuracy unit record is malformed: {record}"));
+    for c in record["scores"].as_array().ok_or_else(bad)? {
+        let n = |k: usize| c[k].as_u64().ok_or_else(bad);
+        let label = c[0].as_str().ok_or_else(bad)?.to_string();
+        let s = scores.entry(label.clone()).or_insert_with(|| LabelScore {
+            label,
+            ..LabelScore::default()
+        });
+        s.events += n(1)?;
+        s.detections += n(2)?;
+        s.true_positives += n(3)?;
+        s.false_positives += n(4)?;
+        s.false_negatives += n(5)?;
+    }
+    for (k, v) in record["statuses"].as_object().into_iter().flatten() {
+        *statuses.entry(k.clone()).or_default() += v.as_u64().unwrap_or(0);
+    }
+    let unit_misses: Vec<Miss> =
+        serde_json::from_value(record["misses"].clone()).map_err(|_| bad())?;
+    for m in unit_misses {
+        let listed = misses.iter().filter(|x| x.label == m.label).count() as u64;
+        if listed < list {
+            misses.push(m);
+        }
+    }
+    Ok(())
 }
 
 /// The run's `annotations` rows of `env` written by `lib`'s detectors, by trace.

@@ -116,6 +116,12 @@ impl Stage for AnnotateStage {
         }))
     }
 
+    /// Its units are the trace file sets, named by index; the `detectors` table is written at the
+    /// commit.
+    fn shardable(&self) -> bool {
+        true
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
         let lib = &self.setup.library;
         let env = self.setup.env;
@@ -125,6 +131,10 @@ impl Stage for AnnotateStage {
         let mut records = Vec::new();
         for (i, set) in sets.iter().enumerate() {
             let shard = format!("{i:05}");
+            if !ctx.owns(&shard) {
+                // Another process's slice (`--shard`): its record is summed at the commit.
+                continue;
+            }
             if let Some(r) = ctx.finished_shard(&shard)? {
                 records.push(r);
                 ctx.progress().advance(ctx.stage_id(), 1);
@@ -171,7 +181,7 @@ impl Stage for AnnotateStage {
             records.push(record);
             ctx.progress().advance(ctx.stage_id(), 1);
         }
-        if ctx.finished_shard("detectors")?.is_none() {
+        if ctx.owns("detectors") && ctx.finished_shard("detectors")?.is_none() {
             // An ensemble library also lists one pseudo-detector per ensemble label, the id its
             // annotations carry.
             let mut dets = lib.detectors.clone();

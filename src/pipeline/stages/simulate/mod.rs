@@ -248,6 +248,11 @@ impl Stage for SimulateStage {
         self.sim.fingerprint_extra()
     }
 
+    /// Its units are the shards of `scenes_per_shard` items, named by index.
+    fn shardable(&self) -> bool {
+        true
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
         let sim = &self.sim;
         let total = sim.items();

@@ -1,0 +1,340 @@
+//! Sharded runs: a pipeline computed by separate `annotrace run --shard i/n` processes over one run
+//! folder, one of them killed and rerun, then `--finalize`, gives the tables of the single-process run.
+
+use std::os::unix::fs::MetadataExt;
+use std::path::Path;
+use std::process::{Child, Stdio};
+
+use crate::common::{Ran, TestRun};
+
+/// simulate (12 scenes in 6 units of 2) → annotate, accuracy → SQL.
+const PIPELINE: &str = r#"[pipeline]
+name = "p"
+seed = 5
+
+[[stage]]
+id = "sim"
+kind = "simulate"
+env = "pooltool"
+scenes = 12
+shots = 1
+scenes_per_shard = 2
+
+[[stage]]
+id = "ann"
+kind = "annotate"
+env = "pooltool"
+inputs = ["sim"]
+
+[[stage]]
+id = "acc"
+kind = "accuracy"
+env = "pooltool"
+inputs = ["sim"]
+
+[[stage]]
+id = "counts"
+kind = "sql"
+inputs = ["ann"]
+sql = "SELECT detector_id, count(*) AS n, sum(end_step - start_step) AS steps FROM annotations GROUP BY detector_id ORDER BY detector_id"
+"#;
+
+fn spawn(t: &TestRun, args: &[&str], env: &[(&str, &str)]) -> Child {
+    let mut c = t.cmd();
+    for (k, v) in env {
+        c.env(k, v);
+    }
+    c.args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("annotrace starts")
+}
+
+fn wait(child: Child) -> Ran {
+    child.wait_with_output().expect("annotrace ends").into()
+}
+
+/// Every published file of a run (relative path → bytes), from its manifest.
+fn published(run: &Path) -> Vec<(String, Vec<u8>)> {
+    let m = crate::common::read_json(&run.join("manifest.json"));
+    let mut out = Vec::new();
+    for (_, stage) in m["stages"].as_object().unwrap() {
+        assert_eq!(stage["status"], "finished", "{stage}");
+        for o in stage["outputs"].as_array().unwrap() {
+            let p = o["path"].as_str().unwrap().to_string();
+            out.push((p.clone(), std::fs::read(run.join(&p)).unwrap()));
+        }
+    }
+    out.sort();
+    out
+}
+
+/// CSV with its rows sorted (the header first).
+fn sorted(csv: String) -> String {
+    let mut lines: Vec<&str> = csv.lines().collect();
+    lines[1..].sort_unstable();
+    lines.join("\n")
+}
+
+/// The run's tables as `annotrace tables` prints them (names, row counts, schemas) and every table's
+/// rows as sorted CSV (`detector_calls` without its timing columns, which differ between any two runs).
+fn tables_and_rows(t: &TestRun, run: &str) -> (String, Vec<String>) {
+    let tables = t.run(&["tables", "--run", run]);
+    tables.ok();
+    let mut rows = Vec::new();
+    for name in [
+        "scenes",
+        "traces",
+        "timesteps",
+        "frames",
+        "events",
+        "detectors",
+        "annotations",
+        "accuracy",
+        "counts",
+    ] {
+        rows.push(sorted(t.csv(run, &format!("SELECT * FROM {name}"))));
+    }
+    rows.push(sorted(t.csv(
+        run,
+        "SELECT detector_id, trace_id, label, status, error, error_line, n_patterns FROM detector_calls",
+    )));
+    (tables.stdout.clone(), rows)
+}
+
+#[test]
+fn three_shard_processes_one_killed_then_finalize_equal_the_single_process_run() {
+    let t = TestRun::new();
+    t.write("pipelines/p.toml", PIPELINE);
+    t.run(&["run", "pipelines/p.toml", "--run-dir", "runs/single"])
+        .ok();
+
+    // Shard 1 owns units 1 and 4 of `sim`; it is killed half-way through the second (one thread, so
+    // the order is fixed): unit 1 is finished, unit 4 is half written.
+    let killed = t.run_env(
+        &[
+            "run",
+            "pipelines/p.toml",
+            "--run-dir",
+            "runs/sharded",
+            "--shard",
+            "1/3",
+        ],
+        &[
+            ("ANNOTRACE_FAULT", "sim:mid-shard=1"),
+            ("RAYON_NUM_THREADS", "1"),
+        ],
+    );
+    assert_ne!(killed.code, Some(0), "the fault kills the shard");
+    let staged = t.path("runs/sharded/.staging/sim");
+    assert!(staged.join("_done/00001.json").exists());
+    assert!(!staged.join("_done/00004.json").exists());
+    let half_written = t
+        .files("runs/sharded/.staging/sim")
+        .into_iter()
+        .filter(|f| f.contains(".sim.00004.parquet.") && f.ends_with(".tmp"))
+        .count();
+    assert!(half_written > 0, "unit 4 is half written");
+    let kept = staged.join("traces/env=pooltool/sim.00001.parquet");
+    let kept_inode = std::fs::metadata(&kept).unwrap().ino();
+    // Nothing is published before every slice is done.
+    t.run(&["tables", "--run", "runs/sharded"])
+        .ok()
+        .stdout_has("traces: 0 rows in 0 file(s)");
+    t.run(&[
+        "run",
+        "pipelines/p.toml",
+        "--run-dir",
+        "runs/sharded",
+        "--finalize",
+    ])
+    .code(1)
+    .stderr_has("stage sim: no slice is finished");
+
+    // The three shards as separate processes (shard 1 rerun), then the finalisation.
+    let args = |i: &'static str| {
+        [
+            "run",
+            "pipelines/p.toml",
+            "--run-dir",
+            "runs/sharded",
+            "--shard",
+            i,
+        ]
+    };
+    let children = [
+        spawn(&t, &args("1/3"), &[]),
+        spawn(&t, &args("0/3"), &[]),
+        spawn(&t, &args("2/3"), &[]),
+    ];
+    let ran: Vec<Ran> = children.into_iter().map(wait).collect();
+    for r in &ran {
+        r.ok();
+    }
+    // The unit finished before the kill was kept, not computed again: the same file was moved into place.
+    let published_unit = t.path("runs/sharded/traces/env=pooltool/sim.00001.parquet");
+    assert_eq!(
+        std::fs::metadata(&published_unit).unwrap().ino(),
+        kept_inode
+    );
+    // The SQL stage is left to --finalize.
+    assert!(!t.path("runs/sharded/counts").exists());
+    t.run(&[
+        "run",
+        "pipelines/p.toml",
+        "--run-dir",
+        "runs/sharded",
+        "--finalize",
+    ])
+    .ok()
+    .stderr_has("[counts] done");
+
+    assert_eq!(
+        tables_and_rows(&t, "runs/sharded"),
+        tables_and_rows(&t, "runs/single")
+    );
+    // Every published file is byte-identical, except detector_calls (wall and CPU seconds).
+    let strip = |v: Vec<(String, Vec<u8>)>| -> Vec<(String, Vec<u8>)> {
+        v.into_iter()
+            .filter(|(p, _)| !p.starts_with("detector_calls/"))
+            .collect()
+    };
+    let (a, b) = (
+        strip(published(&t.path("runs/sharded"))),
+        strip(published(&t.path("runs/single"))),
+    );
+    assert_eq!(
+        a.iter().map(|(p, _)| p).collect::<Vec<_>>(),
+        b.iter().map(|(p, _)| p).collect::<Vec<_>>()
+    );
+    for ((p, x), (_, y)) in a.iter().zip(&b) {
+        assert!(x == y, "{p} differs from the single-process run");
+    }
+    // The summaries summed from the slices' records are the single process's.
+    let summary = |run: &str, stage: &str| {
+        crate::common::read_json(&t.path(run).join("manifest.json"))["stages"][stage]["summary"]
+            .clone()
+    };
+    for stage in ["sim", "acc"] {
+        assert_eq!(
+            summary("runs/sharded", stage),
+            summary("runs/single", stage)
+        );
+    }
+    t.run(&["verify", "--run", "runs/sharded"]).ok();
+    // Nothing of the protocol is left but the locks.
+    assert!(!t.path("runs/sharded/.staging").exists());
+}
+
+#[test]
+fn shards_resume_wait_for_missing_slices_and_take_over_absent_ones() {
+    let t = TestRun::new();
+    t.write("pipelines/p.toml", PIPELINE);
+    let run = |extra: &[&str]| {
+        let mut a = vec!["run", "pipelines/p.toml", "--run-dir", "runs/r"];
+        a.extend_from_slice(extra);
+        t.run(&a)
+    };
+    // One slice of `sim` only: nothing is committed and --finalize names the missing slice.
+    run(&["--shard", "0/2", "--until", "sim"])
+        .ok()
+        .stderr_has("(shard 0/2)");
+    run(&["--finalize"])
+        .code(1)
+        .stderr_has("stage sim: slice(s) 1/2 not finished");
+    // Two processes with the same index at once: the second waits for the first, then finds its own
+    // slice done.
+    let twice = |_| {
+        spawn(
+            &t,
+            &[
+                "run",
+                "pipelines/p.toml",
+                "--run-dir",
+                "runs/r",
+                "--shard",
+                "0/2",
+                "--until",
+                "sim",
+            ],
+            &[],
+        )
+    };
+    let duplicates: Vec<Child> = (0..2).map(twice).collect();
+    for child in duplicates {
+        wait(child).ok();
+    }
+    // A shard that needs `sim` while slice 1/2 has no process computes that slice itself, commits
+    // `sim`, does the same for `ann` (which `acc` waits for, being after it in the run order), and
+    // computes its slice of `acc`, the last shardable stage, whose other slice it leaves: no one
+    // waits for it.
+    run(&["--shard", "0/2"])
+        .ok()
+        .stderr_has("[sim] shard 0/2: slice 1/2 has no running process; computing it here")
+        .stderr_has("[sim] done: 12 pool trace(s)")
+        .stderr_has("[ann] shard 0/2: slice 1/2 has no running process; computing it here");
+    run(&["--finalize"])
+        .code(1)
+        .stderr_has("stage acc: slice(s) 1/2 not finished");
+    // `--shard auto` from a Slurm array numbered 1..2: task 2 is slice 1/2.
+    t.run_env(
+        &[
+            "run",
+            "pipelines/p.toml",
+            "--run-dir",
+            "runs/r",
+            "--shard",
+            "auto",
+        ],
+        &[
+            ("SLURM_ARRAY_TASK_ID", "2"),
+            ("SLURM_ARRAY_TASK_MIN", "1"),
+            ("SLURM_ARRAY_TASK_COUNT", "2"),
+        ],
+    )
+    .ok()
+    .stderr_has("(shard 1/2)")
+    .stderr_has("[acc] done");
+    run(&["--finalize"]).ok().stderr_has("[counts] done");
+    assert_eq!(
+        t.csv("runs/r", "SELECT count(*) AS n FROM traces"),
+        "n\n12\n"
+    );
+}
+
+#[test]
+fn shard_options_are_checked() {
+    let t = TestRun::new();
+    t.write("pipelines/p.toml", PIPELINE);
+    for (shard, message) in [
+        (
+            "3/3",
+            "--shard: shard index 3 is out of range for 3 shard(s)",
+        ),
+        ("0/0", "the shard count must be at least 1"),
+        ("one", "bad shard \"one\": expected i/n"),
+        ("auto", "--shard auto: none of SLURM_ARRAY_TASK_ID"),
+    ] {
+        t.run(&["run", "pipelines/p.toml", "--shard", shard])
+            .code(2)
+            .stderr_has(message);
+    }
+    t.run_env(
+        &["run", "pipelines/p.toml", "--shard", "auto"],
+        &[("JOB_COMPLETION_INDEX", "4")],
+    )
+    .code(2)
+    .stderr_has("ANNOTRACE_SHARD_COUNT");
+    t.run_env(
+        &["run", "pipelines/p.toml", "--shard", "auto"],
+        &[
+            ("JOB_COMPLETION_INDEX", "4"),
+            ("ANNOTRACE_SHARD_COUNT", "4"),
+        ],
+    )
+    .code(2)
+    .stderr_has("--shard auto (JOB_COMPLETION_INDEX): shard index 4 is out of range for 4");
+    t.run(&["run", "pipelines/p.toml", "--shard", "0/2", "--finalize"])
+        .code(2);
+}
