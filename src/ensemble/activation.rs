@@ -149,8 +149,17 @@ impl LabelEnsemble {
             items.iter().map(|(_, a)| centroid(trace, a)).collect();
         let n = items.len();
         let mut parent: Vec<usize> = (0..n).collect();
-        for i in 0..n {
-            for j in i + 1..n {
+        // Pairs are tested in order of start step, and a pattern stops looking once the others start
+        // more than ε_t after it ends: no later one can be linked to it. The linked pairs, and so the
+        // components (each rooted at its smallest index, `union`), are those of testing every pair.
+        let mut by_start: Vec<usize> = (0..n).collect();
+        by_start.sort_by_key(|&i| items[i].1.start_step);
+        for (p, &i) in by_start.iter().enumerate() {
+            let reach = items[i].1.end_step as f64 + self.eps_t;
+            for &j in &by_start[p + 1..] {
+                if items[j].1.start_step as f64 > reach {
+                    break;
+                }
                 let (a, b) = (items[i].1, items[j].1);
                 if items[i].0 != items[j].0
                     && linked(a, b, centres[i], centres[j], self.eps_s * scale, self.eps_t)
@@ -513,6 +522,31 @@ mod tests {
         };
         assert_eq!(summary(&now.annotate_trace(&t, &refs)).len(), 2);
         assert_eq!(summary(&now.annotate_trace(&t, &refs))[0].2, 0.6);
+    }
+
+    #[test]
+    fn a_long_pattern_links_to_later_short_ones_whatever_their_order() {
+        // A@2-16 on the cue ball spans B@14 and C@15 (also the cue ball); given out of start order,
+        // with a short A@3 in between that ends long before them. The sweep by start step must still
+        // link A@2-16 with B@14 and C@15 (one cluster: 0.6 + 0.3 + 0.1 = 1.0), as testing every pair does.
+        let t = trace();
+        let ds = members(0.5, 10.0, 0.0);
+        let ids: Vec<String> = ds.iter().map(|d| d.id.to_string()).collect();
+        let e = &LabelEnsemble::of_detectors(&ds)[0];
+        let anns = [
+            ann(&ds[2], &t, 0, 15, 15, &["cue"]),
+            ann(&ds[0], &t, 0, 3, 3, &["2"]),
+            ann(&ds[1], &t, 0, 14, 14, &["cue"]),
+            ann(&ds[0], &t, 1, 2, 16, &["cue"]),
+        ];
+        let refs: Vec<&Annotation> = anns.iter().collect();
+        assert_eq!(
+            summary(&e.annotate_trace(&t, &refs)),
+            vec![
+                (2, 16, 1.0, ids.clone()),
+                (3, 3, 0.6, vec![ids[0].clone()]),
+            ]
+        );
     }
 
     #[test]
