@@ -1,6 +1,6 @@
 //! [`World`]: one I-PHYRE game in the physics engine that [`PhysicsParams::engine`] selects: Box2D with
-//! Chipmunk's semantics (`box2d_world.rs`) or rapier2d (`rapier_world.rs`). Both speak in the game's
-//! object indices.
+//! Chipmunk's semantics (`box2d_world.rs`), the Chipmunk-faithful step (`chipmunk_world.rs`) or rapier2d
+//! (`rapier_world.rs`). All speak in the game's object indices.
 //!
 //! **Owns:** the engine choice, the game objects as loaded, and the object states reported outward
 //! ([`ObjectState`]: ends rotated with the body) and the contact changes ([`ContactChange`]).
@@ -8,6 +8,7 @@
 //! judge success (`success.rs`) or build traces (`to_trace.rs`).
 
 use super::box2d_world::Box2dWorld;
+use super::chipmunk_world::ChipmunkWorld;
 use super::error::Result;
 use super::game::{Game, GameObject};
 use super::params::{Engine, PhysicsParams};
@@ -59,6 +60,7 @@ pub struct World {
 #[derive(Debug)]
 enum Backend {
     Box2d(Box2dWorld),
+    Chipmunk(ChipmunkWorld),
     Rapier(Box<RapierWorld>),
 }
 
@@ -67,6 +69,7 @@ macro_rules! dispatch {
     ($self:expr, $w:ident => $e:expr) => {
         match $self {
             Backend::Box2d($w) => $e,
+            Backend::Chipmunk($w) => $e,
             Backend::Rapier($w) => $e,
         }
     };
@@ -88,6 +91,7 @@ impl World {
         params.validate()?;
         let backend = match params.engine {
             Engine::Box2d => Backend::Box2d(Box2dWorld::new(game, params)?),
+            Engine::Chipmunk => Backend::Chipmunk(ChipmunkWorld::new(game, params)?),
             Engine::Rapier => Backend::Rapier(Box::new(RapierWorld::new(game, params)?)),
         };
         Ok(World {
@@ -159,8 +163,8 @@ mod tests {
     use crate::envs::iphyre::game::ObjectKind;
 
     /// The default parameters on each engine.
-    fn engines() -> [PhysicsParams; 2] {
-        [Engine::Rapier, Engine::Box2d].map(|engine| PhysicsParams {
+    fn engines() -> [PhysicsParams; 3] {
+        [Engine::Rapier, Engine::Box2d, Engine::Chipmunk].map(|engine| PhysicsParams {
             engine,
             ..PhysicsParams::default()
         })
