@@ -120,22 +120,6 @@ impl Arbiter {
         }
     }
 
-    /// Debug view: bodies, normal, (point on a, separation, hash, jn_acc) per contact.
-    pub(crate) fn debug(&self, bodies: &[Body]) -> String {
-        let pa = bodies[self.body_a].p;
-        let pb = bodies[self.body_b].p;
-        let cs: Vec<String> = self
-            .contacts
-            .iter()
-            .map(|c| {
-                let p1 = pa + c.r1;
-                let d = (pb + c.r2 - p1).dot(self.n);
-                format!("({:.4},{:.4},{:.5},h{},j{:.6})", p1.x, p1.y, d, c.hash % 1000, c.jn_acc)
-            })
-            .collect();
-        format!("{}-{} {:?} n=({:.6},{:.6}) {}", self.body_a, self.body_b, self.state, self.n.x, self.n.y, cs.join(" "))
-    }
-
     /// Effective masses, the bias velocity that removes the overlap beyond `slop` (fraction `bias` of it
     /// this step) and the bounce target, from the velocities before gravity is added.
     pub(crate) fn pre_step(&mut self, bodies: &[Body], dt: f64, slop: f64, bias: f64) {

@@ -160,8 +160,7 @@ impl Space {
         self.stamp += 1;
         let prev_dt = self.prev_dt;
         self.prev_dt = dt;
-        for (s, arb_key) in self.active.drain(..).enumerate() {
-            let _ = s;
+        for arb_key in self.active.drain(..) {
             if let Some(arb) = self.arbiters.get_mut(&arb_key) {
                 arb.state = ArbiterState::Normal;
             }
@@ -197,12 +196,6 @@ impl Space {
             ticks < persistence
         });
 
-        if std::env::var_os("CHIPMUNK_DEBUG").is_some() {
-            for key in &self.active {
-                let arb = &self.arbiters[key];
-                eprintln!("{} {:?}", self.stamp, arb.debug(&self.bodies));
-            }
-        }
         // 3. Pre-step.
         let slop = self.collision_slop;
         let bias = 1.0 - self.collision_bias.powf(dt);

@@ -216,6 +216,24 @@ mod tests {
     }
 
     #[test]
+    fn chipmunk_free_fall_moves_positions_first_like_the_original() {
+        // pymunk moves positions with the previous step's velocity: y_k = y_0 + g·dt²·k(k−1)/2, to the
+        // last bits (the recorded original matches this to 1e-12 px).
+        let params = PhysicsParams {
+            engine: Engine::Chipmunk,
+            ..PhysicsParams::default()
+        };
+        let mut world = World::new(&one_ball(300.0, 50.0), &params).unwrap();
+        let dt = params.dt();
+        for k in 1..=120u32 {
+            world.step();
+            let y = world.state(0).unwrap().centre[1];
+            let exact = 50.0 + params.gravity * dt * dt * f64::from(k * (k - 1)) / 2.0;
+            assert!((y - exact).abs() < 1e-9, "step {k}: y = {y}, exact {exact}");
+        }
+    }
+
+    #[test]
     fn ball_rests_on_a_static_block() {
         let games = Games::default_games().unwrap();
         for params in engines() {
