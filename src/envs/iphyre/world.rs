@@ -60,7 +60,7 @@ pub struct World {
 #[derive(Debug)]
 enum Backend {
     Box2d(Box2dWorld),
-    Chipmunk(ChipmunkWorld),
+    Chipmunk(Box<ChipmunkWorld>),
     Rapier(Box<RapierWorld>),
 }
 
@@ -91,7 +91,7 @@ impl World {
         params.validate()?;
         let backend = match params.engine {
             Engine::Box2d => Backend::Box2d(Box2dWorld::new(game, params)?),
-            Engine::Chipmunk => Backend::Chipmunk(ChipmunkWorld::new(game, params)?),
+            Engine::Chipmunk => Backend::Chipmunk(Box::new(ChipmunkWorld::new(game, params)?)),
             Engine::Rapier => Backend::Rapier(Box::new(RapierWorld::new(game, params)?)),
         };
         Ok(World {
