@@ -77,13 +77,15 @@ fn iphyre_params(sets: &[(String, String)]) -> Result<iphyre::PhysicsParams, Str
             "friction" => p.friction = parse(k, v)?,
             "restitution" => p.restitution = parse(k, v)?,
             "engine" => {
-                p.engine = iphyre::Engine::from_name(v)
-                    .ok_or_else(|| format!("--set engine={v}: expected box2d or rapier"))?
+                p.engine = iphyre::Engine::from_name(v).ok_or_else(|| {
+                    format!("--set engine={v}: expected box2d, chipmunk or rapier")
+                })?
             }
             "box2d_pixels_per_metre" => p.box2d_pixels_per_metre = parse(k, v)?,
             "box2d_velocity_iterations" => p.box2d_velocity_iterations = parse(k, v)?,
             "box2d_position_iterations" => p.box2d_position_iterations = parse(k, v)?,
             "box2d_polygon_skin" => p.box2d_polygon_skin = parse(k, v)?,
+            "chipmunk_iterations" => p.chipmunk_iterations = parse(k, v)?,
             _ => return Err(format!("--set {k}: unknown I-PHYRE parameter")),
         }
     }

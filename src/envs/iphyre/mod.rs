@@ -30,6 +30,7 @@
 
 pub mod action;
 mod box2d_world;
+mod chipmunk_world;
 mod env;
 mod error;
 mod game;
