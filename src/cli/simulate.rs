@@ -87,8 +87,9 @@ pub struct Args {
     /// [default: 6].
     #[arg(long)]
     stride: Option<u64>,
-    /// phyre: the physics engine, box2d (PHYRE's own, the default) or rapier.
-    #[arg(long, value_parser = ["box2d", "rapier"])]
+    /// phyre: the physics engine, box2d (PHYRE's own, the default) or rapier; iphyre: rapier (the
+    /// default), chipmunk (annotrace's Chipmunk-faithful step) or box2d.
+    #[arg(long, value_parser = ["box2d", "rapier", "chipmunk"])]
     engine: Option<String>,
 }
 
@@ -128,7 +129,6 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
         ("--tasks", args.tasks.is_some()),
         ("--task/--action", args.task.is_some()),
         ("--stride", args.stride.is_some()),
-        ("--engine", args.engine.is_some()),
     ];
     let iphyre_flags = [
         ("--games", args.games.is_some()),
@@ -137,6 +137,7 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
     ];
     let params = match args.env {
         Env::Pooltool => {
+            only_for(args.env, &[("--engine", args.engine.is_some())])?;
             only_for(args.env, &phyre_flags)?;
             only_for(args.env, &iphyre_flags)?;
             SimulateParams::Pooltool(pool_params(&args)?)
@@ -152,10 +153,16 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
                 task: args.task.clone(),
                 action: args.action.clone(),
                 stride: Some(args.stride.unwrap_or(6)),
-                engine: args
-                    .engine
-                    .as_deref()
-                    .and_then(annotrace::envs::phyre::Engine::from_name),
+                engine: match args.engine.as_deref() {
+                    None => None,
+                    Some(name) => Some(
+                        annotrace::envs::phyre::Engine::from_name(name).ok_or_else(|| {
+                            CliError::input(anyhow::anyhow!(
+                                "--engine {name} is not a PHYRE engine: PHYRE takes box2d or rapier"
+                            ))
+                        })?,
+                    ),
+                },
             })
         }
         Env::Iphyre => {
@@ -171,6 +178,10 @@ pub fn run(args: Args, quiet: bool) -> CliResult {
                 } else {
                     60.0
                 }),
+                engine: args
+                    .engine
+                    .as_deref()
+                    .and_then(annotrace::envs::iphyre::Engine::from_name),
                 game: args.game.clone(),
                 clicks: args.clicks.clone(),
             })

@@ -542,10 +542,7 @@ mod tests {
         let refs: Vec<&Annotation> = anns.iter().collect();
         assert_eq!(
             summary(&e.annotate_trace(&t, &refs)),
-            vec![
-                (2, 16, 1.0, ids.clone()),
-                (3, 3, 0.6, vec![ids[0].clone()]),
-            ]
+            vec![(2, 16, 1.0, ids.clone()), (3, 3, 0.6, vec![ids[0].clone()]),]
         );
     }
 

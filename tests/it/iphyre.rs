@@ -200,6 +200,51 @@ fn replays_take_pixel_clicks_and_block_indices_alike() {
 }
 
 #[test]
+fn the_engine_is_chosen_on_the_command_line_and_recorded_with_the_scene() {
+    let t = TestRun::new();
+    for engine in ["rapier", "chipmunk"] {
+        t.run(&[
+            "simulate",
+            "--env",
+            "iphyre",
+            "--games",
+            "support,angle",
+            "--shots",
+            "2",
+            "--seed",
+            "1",
+            "--engine",
+            engine,
+            "--run",
+            engine,
+        ])
+        .ok()
+        .stdout_has("simulated 4 iphyre trace(s)");
+        let spec = t.csv(engine, "SELECT spec FROM scenes ORDER BY scene_id");
+        assert!(
+            spec.contains(&format!("\"\"engine\"\":\"\"{engine}\"\"")),
+            "{spec}"
+        );
+    }
+    // Same games, clicks and seed, another engine: the same traces (ids, clicks), other trajectories.
+    let ids = "SELECT trace_id FROM traces ORDER BY trace_id";
+    assert_eq!(t.csv("rapier", ids), t.csv("chipmunk", ids));
+    let xs = "SELECT SUM(x1) FROM frames";
+    assert_ne!(t.csv("rapier", xs), t.csv("chipmunk", xs));
+    // An I-PHYRE engine is not a PHYRE one, and billiards has none.
+    t.run(&[
+        "simulate", "--env", "phyre", "--engine", "chipmunk", "--run", "p",
+    ])
+    .code(2)
+    .stderr_has("not a PHYRE engine");
+    t.run(&[
+        "simulate", "--env", "pooltool", "--engine", "rapier", "--run", "b",
+    ])
+    .code(2)
+    .stderr_has("--engine is not for --env pooltool");
+}
+
+#[test]
 fn bad_input_names_the_field_exits_2_and_writes_nothing() {
     let t = TestRun::new();
     for (args, needle) in [

@@ -2,8 +2,20 @@
 
 use super::error::{IphyreError, Result};
 
-/// The physics engine an I-PHYRE world runs on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// The physics engine an I-PHYRE world runs on (`engine = "rapier" | "box2d" | "chipmunk"` in a
+/// pipeline's `simulate` stage, `--engine` on `annotrace simulate --env iphyre`).
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+)]
+#[serde(rename_all = "lowercase")]
 pub enum Engine {
     /// Box2D (the `box2d-rs` port of Box2D 2.4.1), set up with Chipmunk's semantics: hard contacts
     /// solved by sequential impulses with accumulated impulses and warm starting, no continuous

@@ -1,4 +1,5 @@
-//! The `simulate` stage with `env = "iphyre"`: I-PHYRE episodes (rapier2d, `envs::iphyre`) into the
+//! The `simulate` stage with `env = "iphyre"`: I-PHYRE episodes (`engine`: rapier2d by default, or the
+//! Chipmunk-faithful step or Box2D; `envs::iphyre`) into the
 //! trace tables, sharded and resumable like the billiards datasets.
 //!
 //! **Owns:** the I-PHYRE half of the `simulate` stage: reading its parameters, choosing the
@@ -28,7 +29,7 @@ use super::shards::{ShardSinks, ShardTotals, replay_pair};
 use super::{ShardParams, SimulateSummary, Simulation};
 use crate::digest::hex;
 use crate::envs::iphyre::{
-    Click, Episode, Game, Games, PhysicsParams, click_block, clicks_rng, random_clicks,
+    Click, Engine, Episode, Game, Games, PhysicsParams, click_block, clicks_rng, random_clicks,
     trace_columns, validate_clicks,
 };
 use crate::pipeline::registry::BuildError;
@@ -50,6 +51,10 @@ pub struct IphyreSimParams {
     /// Physics steps per second: 60 (I-PHYRE's default) or 10 (the gym wrappers and DeepPHY).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fps: Option<f64>,
+    /// Physics engine: `rapier` (default), `chipmunk` (annotrace's Chipmunk-faithful step: reproduces
+    /// more of I-PHYRE's outcomes, docs/fidelity.md) or `box2d`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub engine: Option<Engine>,
     /// Replay mode: the game name.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub game: Option<String>,
@@ -87,7 +92,10 @@ pub(super) fn build(
     spec: &PipelineSpec,
 ) -> Result<IphyreSimulation, BuildError> {
     let fps = p.fps.unwrap_or(60.0);
-    let params = PhysicsParams::with_fps(fps);
+    let params = PhysicsParams {
+        engine: p.engine.unwrap_or_default(),
+        ..PhysicsParams::with_fps(fps)
+    };
     params
         .validate()
         .map_err(|e| BuildError::param("fps", e.to_string()))?;
@@ -248,9 +256,12 @@ impl Simulation for IphyreSimulation {
         let games_hash = hex(&Sha256::digest(
             crate::envs::iphyre::DEFAULT_GAMES_JSON.as_bytes(),
         ));
-        Ok(
-            json!({"env": "iphyre", "fps": self.params.fps, "games_data": &games_hash[..16], "work": work}),
-        )
+        let mut fp = json!({"env": "iphyre", "fps": self.params.fps, "games_data": &games_hash[..16], "work": work});
+        // The default engine leaves the fingerprint (and so existing runs' caches) as it was.
+        if self.params.engine != Engine::default() {
+            fp["engine"] = json!(self.params.engine.name());
+        }
+        Ok(fp)
     }
 
     fn env(&self) -> Env {
@@ -282,6 +293,7 @@ impl Simulation for IphyreSimulation {
                     "index": game.index,
                     "fold": game.fold,
                     "fps": self.params.fps,
+                    "engine": self.params.engine.name(),
                     "objects": game.objects.len(),
                     "eliminable": game.eliminable().count(),
                     "joints": game.joints,
