@@ -16,15 +16,13 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use super::detector_setup::{DetectorSetup, SandboxParams};
+use super::trace_files::{pick_trace_ids, read_traces_by_id};
 use crate::detect::Annotation;
-use crate::digest::words_u64;
 use crate::llm::{LibraryEntry, LlmClient, LlmConfig, LlmSettings, Prompts, ReplayConfig};
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
-use crate::rng::SplitMix64;
-use crate::store::{ReadTraceError, read_trace, trace_ids};
 use crate::summary::table::{self, LabelSetting};
 use crate::summary::{LabelAsk, LabelsError, LlmLabeller, TraceImages, add_templates};
 use crate::trace::{Env, Trace};
@@ -267,32 +265,14 @@ impl SuggestLabelsStage {
 
     /// The example traces: the given ids, or a seeded sample of the run's traces of `env`.
     fn examples(&self, ctx: &StageContext<'_>) -> Result<Vec<Trace>, StageError> {
-        let mut all: Vec<String> = trace_ids(ctx.run())?
-            .into_iter()
-            .filter(|(e, _)| *e == self.p.env)
-            .map(|(_, id)| id)
-            .collect();
-        all.sort();
-        all.dedup();
-        let ids = match &self.p.trace_ids {
-            Some(ids) => {
-                if let Some(bad) = ids.iter().find(|i| all.binary_search(i).is_err()) {
-                    return Err(StageError::Input(format!(
-                        "`trace_ids`: the run has no {} trace {bad:?}",
-                        self.p.env
-                    )));
-                }
-                ids.clone()
-            }
-            None => {
-                let mut rng = SplitMix64::new(words_u64(&[self.seed(ctx), 0x1AB5]));
-                for i in (1..all.len()).rev() {
-                    all.swap(i, rng.below(i + 1));
-                }
-                all.truncate(self.p.examples as usize);
-                all
-            }
-        };
+        let ids = pick_trace_ids(
+            ctx.run(),
+            self.p.env,
+            self.p.trace_ids.as_deref(),
+            self.p.examples as usize,
+            self.seed(ctx),
+            0x1AB5,
+        )?;
         if ids.is_empty() {
             return Err(StageError::TooFewTraces {
                 stage: "suggest-labels",
@@ -302,14 +282,7 @@ impl SuggestLabelsStage {
                 hint: ": add a simulate or import stage as input",
             });
         }
-        ids.iter()
-            .map(|id| {
-                read_trace(ctx.run(), id).map_err(|e| match e {
-                    ReadTraceError::Store(e) => StageError::Store(e),
-                    other => StageError::Input(other.to_string()),
-                })
-            })
-            .collect()
+        read_traces_by_id(ctx.run(), &ids)
     }
 
     fn client(&self, ctx: &StageContext<'_>, seed: u64) -> Result<LlmClient, StageError> {

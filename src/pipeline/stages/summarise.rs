@@ -20,15 +20,13 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use super::detector_setup::{DetectorSetup, SandboxParams};
+use super::trace_files::{pick_trace_ids, read_traces_by_id};
 use crate::detect::{Annotation, Detector};
-use crate::digest::words_u64;
 use crate::llm::{LlmClient, LlmConfig, LlmSettings, Prompts, ReplayConfig};
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
-use crate::rng::SplitMix64;
-use crate::store::{ReadTraceError, read_trace, trace_ids};
 use crate::summary::table::{self, Setting, SummaryRow};
 use crate::summary::{
     Chooser, IdentifyParams, LlmChooser, LlmMode, LlmSummariser, OfflineChooser, OfflineSummariser,
@@ -408,33 +406,17 @@ impl SummariseStage {
 
     /// The traces: the given ids, or a seeded sample of the run's traces of `env` (sorted by id).
     fn traces(&self, ctx: &StageContext<'_>) -> Result<Vec<Trace>, StageError> {
-        let mut all: Vec<String> = trace_ids(ctx.run())?
-            .into_iter()
-            .filter(|(e, _)| *e == self.p.env)
-            .map(|(_, id)| id)
-            .collect();
-        all.sort();
-        all.dedup();
-        let ids = match &self.p.trace_ids {
-            Some(ids) => {
-                if let Some(bad) = ids.iter().find(|i| all.binary_search(i).is_err()) {
-                    return Err(StageError::Input(format!(
-                        "`trace_ids`: the run has no {} trace {bad:?}",
-                        self.p.env
-                    )));
-                }
-                ids.clone()
-            }
-            None => {
-                let mut rng = SplitMix64::new(words_u64(&[self.seed(ctx), 0x5A]));
-                for i in (1..all.len()).rev() {
-                    all.swap(i, rng.below(i + 1));
-                }
-                all.truncate(self.p.traces as usize);
-                all.sort();
-                all
-            }
-        };
+        let mut ids = pick_trace_ids(
+            ctx.run(),
+            self.p.env,
+            self.p.trace_ids.as_deref(),
+            self.p.traces as usize,
+            self.seed(ctx),
+            0x5A,
+        )?;
+        if self.p.trace_ids.is_none() {
+            ids.sort();
+        }
         let needed = if self.p.identify == ChooserKind::None {
             1
         } else {
@@ -449,14 +431,7 @@ impl SummariseStage {
                 hint: ": simulate or import more, or lower `options`",
             });
         }
-        ids.iter()
-            .map(|id| {
-                read_trace(ctx.run(), id).map_err(|e| match e {
-                    ReadTraceError::Store(e) => StageError::Store(e),
-                    other => StageError::Input(other.to_string()),
-                })
-            })
-            .collect()
+        read_traces_by_id(ctx.run(), &ids)
     }
 
     fn model(&self, ctx: &StageContext<'_>) -> Result<Option<Model>, StageError> {

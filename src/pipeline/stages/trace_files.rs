@@ -1,4 +1,6 @@
-//! Reading a run's traces file by file, for stages that process every trace (`annotate`, `accuracy`).
+//! Reading a run's traces file by file, for stages that process every trace (`annotate`, `accuracy`),
+//! and choosing and reading a few traces by id, for stages that show examples to a model
+//! (`summarise`, `suggest-labels`: [`pick_trace_ids`], [`read_traces_by_id`]).
 //!
 //! Stages that write the trace tables (`import`, `simulate`) write one file per shard with the same name
 //! in `traces`, `timesteps`, `frames` and `events` (`<stage>.<shard>.parquet`). Reading such a set once,
@@ -11,8 +13,10 @@ use arrow::compute::{
 };
 use arrow::datatypes::DataType;
 
+use crate::digest::words_u64;
 use crate::pipeline::stage::StageError;
-use crate::store::{RunDir, read_file};
+use crate::rng::SplitMix64;
+use crate::store::{ReadTraceError, RunDir, read_file, read_trace, trace_ids};
 use crate::trace::schema::table_schema;
 use crate::trace::{Env, Trace, TraceRows, decode_trace};
 
@@ -146,4 +150,50 @@ pub(crate) fn read_traces(run: &RunDir, set: &TraceFileSet) -> Result<Vec<Trace>
         out.push(trace);
     }
     Ok(out)
+}
+
+/// The ids of the traces a stage works on: `given` (each checked to be a trace of `env` in the run),
+/// or `count` of the run's traces of `env` drawn with `seed` (a Fisher–Yates shuffle of the sorted
+/// ids, keyed by `seed` and the stage's `salt`, then truncated), in drawn order.
+pub(crate) fn pick_trace_ids(
+    run: &RunDir,
+    env: Env,
+    given: Option<&[String]>,
+    count: usize,
+    seed: u64,
+    salt: u64,
+) -> Result<Vec<String>, StageError> {
+    let mut all: Vec<String> = trace_ids(run)?
+        .into_iter()
+        .filter(|(e, _)| *e == env)
+        .map(|(_, id)| id)
+        .collect();
+    all.sort();
+    all.dedup();
+    if let Some(ids) = given {
+        if let Some(bad) = ids.iter().find(|i| all.binary_search(i).is_err()) {
+            return Err(StageError::Input(format!(
+                "`trace_ids`: the run has no {env} trace {bad:?}"
+            )));
+        }
+        return Ok(ids.to_vec());
+    }
+    let mut rng = SplitMix64::new(words_u64(&[seed, salt]));
+    for i in (1..all.len()).rev() {
+        all.swap(i, rng.below(i + 1));
+    }
+    all.truncate(count);
+    Ok(all)
+}
+
+/// Reads the traces `ids` from the run; a missing or damaged trace is an input error naming it.
+pub(crate) fn read_traces_by_id(run: &RunDir, ids: &[String]) -> Result<Vec<Trace>, StageError> {
+    ids.iter()
+        .map(|id| {
+            read_trace(run, id).map_err(|e| match e {
+                ReadTraceError::Store(e) => StageError::Store(e),
+                other => StageError::Input(other.to_string()),
+            })
+        })
+        .collect()
 }
