@@ -14,13 +14,14 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use super::detector_setup::{DetectorSetup, SandboxParams};
+use super::llm_setup::{resumable_client, stage_prompts};
 use crate::bench::agent::{AgentKind, add_templates};
 use crate::bench::{
     Agent, Annotator, BenchError, FeedbackMode, Format, LlmAgent, PoolAction, RandomAgent,
     SearchAgent, Settings, Simulators, TaskChoice, choose_tasks, play_task, table,
 };
 use crate::envs::phyre::EvalSetup;
-use crate::llm::{LlmClient, LlmConfig, LlmSettings, Prompts, ReplayConfig};
+use crate::llm::{LlmClient, LlmSettings};
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
@@ -484,23 +485,9 @@ impl BenchmarkStage {
                 None,
             )),
             AgentKind::Llm => {
-                let mut settings = self.llm.clone();
-                settings.seed = Some(settings.seed.or(self.seed).unwrap_or(ctx.seed()));
-                let mut config = LlmConfig::resolve(&settings, &|k| std::env::var(k).ok())?;
-                // Resuming: answers this run already recorded are served again, not asked again.
-                if config.replay.is_none() {
-                    config.replay = Some(ReplayConfig {
-                        run: ctx.run().root().to_path_buf(),
-                        strict: false,
-                    });
-                }
-                let dir = self
-                    .prompts
-                    .clone()
-                    .or_else(|| Some(self.project.join("prompts")).filter(|d| d.is_dir()));
-                let mut prompts = Prompts::load(dir.as_deref())?;
-                add_templates(&mut prompts)?;
-                let client = Arc::new(LlmClient::new(config, Some(ctx.run()))?);
+                let seed = self.seed.unwrap_or(ctx.seed());
+                let client = Arc::new(resumable_client(&self.llm, seed, ctx.run())?);
+                let prompts = stage_prompts(self.prompts.as_ref(), &self.project, add_templates)?;
                 Ok((
                     Box::new(LlmAgent {
                         client: client.clone(),

@@ -28,6 +28,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use super::detector_setup::{DetectorSetup, SandboxParams};
+use super::llm_setup::{resumable_client, stage_prompts};
 use super::trace_files::{read_traces, trace_file_sets};
 use crate::detect::{Detector, Library, WorkerPool};
 use crate::ensemble::activation::{LabelEnsemble, Member, combine};
@@ -41,7 +42,7 @@ use crate::ensemble::tables::{
     EvaluationRow, calibration_batch, clusters_batch, evaluation_batch, members_batch,
 };
 use crate::fitness::{DistanceMatrix, Dp, correlation};
-use crate::llm::{LlmClient, LlmConfig, LlmSettings, Prompts, ReplayConfig};
+use crate::llm::{LlmClient, LlmSettings, Prompts};
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
@@ -473,28 +474,15 @@ impl EnsembleStage {
     /// The client, prompts and renderer of the identification objective. Answers this run already
     /// recorded are served again (a resumed calibration asks nothing twice).
     fn model(&self, ctx: &StageContext<'_>, seed: u64) -> Result<Model, StageError> {
-        let mut settings = self.llm.clone();
-        settings.seed = Some(settings.seed.unwrap_or(seed));
-        let mut config = LlmConfig::resolve(&settings, &|k| std::env::var(k).ok())?;
-        if config.replay.is_none() {
-            config.replay = Some(ReplayConfig {
-                run: ctx.run().root().to_path_buf(),
-                strict: false,
-            });
-        }
-        let dir = self
-            .prompts
-            .clone()
-            .or_else(|| Some(self.project.join("prompts")).filter(|d| d.is_dir()));
-        let mut prompts = Prompts::load(dir.as_deref())?;
-        add_templates(&mut prompts)?;
+        let client = resumable_client(&self.llm, seed, ctx.run())?;
+        let prompts = stage_prompts(self.prompts.as_ref(), &self.project, add_templates)?;
         let images =
             TraceImages::new(self.p.image_size as u32).map_err(|e| StageError::Simulation {
                 item: "renderer".into(),
                 source: Box::new(e),
             })?;
         Ok(Model {
-            client: Arc::new(LlmClient::new(config, Some(ctx.run()))?),
+            client: Arc::new(client),
             prompts: Arc::new(prompts),
             images: Arc::new(images),
         })

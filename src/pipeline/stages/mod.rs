@@ -26,6 +26,7 @@ pub mod evolve;
 pub mod export;
 pub mod import;
 pub mod import_survey;
+mod llm_setup;
 pub mod optimise;
 pub mod plot;
 pub mod report;

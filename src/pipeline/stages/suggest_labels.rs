@@ -16,9 +16,10 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use super::detector_setup::{DetectorSetup, SandboxParams};
+use super::llm_setup::{resumable_client, stage_prompts};
 use super::trace_files::{pick_trace_ids, read_traces_by_id};
 use crate::detect::Annotation;
-use crate::llm::{LibraryEntry, LlmClient, LlmConfig, LlmSettings, Prompts, ReplayConfig};
+use crate::llm::{LibraryEntry, LlmSettings};
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
@@ -284,20 +285,6 @@ impl SuggestLabelsStage {
         }
         read_traces_by_id(ctx.run(), &ids)
     }
-
-    fn client(&self, ctx: &StageContext<'_>, seed: u64) -> Result<LlmClient, StageError> {
-        let mut settings = self.llm.clone();
-        settings.seed = Some(settings.seed.unwrap_or(seed));
-        let mut config = LlmConfig::resolve(&settings, &|k| std::env::var(k).ok())?;
-        // Resuming: answers this run already recorded are served again, not asked again.
-        if config.replay.is_none() {
-            config.replay = Some(ReplayConfig {
-                run: ctx.run().root().to_path_buf(),
-                strict: false,
-            });
-        }
-        Ok(LlmClient::new(config, Some(ctx.run()))?)
-    }
 }
 
 fn labels_error(e: LabelsError) -> StageError {
@@ -344,13 +331,8 @@ impl Stage for SuggestLabelsStage {
             guidance: self.p.guidance.clone(),
         };
         let (suggested, origin, model) = if self.uses_llm() {
-            let client = self.client(ctx, seed)?;
-            let dir = self
-                .prompts
-                .clone()
-                .or_else(|| Some(self.project.join("prompts")).filter(|d| d.is_dir()));
-            let mut prompts = Prompts::load(dir.as_deref())?;
-            add_templates(&mut prompts)?;
+            let client = resumable_client(&self.llm, seed, ctx.run())?;
+            let prompts = stage_prompts(self.prompts.as_ref(), &self.project, add_templates)?;
             let images =
                 TraceImages::new(self.p.image_size as u32).map_err(|e| StageError::Simulation {
                     item: "renderer".into(),

@@ -20,9 +20,10 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use super::detector_setup::{DetectorSetup, SandboxParams};
+use super::llm_setup::{resumable_client, stage_prompts};
 use super::trace_files::{pick_trace_ids, read_traces_by_id};
 use crate::detect::{Annotation, Detector};
-use crate::llm::{LlmClient, LlmConfig, LlmSettings, Prompts, ReplayConfig};
+use crate::llm::{LlmClient, LlmSettings, Prompts};
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
@@ -438,29 +439,15 @@ impl SummariseStage {
         if !self.uses_llm() {
             return Ok(None);
         }
-        let mut settings = self.llm.clone();
-        settings.seed = Some(settings.seed.unwrap_or(self.seed(ctx)));
-        let mut config = LlmConfig::resolve(&settings, &|k| std::env::var(k).ok())?;
-        // Resuming: answers this run already recorded are served again, not asked again.
-        if config.replay.is_none() {
-            config.replay = Some(ReplayConfig {
-                run: ctx.run().root().to_path_buf(),
-                strict: false,
-            });
-        }
-        let dir = self
-            .prompts
-            .clone()
-            .or_else(|| Some(self.project.join("prompts")).filter(|d| d.is_dir()));
-        let mut prompts = Prompts::load(dir.as_deref())?;
-        add_templates(&mut prompts)?;
+        let client = resumable_client(&self.llm, self.seed(ctx), ctx.run())?;
+        let prompts = stage_prompts(self.prompts.as_ref(), &self.project, add_templates)?;
         let images =
             TraceImages::new(self.p.image_size as u32).map_err(|e| StageError::Simulation {
                 item: "renderer".into(),
                 source: Box::new(e),
             })?;
         Ok(Some(Model {
-            client: Arc::new(LlmClient::new(config, Some(ctx.run()))?),
+            client: Arc::new(client),
             prompts: Arc::new(prompts),
             images: Arc::new(images),
         }))
