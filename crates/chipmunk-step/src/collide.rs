@@ -86,7 +86,11 @@ fn circle_segment(centre: Vect, r: f64, sa: Vect, sb: Vect, sn: Vect, sr: f64) -
     let mut m = Manifold::default();
     if distsq < mindist * mindist {
         let dist = distsq.sqrt();
-        let n = if dist != 0.0 { delta * (1.0 / dist) } else { sn };
+        let n = if dist != 0.0 {
+            delta * (1.0 / dist)
+        } else {
+            sn
+        };
         m.n = n;
         m.points.push(RawContact {
             p1: centre + n * r,
@@ -167,8 +171,20 @@ fn support_edge(a: Vect, b: Vect, sn: Vect, hash_id: u64, n: Vect) -> [(Vect, u6
 }
 
 fn segment_segment(s1: &Cached, h1: u64, s2: &Cached, h2: u64) -> Manifold {
-    let (&Cached::Segment { a: a1, b: b1, n: n1, r: r1 }, &Cached::Segment { a: a2, b: b2, n: n2, r: r2 }) =
-        (s1, s2)
+    let (
+        &Cached::Segment {
+            a: a1,
+            b: b1,
+            n: n1,
+            r: r1,
+        },
+        &Cached::Segment {
+            a: a2,
+            b: b2,
+            n: n2,
+            r: r2,
+        },
+    ) = (s1, s2)
     else {
         unreachable!("segment_segment on non-segments")
     };
@@ -187,8 +203,16 @@ fn segment_segment(s1: &Cached, h1: u64, s2: &Cached, h2: u64) -> Manifold {
     let clamp01 = |x: f64| x.clamp(0.0, 1.0);
     // Each end of one edge projected onto the other, clamped to it; kept where the surfaces overlap.
     let candidates = [
-        (clamp01((d2b - d1a) * den1), clamp01((d1a - d2a) * den2), hash_pair(e1[0].1, e2[1].1)),
-        (clamp01((d2a - d1a) * den1), clamp01((d1b - d2a) * den2), hash_pair(e1[1].1, e2[0].1)),
+        (
+            clamp01((d2b - d1a) * den1),
+            clamp01((d1a - d2a) * den2),
+            hash_pair(e1[0].1, e2[1].1),
+        ),
+        (
+            clamp01((d2a - d1a) * den1),
+            clamp01((d1b - d2a) * den2),
+            hash_pair(e1[1].1, e2[0].1),
+        ),
     ];
     for (t1, t2, hash) in candidates {
         let p1 = n * r1 + e1[0].0.lerp(e1[1].0, t1);
@@ -222,7 +246,10 @@ mod tests {
         assert!((m.n.y - 1.0).abs() < 1e-12, "{:?}", m.n);
         let mut xs: Vec<f64> = m.points.iter().map(|c| c.p1.x).collect();
         xs.sort_by(f64::total_cmp);
-        assert!((xs[0] - 50.0).abs() < 1e-9 && (xs[1] - 100.0).abs() < 1e-9, "{xs:?}");
+        assert!(
+            (xs[0] - 50.0).abs() < 1e-9 && (xs[1] - 100.0).abs() < 1e-9,
+            "{xs:?}"
+        );
         for c in &m.points {
             assert!(((c.p2 - c.p1).dot(m.n) + 1.0).abs() < 1e-9);
         }

@@ -74,7 +74,14 @@ fn geometry(a: &Body, b: &Body, anchor_a: Vect, anchor_b: Vect) -> (Vect, Vect, 
 impl PinJoint {
     /// A pin joint between anchors `anchor_a` on `a` and `anchor_b` on `b` (body coordinates), keeping
     /// their present distance.
-    pub fn new(bodies: &[Body], a: usize, b: usize, anchor_a: Vect, anchor_b: Vect, error_bias: f64) -> PinJoint {
+    pub fn new(
+        bodies: &[Body],
+        a: usize,
+        b: usize,
+        anchor_a: Vect,
+        anchor_b: Vect,
+        error_bias: f64,
+    ) -> PinJoint {
         let (ba, bb) = (&bodies[a], &bodies[b]);
         let pa = ba.p + anchor_a.rotate(ba.rot);
         let pb = bb.p + anchor_b.rotate(bb.rot);

@@ -81,7 +81,13 @@ impl Space {
     }
 
     /// Adds a shape to body `body` with the given friction and elasticity; returns its index.
-    pub fn add_shape(&mut self, body: BodyId, geometry: Geometry, friction: f64, elasticity: f64) -> usize {
+    pub fn add_shape(
+        &mut self,
+        body: BodyId,
+        geometry: Geometry,
+        friction: f64,
+        elasticity: f64,
+    ) -> usize {
         let b = &self.bodies[body];
         let cache = transform(&geometry, b.p, b.rot);
         let leaf_bb = cache.bb().grown(b.v);
@@ -112,7 +118,11 @@ impl Space {
 
     /// Body `id`, if it exists and was not removed.
     pub fn body(&self, id: BodyId) -> Option<&Body> {
-        self.alive.get(id).copied().unwrap_or(false).then(|| &self.bodies[id])
+        self.alive
+            .get(id)
+            .copied()
+            .unwrap_or(false)
+            .then(|| &self.bodies[id])
     }
 
     /// Whether body `id` exists and was not removed.
@@ -135,7 +145,8 @@ impl Space {
         let shape_alive = &self.shape_alive;
         self.arbiters
             .retain(|&(a, b), _| shape_alive[a] && shape_alive[b]);
-        self.active.retain(|&(a, b)| shape_alive[a] && shape_alive[b]);
+        self.active
+            .retain(|&(a, b)| shape_alive[a] && shape_alive[b]);
         for c in &mut self.constraints {
             if c.as_ref().is_some_and(|c| c.bodies().contains(&id)) {
                 *c = None;

@@ -81,7 +81,10 @@ fn a_bar_rests_on_a_block_without_sinking_or_drifting() {
     }
     let body = space.body(bar).unwrap();
     // Sequential impulses over the two contact points in a fixed order leave a small tilt, no slide.
-    assert!(body.angle.abs() < 0.005 && (body.p.x - 300.0).abs() < 0.05, "{body:?}");
+    assert!(
+        body.angle.abs() < 0.005 && (body.p.x - 300.0).abs() < 0.05,
+        "{body:?}"
+    );
     assert!(body.v.length() < 1e-3, "{body:?}");
 }
 
@@ -90,7 +93,14 @@ fn a_pin_joint_keeps_its_length_while_the_pendulum_swings() {
     let mut space = Space::new(Vect::new(0.0, 100.0));
     let pivot = space.add_body(Body::fixed(Vect::new(300.0, 100.0)));
     let bob = ball(&mut space, Vect::new(450.0, 100.0), 10.0);
-    let joint = PinJoint::new(space.bodies(), pivot, bob, Vect::ZERO, Vect::ZERO, 0.9f64.powi(60));
+    let joint = PinJoint::new(
+        space.bodies(),
+        pivot,
+        bob,
+        Vect::ZERO,
+        Vect::ZERO,
+        0.9f64.powi(60),
+    );
     assert!((joint.distance() - 150.0).abs() < 1e-12);
     space.add_constraint(Constraint::Pin(joint));
     let mut lowest: f64 = 0.0;
