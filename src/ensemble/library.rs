@@ -69,80 +69,66 @@ pub fn write(
     labels: &[LabelFile],
     ensemble: bool,
 ) -> std::io::Result<()> {
-    let parent = dir.parent().unwrap_or(Path::new("."));
-    std::fs::create_dir_all(parent)?;
-    let base = dir
-        .file_name()
-        .map(|f| f.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = parent.join(format!(".{base}.tmp-{}", std::process::id()));
-    if tmp.exists() {
-        std::fs::remove_dir_all(&tmp)?;
-    }
-    std::fs::create_dir_all(&tmp)?;
-    let mut m = format!(
-        "# Written by annotrace ensemble ({}). Each .py file is self-contained.\n\n\
-         [library]\nname = {}\nenv = {}\ndescription = {}\n",
-        if ensemble {
-            "ensemble library: paper section 3.3; docs/ensemble.md"
-        } else {
-            "single-program ablation -SP: the best candidate per label over every run"
-        },
-        toml_str(name),
-        toml_str(env.as_str()),
-        toml_str(description)
-    );
-    let mut taken: Vec<String> = Vec::new();
-    for l in labels.iter().filter(|l| !l.members.is_empty()) {
-        if ensemble {
-            m.push_str(&format!(
-                "\n[[ensemble]]\nlabel = {}\ngamma = {:?}\neps_s = {:?}\neps_t = {:?}\nk = {}\n",
-                toml_str(&l.label),
-                l.gamma,
-                l.eps_s,
-                l.eps_t,
-                l.members.len()
-            ));
-        }
-        for mem in &l.members {
-            let mut f = format!("{}_c{}.py", file_stem(&l.label), mem.cluster);
-            let mut k = 2;
-            while taken.contains(&f) {
-                f = format!("{}_c{}_{k}.py", file_stem(&l.label), mem.cluster);
-                k += 1;
-            }
-            taken.push(f.clone());
-            std::fs::write(tmp.join(&f), &mem.code)?;
-            m.push_str(&format!(
-                "\n[[detector]]\nlabel = {}\nfile = {}\n",
-                toml_str(&mem.label),
-                toml_str(&f)
-            ));
+    crate::store::write_dir_atomic(dir, |tmp| {
+        let mut m = format!(
+            "# Written by annotrace ensemble ({}). Each .py file is self-contained.\n\n\
+             [library]\nname = {}\nenv = {}\ndescription = {}\n",
+            if ensemble {
+                "ensemble library: paper section 3.3; docs/ensemble.md"
+            } else {
+                "single-program ablation -SP: the best candidate per label over every run"
+            },
+            toml_str(name),
+            toml_str(env.as_str()),
+            toml_str(description)
+        );
+        let mut taken: Vec<String> = Vec::new();
+        for l in labels.iter().filter(|l| !l.members.is_empty()) {
             if ensemble {
                 m.push_str(&format!(
-                    "weight = {:?}\nreward = {:?}\nrun = {}\ncandidate = {}\ncluster = {}\n",
-                    mem.weight,
-                    mem.reward,
-                    toml_str(&mem.run),
-                    toml_str(&mem.candidate),
-                    mem.cluster
-                ));
-            } else {
-                m.push_str(&format!(
-                    "# from {} candidate {} (ν {:?})\n",
-                    mem.run.replace('\n', " "),
-                    mem.candidate,
-                    mem.reward
+                    "\n[[ensemble]]\nlabel = {}\ngamma = {:?}\neps_s = {:?}\neps_t = {:?}\nk = {}\n",
+                    toml_str(&l.label),
+                    l.gamma,
+                    l.eps_s,
+                    l.eps_t,
+                    l.members.len()
                 ));
             }
+            for mem in &l.members {
+                let mut f = format!("{}_c{}.py", file_stem(&l.label), mem.cluster);
+                let mut k = 2;
+                while taken.contains(&f) {
+                    f = format!("{}_c{}_{k}.py", file_stem(&l.label), mem.cluster);
+                    k += 1;
+                }
+                taken.push(f.clone());
+                std::fs::write(tmp.join(&f), &mem.code)?;
+                m.push_str(&format!(
+                    "\n[[detector]]\nlabel = {}\nfile = {}\n",
+                    toml_str(&mem.label),
+                    toml_str(&f)
+                ));
+                if ensemble {
+                    m.push_str(&format!(
+                        "weight = {:?}\nreward = {:?}\nrun = {}\ncandidate = {}\ncluster = {}\n",
+                        mem.weight,
+                        mem.reward,
+                        toml_str(&mem.run),
+                        toml_str(&mem.candidate),
+                        mem.cluster
+                    ));
+                } else {
+                    m.push_str(&format!(
+                        "# from {} candidate {} (ν {:?})\n",
+                        mem.run.replace('\n', " "),
+                        mem.candidate,
+                        mem.reward
+                    ));
+                }
+            }
         }
-    }
-    std::fs::write(tmp.join("library.toml"), m)?;
-    if dir.exists() {
-        std::fs::remove_dir_all(dir)?;
-    }
-    std::fs::rename(&tmp, dir)?;
-    crate::store::sync_dir(Some(parent))
+        std::fs::write(tmp.join("library.toml"), m)
+    })
 }
 
 #[cfg(test)]

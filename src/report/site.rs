@@ -143,25 +143,7 @@ impl SiteWriter {
 /// the new one renamed in, the parent synced, the old one removed, so a reader sees one or the other.
 /// The survey page (`crate::survey`) is swapped in the same way.
 pub(crate) fn swap_in(tmp: &Path, target: &Path) -> Result<(), ReportError> {
-    let parent = target.parent().unwrap_or(Path::new(".")).to_path_buf();
-    let old = parent.join(format!(
-        ".{}.old-{}",
-        target
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default(),
-        std::process::id()
-    ));
-    let had_old = target.exists();
-    if had_old {
-        fs::rename(target, &old).map_err(io(target))?;
-    }
-    fs::rename(tmp, target).map_err(io(target))?;
-    crate::store::sync_dir(Some(&parent)).map_err(io(&parent))?;
-    if had_old {
-        fs::remove_dir_all(&old).map_err(io(&old))?;
-    }
-    Ok(())
+    crate::store::swap_dir(tmp, target).map_err(io(target))
 }
 
 impl Drop for SiteWriter {

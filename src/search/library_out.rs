@@ -42,49 +42,35 @@ pub fn write_library(
     description: &str,
     detectors: &[Detector],
 ) -> std::io::Result<()> {
-    let parent = dir.parent().unwrap_or(Path::new("."));
-    std::fs::create_dir_all(parent)?;
-    let file = dir
-        .file_name()
-        .map(|f| f.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = parent.join(format!(".{file}.tmp-{}", std::process::id()));
-    if tmp.exists() {
-        std::fs::remove_dir_all(&tmp)?;
-    }
-    std::fs::create_dir_all(&tmp)?;
-    let mut manifest = format!(
-        "# Written by annotrace evolve: the accepted detectors of the search plus the library it grew.\n\
-         # Each .py file is self-contained (shared helpers inlined).\n\n\
-         [library]\nname = {}\nenv = {}\ndescription = {}\n",
-        toml_str(name),
-        toml_str(env.as_str()),
-        toml_str(description)
-    );
-    let mut taken = Vec::new();
-    for d in detectors {
-        let f = file_name(&d.label, &mut taken);
-        std::fs::write(tmp.join(&f), &d.code)?;
-        manifest.push_str(&format!(
-            "\n# {}\n[[detector]]\nlabel = {}\nfile = {}\n",
-            d.source.replace('\n', " "),
-            toml_str(&d.label),
-            toml_str(&f)
-        ));
-        if !d.aliases.is_empty() {
-            let a: Vec<String> = d.aliases.iter().map(|a| toml_str(a)).collect();
-            manifest.push_str(&format!("aliases = [{}]\n", a.join(", ")));
+    crate::store::write_dir_atomic(dir, |tmp| {
+        let mut manifest = format!(
+            "# Written by annotrace evolve: the accepted detectors of the search plus the library it grew.\n\
+             # Each .py file is self-contained (shared helpers inlined).\n\n\
+             [library]\nname = {}\nenv = {}\ndescription = {}\n",
+            toml_str(name),
+            toml_str(env.as_str()),
+            toml_str(description)
+        );
+        let mut taken = Vec::new();
+        for d in detectors {
+            let f = file_name(&d.label, &mut taken);
+            std::fs::write(tmp.join(&f), &d.code)?;
+            manifest.push_str(&format!(
+                "\n# {}\n[[detector]]\nlabel = {}\nfile = {}\n",
+                d.source.replace('\n', " "),
+                toml_str(&d.label),
+                toml_str(&f)
+            ));
+            if !d.aliases.is_empty() {
+                let a: Vec<String> = d.aliases.iter().map(|a| toml_str(a)).collect();
+                manifest.push_str(&format!("aliases = [{}]\n", a.join(", ")));
+            }
+            if d.weight != 1.0 {
+                manifest.push_str(&format!("weight = {:?}\n", d.weight));
+            }
         }
-        if d.weight != 1.0 {
-            manifest.push_str(&format!("weight = {:?}\n", d.weight));
-        }
-    }
-    std::fs::write(tmp.join("library.toml"), manifest)?;
-    if dir.exists() {
-        std::fs::remove_dir_all(dir)?;
-    }
-    std::fs::rename(&tmp, dir)?;
-    crate::store::sync_dir(Some(parent))
+        std::fs::write(tmp.join("library.toml"), manifest)
+    })
 }
 
 #[cfg(test)]

@@ -115,6 +115,53 @@ pub fn sync_dir(dir: Option<&Path>) -> io::Result<()> {
     }
 }
 
+/// Replaces the folder `target` by `tmp` (a finished folder beside it) so that a reader sees the old
+/// folder or the new one, never none or half of one: the old folder is renamed aside, the new one
+/// renamed into place, the parent synced, then the old one removed.
+pub fn swap_dir(tmp: &Path, target: &Path) -> io::Result<()> {
+    let parent = target.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let name = target
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let old = parent.join(format!(".{name}.old-{}", std::process::id()));
+    let had_old = target.exists();
+    if had_old {
+        std::fs::rename(target, &old)?;
+    }
+    std::fs::rename(tmp, target)?;
+    sync_dir(Some(&parent))?;
+    if had_old {
+        std::fs::remove_dir_all(&old)?;
+    }
+    Ok(())
+}
+
+/// Writes the folder `target` atomically: `fill` writes its files into a fresh temporary folder beside
+/// it (`.<name>.tmp-<pid>`), which [`swap_dir`] then puts in place; when `fill` fails, the temporary
+/// folder is removed and `target` is left as it was.
+pub fn write_dir_atomic(
+    target: &Path,
+    fill: impl FnOnce(&Path) -> io::Result<()>,
+) -> io::Result<()> {
+    let parent = target.parent().unwrap_or(Path::new("."));
+    std::fs::create_dir_all(parent)?;
+    let name = target
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = parent.join(format!(".{name}.tmp-{}", std::process::id()));
+    if tmp.exists() {
+        std::fs::remove_dir_all(&tmp)?;
+    }
+    std::fs::create_dir_all(&tmp)?;
+    if let Err(e) = fill(&tmp) {
+        let _ = std::fs::remove_dir_all(&tmp);
+        return Err(e);
+    }
+    swap_dir(&tmp, target)
+}
+
 /// Writes `bytes` to `target` atomically.
 pub fn write_atomic(target: impl Into<PathBuf>, bytes: &[u8]) -> io::Result<PathBuf> {
     let mut f = AtomicFile::create(target)?;
