@@ -33,7 +33,7 @@ use std::collections::{BTreeMap, HashMap};
 use serde_json::json;
 
 use crate::detect::{Annotation, Detector, DetectorId, EnsembleSettings, Library};
-use crate::trace::{Env, Trace};
+use crate::trace::{Body, Env, Trace};
 
 /// One member of a label's ensemble: its detector id, reliability weight w and training reward t.
 #[derive(Clone, Debug, PartialEq)]
@@ -144,9 +144,23 @@ impl LabelEnsemble {
         if items.is_empty() {
             return Vec::new();
         }
+        self.clusters(trace, &items, &Prepared::of(self))
+    }
+
+    /// The ensemble annotations of `trace` from `items`, its member patterns with their member's
+    /// index, in the order given.
+    fn clusters(
+        &self,
+        trace: &Trace,
+        items: &[(usize, &Annotation)],
+        prepared: &Prepared,
+    ) -> Vec<Annotation> {
         let scale = crate::envs::facts(self.env).nearby_scale;
-        let centres: Vec<Option<(f64, f64)>> =
-            items.iter().map(|(_, a)| centroid(trace, a)).collect();
+        let mut id_buf = String::new();
+        let centres: Vec<Option<(f64, f64)>> = items
+            .iter()
+            .map(|(_, a)| centroid(trace, a, &mut id_buf))
+            .collect();
         let n = items.len();
         let mut parent: Vec<usize> = (0..n).collect();
         // Pairs are tested in order of start step, and a pattern stops looking once the others start
@@ -173,9 +187,7 @@ impl LabelEnsemble {
             let r = find(&mut parent, i);
             groups.entry(r).or_default().push(i);
         }
-        let votes = self.votes();
-        let total: f64 = votes.iter().sum();
-        let id = self.id();
+        let Prepared { id, votes, total } = prepared;
         let mut out = Vec::new();
         for group in groups.values() {
             let mut members: Vec<usize> = group.iter().map(|&i| items[i].0).collect();
@@ -223,20 +235,50 @@ impl LabelEnsemble {
                 });
             }
         }
-        out.sort_by(|a, b| {
-            (a.start_step, a.end_step)
-                .cmp(&(b.start_step, b.end_step))
-                .then_with(|| {
-                    a.metadata
-                        .as_ref()
-                        .map(|m| m.to_string())
-                        .cmp(&b.metadata.as_ref().map(|m| m.to_string()))
-                })
-        });
+        sort_by_span_then_metadata(&mut out);
         for (seq, a) in out.iter_mut().enumerate() {
             a.seq = seq;
         }
         out
+    }
+}
+
+/// What the combination needs of a label's ensemble on every trace, computed once: its id and the
+/// members' votes with their sum.
+struct Prepared {
+    id: DetectorId,
+    votes: Vec<f64>,
+    total: f64,
+}
+
+impl Prepared {
+    fn of(e: &LabelEnsemble) -> Self {
+        let votes = e.votes();
+        Prepared {
+            id: e.id(),
+            total: votes.iter().sum(),
+            votes,
+        }
+    }
+}
+
+/// Orders ensemble annotations by (start, end), ties by the text of their metadata — the order of
+/// `sort_by` with that comparator (both are stable), with the metadata written out only for the
+/// annotations that tie on their span.
+fn sort_by_span_then_metadata(out: &mut [Annotation]) {
+    out.sort_by_key(|a| (a.start_step, a.end_step));
+    let mut lo = 0;
+    while lo < out.len() {
+        let span = (out[lo].start_step, out[lo].end_step);
+        let hi = lo
+            + out[lo..]
+                .iter()
+                .take_while(|a| (a.start_step, a.end_step) == span)
+                .count();
+        if hi - lo > 1 {
+            out[lo..hi].sort_by_cached_key(|a| a.metadata.as_ref().map(|m| m.to_string()));
+        }
+        lo = hi;
     }
 }
 
@@ -261,8 +303,8 @@ fn linked(
 }
 
 /// The centroid of a pattern's objects' centres at its first step (the nearest step at or after it),
-/// or `None` when none of its objects is in the trace there.
-fn centroid(trace: &Trace, a: &Annotation) -> Option<(f64, f64)> {
+/// or `None` when none of its objects is in the trace there. `buf` is scratch space for object ids.
+fn centroid(trace: &Trace, a: &Annotation, buf: &mut String) -> Option<(f64, f64)> {
     let i = trace
         .timesteps
         .partition_point(|t| t.index < a.start_step)
@@ -270,7 +312,7 @@ fn centroid(trace: &Trace, a: &Annotation) -> Option<(f64, f64)> {
     let step = &trace.timesteps[i];
     let (mut x, mut y, mut n) = (0.0, 0.0, 0usize);
     for o in &step.objects {
-        if a.objects.contains(&o.object_id()) {
+        if a.objects.iter().any(|id| id == object_id(&o.body, buf)) {
             let (cx, cy) = o.body.centre();
             x += cx;
             y += cy;
@@ -278,6 +320,24 @@ fn centroid(trace: &Trace, a: &Annotation) -> Option<(f64, f64)> {
         }
     }
     (n > 0).then(|| (x / n as f64, y / n as f64))
+}
+
+/// [`Body::object_id`] without allocating: a ball's id, or the index written into `buf`.
+fn object_id<'a>(body: &'a Body, buf: &'a mut String) -> &'a str {
+    use std::fmt::Write;
+    match body {
+        Body::Pool(b) => &b.ball_id,
+        Body::Phyre(o) => {
+            buf.clear();
+            let _ = write!(buf, "{}", o.object_index);
+            buf
+        }
+        Body::Iphyre(o) => {
+            buf.clear();
+            let _ = write!(buf, "{}", o.index);
+            buf
+        }
+    }
 }
 
 fn find(parent: &mut [usize], i: usize) -> usize {
@@ -310,23 +370,39 @@ pub fn combine(detectors: &[Detector], traces: &[Trace], anns: Vec<Annotation>) 
     if ensembles.is_empty() {
         return anns;
     }
-    let member = |a: &Annotation| {
-        ensembles
-            .iter()
-            .any(|e| e.members.iter().any(|m| m.id == a.detector_id))
-    };
-    let (members, mut out): (Vec<Annotation>, Vec<Annotation>) = anns.into_iter().partition(member);
-    // Member patterns grouped by trace once, so a batch costs its patterns, not traces × patterns.
-    let mut by_trace: HashMap<&str, Vec<&Annotation>> = HashMap::new();
-    for a in &members {
-        by_trace.entry(a.trace_id.as_str()).or_default().push(a);
+    // Each member id's ensembles, with its (first) position among each one's members.
+    let mut roles: HashMap<&str, Vec<(usize, usize)>> = HashMap::new();
+    for (e, ens) in ensembles.iter().enumerate() {
+        for (k, m) in ens.members.iter().enumerate() {
+            let r = roles.entry(m.id.as_str()).or_default();
+            if !r.iter().any(|&(f, _)| f == e) {
+                r.push((e, k));
+            }
+        }
     }
+    let (members, mut out): (Vec<Annotation>, Vec<Annotation>) = anns
+        .into_iter()
+        .partition(|a| roles.contains_key(a.detector_id.as_str()));
+    // Member patterns grouped by trace and ensemble once, in their order, so a batch costs its
+    // patterns, not traces × patterns.
+    let mut by_trace: HashMap<&str, Vec<Vec<(usize, &Annotation)>>> = HashMap::new();
+    for a in &members {
+        let slots = by_trace
+            .entry(a.trace_id.as_str())
+            .or_insert_with(|| vec![Vec::new(); ensembles.len()]);
+        for &(e, k) in &roles[a.detector_id.as_str()] {
+            slots[e].push((k, a));
+        }
+    }
+    let prepared: Vec<Prepared> = ensembles.iter().map(Prepared::of).collect();
     for trace in traces {
-        let Some(refs) = by_trace.get(trace.trace_id.as_str()) else {
+        let Some(slots) = by_trace.get(trace.trace_id.as_str()) else {
             continue;
         };
-        for e in &ensembles {
-            out.extend(e.annotate_trace(trace, refs));
+        for ((e, items), p) in ensembles.iter().zip(slots).zip(&prepared) {
+            if !items.is_empty() {
+                out.extend(e.clusters(trace, items, p));
+            }
         }
     }
     out
@@ -579,6 +655,56 @@ mod tests {
             .map(|a| (a.start_step, (a.activation * 1e9).round() / 1e9))
             .collect();
         assert_eq!(got, vec![(3, 0.9), (4, 0.9)]);
+    }
+
+    #[test]
+    fn object_ids_without_allocating_are_the_bodies_ids() {
+        let mut buf = String::new();
+        for env in [Env::Pooltool, Env::Phyre, Env::Iphyre] {
+            let t = crate::testutil::synthetic_trace(env, 0, 2, 3);
+            for o in &t.timesteps[0].objects {
+                assert_eq!(object_id(&o.body, &mut buf), o.body.object_id());
+            }
+        }
+    }
+
+    #[test]
+    fn ties_on_the_span_are_ordered_by_the_metadata_text_as_a_full_sort_orders_them() {
+        let t = trace();
+        let d = &members(0.5, 0.02, 1.0)[0];
+        let mut anns: Vec<Annotation> = [
+            (3, 4, 2.5),
+            (1, 2, 10.0),
+            (3, 4, 10.0),
+            (3, 4, -1.0),
+            (1, 1, 0.0),
+        ]
+        .iter()
+        .map(|&(s, e, m)| {
+            let mut a = ann(d, &t, 0, s, e, &["cue"]);
+            a.metadata = Some(json!({"x": m}));
+            a
+        })
+        .collect();
+        let mut full = anns.clone();
+        full.sort_by(|a, b| {
+            (a.start_step, a.end_step)
+                .cmp(&(b.start_step, b.end_step))
+                .then_with(|| {
+                    a.metadata
+                        .as_ref()
+                        .map(|m| m.to_string())
+                        .cmp(&b.metadata.as_ref().map(|m| m.to_string()))
+                })
+        });
+        sort_by_span_then_metadata(&mut anns);
+        assert_eq!(anns, full);
+        // "10.0" sorts before "2.5" as text.
+        let xs: Vec<f64> = anns
+            .iter()
+            .map(|a| a.metadata.as_ref().unwrap()["x"].as_f64().unwrap())
+            .collect();
+        assert_eq!(xs, vec![0.0, 10.0, -1.0, 10.0, 2.5]);
     }
 
     #[test]
