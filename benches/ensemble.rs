@@ -88,38 +88,63 @@ fn ensemble_of(
     Library::load(&path).expect("the ensemble library loads")
 }
 
-/// Per label of `base`, `n` distinct `mutate` children of its built-in detector (one edit each,
-/// seeds 1, 2, … in order) that run without error on every probe trace; fewer when 200 seeds do not
-/// give `n`.
-fn mutants(base: &Library, n: usize, probe: &[Trace], pool: &WorkerPool) -> Vec<Vec<String>> {
-    let proposer = MutateProposer::new(None, 1).expect("python3 for the mutate proposer");
-    base.detectors
+/// Per label of `base`, `n` distinct `mutate` children of its built-in detector (up to 2 edits each,
+/// seeds 1, 2, … in order) that run without error on every probe trace, preferring children whose
+/// patterns there differ from the parent's (in number or span); fewer when 60 seeds do not give `n`.
+/// Also returns how many of the children kept differ from their parent.
+fn mutants(
+    base: &Library,
+    n: usize,
+    probe: &[Trace],
+    pool: &WorkerPool,
+) -> (Vec<Vec<String>>, usize) {
+    let proposer = MutateProposer::new(None, 2).expect("python3 for the mutate proposer");
+    let spans = |d: &Detector| -> Option<Vec<Vec<(i64, i64)>>> {
+        let batch = pool.run(std::slice::from_ref(d), probe);
+        batch
+            .results
+            .iter()
+            .map(|r| {
+                (r.status == CandidateStatus::Ok).then(|| {
+                    r.patterns
+                        .iter()
+                        .map(|p| (p.start_step, p.end_step))
+                        .collect()
+                })
+            })
+            .collect()
+    };
+    let mut differing = 0;
+    let out = base
+        .detectors
         .iter()
         .map(|d| {
-            let mut kept: Vec<String> = Vec::new();
-            for seed in 1..=200u64 {
-                if kept.len() == n {
+            let parent = spans(d);
+            let (mut other, mut same): (Vec<String>, Vec<String>) = (Vec::new(), Vec::new());
+            for seed in 1..=60u64 {
+                if other.len() == n {
                     break;
                 }
                 let Ok((code, _)) = proposer.mutate(&[d.code.as_str()], seed) else {
                     continue;
                 };
-                if code == d.code || kept.contains(&code) {
+                if code == d.code || other.contains(&code) || same.contains(&code) {
                     continue;
                 }
                 let child = Detector::new(Env::Pooltool, &d.label, &code, "mutant");
-                let batch = pool.run(std::slice::from_ref(&child), probe);
-                if batch
-                    .results
-                    .iter()
-                    .all(|r| r.status == CandidateStatus::Ok)
-                {
-                    kept.push(code);
+                match spans(&child) {
+                    Some(s) if Some(&s) != parent.as_ref() => other.push(code),
+                    Some(_) => same.push(code),
+                    None => {}
                 }
             }
-            kept
+            differing += other.len();
+            other.extend(same);
+            other.truncate(n);
+            other
         })
-        .collect()
+        .collect();
+    (out, differing.min(n * base.detectors.len()))
 }
 
 /// Where one library's time went, summed over batches.
@@ -247,7 +272,7 @@ fn main() {
                 .expect("a dataset shot simulates")
         })
         .collect();
-    let children = mutants(&base, 3, &probe, &new_pool());
+    let (children, differing) = mutants(&base, 3, &probe, &new_pool());
     let mut libs = vec![("single".to_string(), base.clone())];
     for k in [2, 4] {
         let copy = |l: usize, m: usize| {
@@ -282,9 +307,10 @@ fn main() {
         libs.push((format!("mutants K={k}"), lib));
     }
     println!(
-        "ensemble: {} labels of {} over {n} simulated traces (dt 0.01 s), {workers} worker(s)",
+        "ensemble: {} labels of {} over {n} simulated traces (dt 0.01 s), {workers} worker(s); {differing} of {} mutate children annotate the probe traces differently from their parent",
         base.detectors.len(),
-        base.name
+        base.name,
+        children.iter().map(Vec::len).sum::<usize>()
     );
     struct Run {
         name: String,
