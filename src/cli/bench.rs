@@ -155,7 +155,10 @@ fn candidate_settings() -> Vec<(&'static str, ParquetSettings)> {
             "zstd 3, no statistics on label strings",
             with(&|s| s.label_stats = false),
         ),
-        ("zstd 3, chunk statistics only", with(&|s| s.stats = Stats::Chunk)),
+        (
+            "zstd 3, chunk statistics only",
+            with(&|s| s.stats = Stats::Chunk),
+        ),
         ("zstd 3, 64 Ki-row pages", with(&|s| s.page_rows = 1 << 16)),
         (
             "zstd 3, 1 Mi-row row groups",
