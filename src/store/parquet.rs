@@ -58,9 +58,9 @@ pub struct ParquetSettings {
     pub float_byte_stream_split: bool,
     /// Statistics of every column.
     pub stats: Stats,
-    /// Statistics on the string columns other than `trace_id` (object ids, kinds, states, shapes,
-    /// colours, `extra`): without them the writer compares no strings per row; `trace_id`, the
-    /// integers and the floats keep theirs.
+    /// Statistics on the dictionary-encoded string columns other than `trace_id` (the labels: object
+    /// ids, kinds, states, shapes, colours): without them the writer compares no strings per row;
+    /// `trace_id`, plain strings, integers and floats keep theirs.
     pub label_stats: bool,
     /// Rows per row group.
     pub row_group_rows: usize,
@@ -116,9 +116,7 @@ impl ParquetSettings {
                         b = b.set_column_encoding(col(), Encoding::BYTE_STREAM_SPLIT);
                     }
                 }
-                DataType::Utf8 | DataType::Dictionary(..)
-                    if !self.label_stats && f.name() != "trace_id" =>
-                {
+                DataType::Dictionary(..) if !self.label_stats && f.name() != "trace_id" => {
                     b = b.set_column_statistics_enabled(col(), EnabledStatistics::None);
                 }
                 _ => {}
