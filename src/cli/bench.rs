@@ -93,87 +93,109 @@ pub struct Args {
     #[arg(long)]
     json: Option<PathBuf>,
     /// Instead of the cases: re-encode the trace tables of this run folder with each Parquet setting
-    /// annotrace considered (codec and level, float dictionaries, statistics, row-group size) and
-    /// print time and size per setting.
+    /// annotrace considered (codec and level, float dictionaries and encodings, statistics, page and
+    /// row-group size), one write per trace's worth of rows as `simulate` writes them, and print time
+    /// (the faster of two passes) and size per setting.
     #[arg(long, conflicts_with_all = ["cases", "threads", "scale"])]
     settings: Option<PathBuf>,
 }
 
 /// The Parquet settings `--settings` compares, the default first.
 fn candidate_settings() -> Vec<(&'static str, ParquetSettings)> {
-    let nodict = ParquetSettings::default();
+    // The default until session 8 (2026-11-24): zstd 3, statistics on every column, 20,000-row
+    // pages; every other candidate changes it in one or a few ways.
     let d = ParquetSettings {
-        float_dictionary: true,
-        ..nodict
+        codec: Codec::Zstd(3),
+        label_stats: true,
+        page_rows: 20_000,
+        ..ParquetSettings::default()
     };
+    let with = |f: &dyn Fn(&mut ParquetSettings)| {
+        let mut s = d;
+        f(&mut s);
+        s
+    };
+    let fast = with(&|s| {
+        s.label_stats = false;
+        s.page_rows = 1 << 16;
+    });
     vec![
         (
-            "zstd 3, dictionary everywhere, page stats, 64 Ki rows (the default before 2026-11-24)",
+            "zstd 3, no float dictionary, page statistics everywhere, 20,000-row pages (the default before session 8)",
             d,
         ),
         (
-            "zstd 1",
-            ParquetSettings {
-                codec: Codec::Zstd(1),
-                ..d
-            },
+            "zstd 3, dictionary on floats too (the default before 2026-11-24)",
+            with(&|s| s.float_dictionary = true),
+        ),
+        ("zstd 1", with(&|s| s.codec = Codec::Zstd(1))),
+        ("zstd 9", with(&|s| s.codec = Codec::Zstd(9))),
+        ("lz4 (raw)", with(&|s| s.codec = Codec::Lz4Raw)),
+        ("snappy", with(&|s| s.codec = Codec::Snappy)),
+        ("uncompressed", with(&|s| s.codec = Codec::None)),
+        (
+            "zstd 3, byte-stream-split floats",
+            with(&|s| s.float_byte_stream_split = true),
         ),
         (
-            "zstd 9",
-            ParquetSettings {
-                codec: Codec::Zstd(9),
-                ..d
-            },
+            "zstd 1, byte-stream-split floats",
+            with(&|s| {
+                s.codec = Codec::Zstd(1);
+                s.float_byte_stream_split = true;
+            }),
         ),
         (
-            "snappy",
-            ParquetSettings {
-                codec: Codec::Snappy,
-                ..d
-            },
+            "lz4, byte-stream-split floats",
+            with(&|s| {
+                s.codec = Codec::Lz4Raw;
+                s.float_byte_stream_split = true;
+            }),
         ),
         (
-            "uncompressed",
-            ParquetSettings {
-                codec: Codec::None,
-                ..d
-            },
-        ),
-        ("zstd 3, no float dictionary (the default)", nodict),
-        (
-            "zstd 1, no float dictionary",
-            ParquetSettings {
-                codec: Codec::Zstd(1),
-                ..nodict
-            },
+            "zstd 3, no statistics on label strings",
+            with(&|s| s.label_stats = false),
         ),
         (
-            "zstd 3, chunk stats only",
-            ParquetSettings {
-                stats: Stats::Chunk,
-                ..d
-            },
+            "zstd 3, chunk statistics only",
+            with(&|s| s.stats = Stats::Chunk),
         ),
+        ("zstd 3, 64 Ki-row pages", with(&|s| s.page_rows = 1 << 16)),
         (
             "zstd 3, 1 Mi-row row groups",
-            ParquetSettings {
-                row_group_rows: 1 << 20,
-                ..d
-            },
+            with(&|s| s.row_group_rows = 1 << 20),
         ),
         (
             "zstd 3, 8 Ki-row row groups",
-            ParquetSettings {
-                row_group_rows: 1 << 13,
-                ..d
-            },
+            with(&|s| s.row_group_rows = 1 << 13),
         ),
         (
-            "zstd 3, no float dictionary, chunk stats",
-            ParquetSettings {
-                stats: Stats::Chunk,
-                ..nodict
-            },
+            "zstd 1, no label statistics, 64 Ki-row pages (the default now)",
+            with(&|s| {
+                *s = fast;
+                s.codec = Codec::Zstd(1);
+            }),
+        ),
+        (
+            "zstd 1, byte-stream-split floats, no label statistics, 64 Ki-row pages",
+            with(&|s| {
+                *s = fast;
+                s.codec = Codec::Zstd(1);
+                s.float_byte_stream_split = true;
+            }),
+        ),
+        (
+            "lz4, no label statistics, 64 Ki-row pages",
+            with(&|s| {
+                *s = fast;
+                s.codec = Codec::Lz4Raw;
+            }),
+        ),
+        (
+            "uncompressed, no label statistics, 64 Ki-row pages",
+            with(&|s| {
+                *s = fast;
+                s.codec = Codec::None;
+            }),
         ),
     ]
 }
@@ -221,24 +243,37 @@ fn compare_settings(run: &Path) -> anyhow::Result<()> {
     let mut base = None;
     let result = (|| -> anyhow::Result<()> {
         for (name, settings) in candidate_settings() {
+            // Each setting twice; the faster pass counts (the machine is shared).
+            let (mut secs, mut cpu) = (f64::INFINITY, f64::INFINITY);
             let (mut bytes, mut frames_bytes) = (0u64, 0u64);
-            let start = Instant::now();
-            let cpu0 = cpu_s(libc::RUSAGE_SELF);
-            for (i, (table, schema, batches, _)) in files.iter().enumerate() {
-                let target = scratch.join(format!("{i}.parquet"));
-                let mut sink = ParquetSink::create_with(&target, schema.clone(), &settings)?;
-                for b in batches {
-                    sink.write(b)?;
+            for _pass in 0..2 {
+                (bytes, frames_bytes) = (0, 0);
+                let start = Instant::now();
+                let cpu0 = cpu_s(libc::RUSAGE_SELF);
+                for (i, (table, schema, batches, _)) in files.iter().enumerate() {
+                    let target = scratch.join(format!("{i}.parquet"));
+                    let mut sink = ParquetSink::create_with(&target, schema.clone(), &settings)?;
+                    // One write per trace's worth of rows, as the `simulate` stage writes them.
+                    let table_rows: usize = batches.iter().map(|b| b.num_rows()).sum();
+                    let chunk = (table_rows / traces.max(1) as usize).max(1);
+                    for b in batches {
+                        let mut at = 0;
+                        while at < b.num_rows() {
+                            let len = chunk.min(b.num_rows() - at);
+                            sink.write(&b.slice(at, len))?;
+                            at += len;
+                        }
+                    }
+                    let (path, _) = sink.commit()?;
+                    let n = fs::metadata(&path)?.len();
+                    bytes += n;
+                    if *table == "frames" {
+                        frames_bytes += n;
+                    }
                 }
-                let (path, _) = sink.commit()?;
-                let n = fs::metadata(&path)?.len();
-                bytes += n;
-                if *table == "frames" {
-                    frames_bytes += n;
-                }
+                secs = secs.min(start.elapsed().as_secs_f64());
+                cpu = cpu.min(cpu_s(libc::RUSAGE_SELF) - cpu0);
             }
-            let secs = start.elapsed().as_secs_f64();
-            let cpu = cpu_s(libc::RUSAGE_SELF) - cpu0;
             let base = *base.get_or_insert(bytes);
             println!(
                 "| {name} | {secs:.2} | {cpu:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.3} |",

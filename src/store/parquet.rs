@@ -8,7 +8,7 @@ use arrow::datatypes::DataType;
 use arrow::datatypes::SchemaRef;
 use parquet::arrow::ArrowWriter;
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
-use parquet::basic::{Compression, ZstdLevel};
+use parquet::basic::{Compression, Encoding, ZstdLevel};
 use parquet::file::properties::{EnabledStatistics, WriterProperties};
 use parquet::schema::types::ColumnPath;
 
@@ -19,6 +19,10 @@ use super::atomic::AtomicFile;
 /// readers can skip row groups of other traces.
 pub const ROW_GROUP_ROWS: usize = 64 * 1024;
 
+/// Rows per data page at most: a whole row group's column chunk (the Parquet writer's own default,
+/// 20,000, made files 2–8 % larger and cost a compression call per page).
+pub const PAGE_ROWS: usize = ROW_GROUP_ROWS;
+
 /// The codec of a Parquet file's pages.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Codec {
@@ -26,6 +30,8 @@ pub enum Codec {
     Zstd(i32),
     /// Snappy.
     Snappy,
+    /// LZ4 (the raw block format, Parquet's `LZ4_RAW`).
+    Lz4Raw,
     /// No compression.
     None,
 }
@@ -40,30 +46,45 @@ pub enum Stats {
 }
 
 /// The encoding choices of a run's Parquet files (docs/performance.md, "Parquet settings", measured
-/// each of them).
+/// each of them). None of them changes the rows, values or Arrow schema a reader sees, only the bytes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ParquetSettings {
     /// Page codec.
     pub codec: Codec,
     /// Dictionary-encode `Float64` columns (other columns always are: ids, kinds, integers).
     pub float_dictionary: bool,
+    /// Encode `Float64` columns that are not dictionary-encoded as `BYTE_STREAM_SPLIT` (each byte of
+    /// the eight in its own stream) instead of `PLAIN`.
+    pub float_byte_stream_split: bool,
     /// Statistics of every column.
     pub stats: Stats,
+    /// Statistics on the dictionary-encoded string columns other than `trace_id` (the labels: object
+    /// ids, kinds, states, shapes, colours): without them the writer compares no strings per row;
+    /// `trace_id`, plain strings, integers and floats keep theirs.
+    pub label_stats: bool,
     /// Rows per row group.
     pub row_group_rows: usize,
+    /// Rows per data page at most.
+    pub page_rows: usize,
 }
 
 impl Default for ParquetSettings {
-    /// What annotrace writes: zstd level 3, dictionaries on every column but the `Float64` ones
-    /// (21 % smaller files than with them: simulator states rarely repeat, and a float column's
-    /// dictionary only costs until the writer falls back to plain pages), page statistics, row groups
-    /// of [`ROW_GROUP_ROWS`].
+    /// What annotrace writes (docs/performance.md, "Parquet settings", measured each choice): zstd
+    /// level 1 (within 1 % of level 3's size, a quarter less CPU); dictionaries on every column but
+    /// the `Float64` ones (simulator states rarely repeat, and a float column's dictionary only costs
+    /// until the writer falls back to plain pages); statistics per page, except on the label strings
+    /// (no string comparisons per row: a row group of many traces spans every label anyway); pages
+    /// of up to a row group's rows (one compression call per column chunk; 2–8 % smaller files);
+    /// row groups of [`ROW_GROUP_ROWS`].
     fn default() -> Self {
         ParquetSettings {
-            codec: Codec::Zstd(3),
+            codec: Codec::Zstd(1),
             float_dictionary: false,
+            float_byte_stream_split: false,
             stats: Stats::Page,
+            label_stats: false,
             row_group_rows: ROW_GROUP_ROWS,
+            page_rows: PAGE_ROWS,
         }
     }
 }
@@ -74,6 +95,7 @@ impl ParquetSettings {
         let codec = match self.codec {
             Codec::Zstd(level) => Compression::ZSTD(ZstdLevel::try_new(level).unwrap_or_default()),
             Codec::Snappy => Compression::SNAPPY,
+            Codec::Lz4Raw => Compression::LZ4_RAW,
             Codec::None => Compression::UNCOMPRESSED,
         };
         let mut b = WriterProperties::builder()
@@ -83,12 +105,21 @@ impl ParquetSettings {
                 Stats::Page => EnabledStatistics::Page,
                 Stats::Chunk => EnabledStatistics::Chunk,
             })
+            .set_data_page_row_count_limit(self.page_rows.max(1))
             .set_created_by(format!("annotrace {}", crate::VERSION));
-        if !self.float_dictionary {
-            for f in schema.fields() {
-                if f.data_type() == &DataType::Float64 {
-                    b = b.set_column_dictionary_enabled(ColumnPath::from(f.name().as_str()), false);
+        for f in schema.fields() {
+            let col = || ColumnPath::from(f.name().as_str());
+            match f.data_type() {
+                DataType::Float64 if !self.float_dictionary => {
+                    b = b.set_column_dictionary_enabled(col(), false);
+                    if self.float_byte_stream_split {
+                        b = b.set_column_encoding(col(), Encoding::BYTE_STREAM_SPLIT);
+                    }
                 }
+                DataType::Dictionary(..) if !self.label_stats && f.name() != "trace_id" => {
+                    b = b.set_column_statistics_enabled(col(), EnabledStatistics::None);
+                }
+                _ => {}
             }
         }
         b.build()
@@ -177,4 +208,44 @@ pub fn read_file(path: &Path) -> Result<Vec<RecordBatch>, StoreError> {
     reader
         .collect::<Result<Vec<_>, _>>()
         .map_err(|e| StoreError::parquet(path, parquet::errors::ParquetError::from(e)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use parquet::file::properties::EnabledStatistics;
+
+    #[test]
+    fn trace_ids_keep_statistics_and_floats_lose_dictionaries() {
+        let schema = crate::trace::schema::FRAMES.clone();
+        let props = ParquetSettings::default().properties(&schema);
+        let col = |name: &str| ColumnPath::from(name);
+        // `read_trace` skips row groups by the `trace_id` statistics.
+        assert_eq!(
+            props.statistics_enabled(&col("trace_id")),
+            EnabledStatistics::Page
+        );
+        assert_eq!(props.statistics_enabled(&col("x")), EnabledStatistics::Page);
+        assert_eq!(
+            props.statistics_enabled(&col("object_id")),
+            EnabledStatistics::None
+        );
+        assert!(!props.dictionary_enabled(&col("x")));
+        assert!(props.dictionary_enabled(&col("object_id")));
+        assert!(props.dictionary_enabled(&col("step")));
+        let with_labels = ParquetSettings {
+            label_stats: true,
+            float_byte_stream_split: true,
+            ..ParquetSettings::default()
+        }
+        .properties(&schema);
+        assert_eq!(
+            with_labels.statistics_enabled(&col("object_id")),
+            EnabledStatistics::Page
+        );
+        assert_eq!(
+            with_labels.encoding(&col("vx")),
+            Some(parquet::basic::Encoding::BYTE_STREAM_SPLIT)
+        );
+    }
 }

@@ -49,7 +49,8 @@ fn a_case_is_measured_from_the_files_it_wrote_and_settings_compare_on_them() {
     ]);
     s.ok()
         .stdout_has("40 trace(s)")
-        .stdout_has("no float dictionary (the default)");
+        .stdout_has("64 Ki-row pages (the default now)")
+        .stdout_has("| lz4 (raw) |");
 }
 
 #[test]

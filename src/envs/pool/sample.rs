@@ -48,27 +48,49 @@ pub fn resample(sim: &Simulation, dt: f64) -> Vec<Sample> {
             balls: Vec::with_capacity(n),
         })
         .collect();
-    for (b, h) in sim.history.iter().enumerate() {
-        let params = &sim.ball_params[b];
-        // NOTE: `k` ends at the last history entry with time <= the sample time, as `state_at`'s
-        // partition point does; history times never decrease and start at 0.
-        let mut k = 0usize;
+    for b in 0..n {
+        let mut cursor = Cursor::new(sim, b);
         for sample in out.iter_mut() {
-            let t = sample.t.clamp(0.0, sim.t_end);
-            while k + 1 < h.len() && h[k + 1].t <= t {
-                k += 1;
-            }
-            let base = &h[k];
-            let mut s = if matches!(base.s, MotionState::Stationary | MotionState::Pocketed) {
-                *base
-            } else {
-                evolve_state(base, params, t - base.t)
-            };
-            s.t = t;
-            sample.balls.push(s);
+            sample.balls.push(cursor.state_at(sample.t));
         }
     }
     out
+}
+
+/// One ball's state at increasing times, walking its history once (what [`resample`] does per ball;
+/// the trace builder uses it step by step, without a [`Sample`] per time).
+pub struct Cursor<'a> {
+    sim: &'a Simulation,
+    ball: usize,
+    /// The last history entry with time <= the latest time asked for.
+    k: usize,
+}
+
+impl<'a> Cursor<'a> {
+    /// At the start of ball `ball`'s history.
+    pub fn new(sim: &'a Simulation, ball: usize) -> Self {
+        Cursor { sim, ball, k: 0 }
+    }
+
+    /// The state at time `t` (clamped to the shot), bit for bit what
+    /// [`state_at`](super::simulate::state_at) gives; times must not decrease between calls.
+    pub fn state_at(&mut self, t: f64) -> BallState {
+        let h = &self.sim.history[self.ball];
+        let t = t.clamp(0.0, self.sim.t_end);
+        // NOTE: `k` ends at the last history entry with time <= the sample time, as `state_at`'s
+        // partition point does; history times never decrease and start at 0.
+        while self.k + 1 < h.len() && h[self.k + 1].t <= t {
+            self.k += 1;
+        }
+        let base = &h[self.k];
+        let mut s = if matches!(base.s, MotionState::Stationary | MotionState::Pocketed) {
+            *base
+        } else {
+            evolve_state(base, &self.sim.ball_params[self.ball], t - base.t)
+        };
+        s.t = t;
+        s
+    }
 }
 
 #[cfg(test)]

@@ -1,7 +1,7 @@
 //! A finished [`Simulation`] as an annotrace [`Trace`] in the paper's PoolTool layout.
 //!
 //! * **Timesteps** lie on pooltool's `continuize` grid, t = 0, dt, 2·dt, … plus the time of the last
-//!   event ([`resample`]); every ball's state at each of them is evaluated from the closed-form
+//!   event ([`resample`](super::resample)); every ball's state at each of them is evaluated from the closed-form
 //!   motion after the latest event, not re-simulated. Every ball appears at every step
 //!   (pocketed balls with `motion_state = "pocketed"`), as `kind, ball_id, position, velocity,
 //!   angular_velocity, motion_state_code, motion_state, radius`.
@@ -18,7 +18,7 @@ use serde_json::{Value, json};
 use super::config::PoolConfig;
 use super::events::{Agent, EventKind};
 use super::rack;
-use super::sample::resample;
+use super::sample::{Cursor, sample_times};
 use super::scene::Scene;
 use super::shot::Shot;
 use super::simulate::{SimOptions, Simulation, Status, simulate};
@@ -89,19 +89,24 @@ pub fn trace_columns(
     trace_id: &str,
     opts: &TraceOptions,
 ) -> TraceColumns {
-    let mut samples = resample(sim, opts.dt);
+    let mut times = sample_times(sim.t_end, opts.dt);
     // The final sample is the last event's time; drop it when it repeats the grid (t_end = k·dt, or
     // a shot without events), so that times stay strictly increasing.
-    samples.dedup_by(|later, earlier| later.t <= earlier.t);
+    times.dedup_by(|later, earlier| *later <= *earlier);
     let mut frames = PoolFrames::new(
         sim.ball_ids.clone(),
         sim.ball_params.iter().map(|p| p.r).collect(),
         &STATE_NAMES,
-        samples.len(),
+        times.len(),
     );
-    for (index, sample) in samples.iter().enumerate() {
-        frames.begin_step(index as i64, sample.t);
-        for (b, s) in sample.balls.iter().enumerate() {
+    // Step by step, every ball's state straight into the columns (no `Sample` per time).
+    let mut cursors: Vec<Cursor<'_>> = (0..sim.ball_ids.len())
+        .map(|b| Cursor::new(sim, b))
+        .collect();
+    for (index, &t) in times.iter().enumerate() {
+        frames.begin_step(index as i64, t);
+        for (b, cursor) in cursors.iter_mut().enumerate() {
+            let s = cursor.state_at(t);
             frames.ball(b, &s.r, &s.v, &s.w, s.s.as_int());
         }
     }
@@ -281,7 +286,7 @@ pub fn outcome(sim: &Simulation, scene: &Scene, shot: &Shot, dt: f64) -> Outcome
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::envs::pool::{PoolConfig, SimOptions, simulate};
+    use crate::envs::pool::{PoolConfig, SimOptions, resample, simulate};
     use crate::trace::{Body, Object, PoolBall};
 
     fn straight_pot() -> (Scene, Shot) {
