@@ -1,0 +1,110 @@
+#!/usr/bin/env python3
+"""Dump one I-PHYRE episode of the original (iphyre 0.2.3 on pymunk 6.11.1) as a step-by-step scene for
+`cargo run -p chipmunk-step --example replay`: the space as iphyre builds it (bodies, shapes,
+constraints), the clicks that removed a block (as "remove before step k"), and after every step each
+body's exact state and the order in which Chipmunk solved the contacts (the order of its arbiter list,
+observed through the default collision handler's pre-solve callback, which Chipmunk calls for each
+arbiter just before appending it to that list; returning True leaves the physics unchanged).
+
+Run it with the original's interpreter:
+
+    /work/venvs/iphyre/bin/python tools/iphyre_chipmunk_steps.py seesaw '[[455,320,4.8]]' 60 > /tmp/s.txt
+    cargo run -p chipmunk-step --example replay -- /tmp/s.txt
+
+Output (one record per line, numbers in Python's repr, i.e. exact):
+    space GX GY ITERATIONS DT
+    body INDEX dynamic|static MASS MOMENT PX PY ANGLE
+    circle BODY R FRICTION ELASTICITY
+    segment BODY AX AY BX BY R FRICTION ELASTICITY
+    pin A B
+    spring A B REST STIFFNESS DAMPING
+    remove STEP BODY               (body removed, with its shape and constraints, before step STEP)
+    state STEP BODY PX PY ANGLE VX VY W
+    arbiters STEP A:B:N A:B:N ...   (solver order; A, B the bodies of the first and second shape, N points)
+    contact STEP A B NX NY [P1X P1Y P2X P2Y]...   (each arbiter's normal and points on shape a and b)
+    result SUCCESS STEPS
+"""
+import json
+import os
+import sys
+
+os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+
+import pymunk  # noqa: E402
+from iphyre.simulator import IPHYRE  # noqa: E402
+
+
+def main():
+    game, clicks = sys.argv[1], json.loads(sys.argv[2])
+    fps = float(sys.argv[3]) if len(sys.argv) > 3 else 60.0
+    env = IPHYRE(game, fps=fps)
+    env.reset()
+    space = env.space
+    out = sys.stdout.write
+    bodies = list(space.bodies)
+    index = {b: i for i, b in enumerate(bodies)}
+    out(f"space {space.gravity.x!r} {space.gravity.y!r} {space.iterations} {env.timestep!r}\n")
+    for i, b in enumerate(bodies):
+        kind = "static" if b.body_type == pymunk.Body.STATIC else "dynamic"
+        mass = b.mass if kind == "dynamic" else 0.0
+        moment = b.moment if kind == "dynamic" else 0.0
+        out(f"body {i} {kind} {mass!r} {moment!r} {b.position.x!r} {b.position.y!r} {b.angle!r}\n")
+        for s in b.shapes:
+            if isinstance(s, pymunk.Circle):
+                assert s.offset == (0, 0)
+                out(f"circle {i} {s.radius!r} {s.friction!r} {s.elasticity!r}\n")
+            else:
+                out(f"segment {i} {s.a.x!r} {s.a.y!r} {s.b.x!r} {s.b.y!r} {s.radius!r} "
+                    f"{s.friction!r} {s.elasticity!r}\n")
+    for c in space.constraints:
+        a, b = index[c.a], index[c.b]
+        assert c.anchor_a == (0, 0) and c.anchor_b == (0, 0)
+        if isinstance(c, pymunk.PinJoint):
+            out(f"pin {a} {b}\n")
+        else:
+            out(f"spring {a} {b} {c.rest_length!r} {c.stiffness!r} {c.damping!r}\n")
+
+    order, details = [], []
+
+    def pre_solve(arb, _space, _data):
+        sa, sb = arb.shapes
+        cps = arb.contact_point_set
+        order.append(f"{index[sa.body]}:{index[sb.body]}:{len(cps.points)}")
+        pts = " ".join(f"{p.point_a.x!r} {p.point_a.y!r} {p.point_b.x!r} {p.point_b.y!r}" for p in cps.points)
+        details.append(f"contact {step + 1} {index[sa.body]} {index[sb.body]} {cps.normal.x!r} {cps.normal.y!r} {pts}\n")
+        return True
+
+    space.add_default_collision_handler().pre_solve = pre_solve
+
+    acts = sorted([list(a) for a in clicks], key=lambda a: a[-1])
+    nxt, time_count, step = 0, 0, 0
+    while time_count < env.max_time:
+        if nxt < len(acts):
+            p, t = acts[nxt][0:2], acts[nxt][2]
+            if time_count >= t:
+                if t != 0:
+                    before = list(space.bodies)
+                    r = env.eliminate(p)
+                    if r != -1:
+                        out(f"remove {step + 1} {index[before[r]]}\n")
+                nxt += 1
+        order.clear()
+        details.clear()
+        space.step(env.timestep)
+        time_count += env.timestep
+        step += 1
+        for b in space.bodies:
+            if b.body_type == pymunk.Body.STATIC:
+                continue
+            out(f"state {step} {index[b]} {b.position.x!r} {b.position.y!r} {b.angle!r} "
+                f"{b.velocity.x!r} {b.velocity.y!r} {b.angular_velocity!r}\n")
+        out(f"arbiters {step} {' '.join(order)}\n")
+        out("".join(details))
+        if env.examine_success():
+            out(f"result 1 {step}\n")
+            return
+    out(f"result 0 {step}\n")
+
+
+if __name__ == "__main__":
+    main()
