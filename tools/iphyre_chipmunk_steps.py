@@ -10,6 +10,9 @@ Run it with the original's interpreter:
 
     /work/venvs/iphyre/bin/python tools/iphyre_chipmunk_steps.py seesaw '[[455,320,4.8]]' 60 > /tmp/s.txt
     cargo run -p chipmunk-step --example replay -- /tmp/s.txt
+    # or every N-th pair of a balanced set, both frame rates, one file per episode:
+    /work/venvs/iphyre/bin/python tools/iphyre_chipmunk_steps.py --set tests/data/iphyre/balanced_tune.jsonl.gz \
+        --every 4 --out /tmp/scenes
 
 Output (one record per line, numbers in Python's repr, i.e. exact):
     space GX GY ITERATIONS DT
@@ -34,13 +37,10 @@ import pymunk  # noqa: E402
 from iphyre.simulator import IPHYRE  # noqa: E402
 
 
-def main():
-    game, clicks = sys.argv[1], json.loads(sys.argv[2])
-    fps = float(sys.argv[3]) if len(sys.argv) > 3 else 60.0
+def dump(game, clicks, fps, out):
     env = IPHYRE(game, fps=fps)
     env.reset()
     space = env.space
-    out = sys.stdout.write
     bodies = list(space.bodies)
     index = {b: i for i, b in enumerate(bodies)}
     out(f"space {space.gravity.x!r} {space.gravity.y!r} {space.iterations} {env.timestep!r}\n")
@@ -104,6 +104,25 @@ def main():
             out(f"result 1 {step}\n")
             return
     out(f"result 0 {step}\n")
+
+
+def main():
+    if sys.argv[1] == "--set":
+        # --set FILE.jsonl[.gz] --every N --out DIR: one scene per N-th pair and fps, named PAIR_FPS.txt.
+        import gzip
+        path, every, out_dir = sys.argv[2], int(sys.argv[4]), sys.argv[6]
+        os.makedirs(out_dir, exist_ok=True)
+        opener = gzip.open if path.endswith(".gz") else open
+        with opener(path, "rt") as f:
+            records = [json.loads(line) for line in f if line.strip()]
+        for rec in records[::every]:
+            for res in rec["results"]:
+                name = f"{out_dir}/{rec['pair_id']:04d}_{rec['game']}_{res['fps']}.txt"
+                with open(name, "w") as f:
+                    dump(rec["game"], rec["actions"], float(res["fps"]), f.write)
+    else:
+        fps = float(sys.argv[3]) if len(sys.argv) > 3 else 60.0
+        dump(sys.argv[1], json.loads(sys.argv[2]), fps, sys.stdout.write)
 
 
 if __name__ == "__main__":
