@@ -26,9 +26,16 @@ Output (one record per line, numbers in Python's repr, i.e. exact):
     arbiters STEP A:B:N A:B:N ...   (solver order; A, B the bodies of the first and second shape, N points)
     contact STEP A B NX NY [P1X P1Y P2X P2Y]...   (each arbiter's normal and points on shape a and b)
     result SUCCESS STEPS
+
+With --compact (the test recordings in crates/chipmunk-step/tests/data/): no arbiters or contact lines,
+state lines for the last step only, and every 30 steps and at the last one
+    digest STEP HEX    (64-bit FNV-1a over every step so far: per body, in space order, its index as a
+                        little-endian u64 and PX PY ANGLE VX VY W as little-endian f64; then the
+                        step's arbiter order as written above, without "arbiters STEP ")
 """
 import json
 import os
+import struct
 import sys
 
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
@@ -37,7 +44,17 @@ import pymunk  # noqa: E402
 from iphyre.simulator import IPHYRE  # noqa: E402
 
 
-def dump(game, clicks, fps, out):
+FNV_OFFSET, FNV_PRIME, MASK = 0xCBF29CE484222325, 0x100000001B3, (1 << 64) - 1
+
+
+def fnv(h, data):
+    """64-bit FNV-1a over `data`, continuing from `h`."""
+    for byte in data:
+        h = ((h ^ byte) * FNV_PRIME) & MASK
+    return h
+
+
+def dump(game, clicks, fps, out, compact=False):
     env = IPHYRE(game, fps=fps)
     env.reset()
     space = env.space
@@ -78,6 +95,7 @@ def dump(game, clicks, fps, out):
 
     acts = sorted([list(a) for a in clicks], key=lambda a: a[-1])
     nxt, time_count, step = 0, 0, 0
+    h = FNV_OFFSET
     while time_count < env.max_time:
         if nxt < len(acts):
             p, t = acts[nxt][0:2], acts[nxt][2]
@@ -93,14 +111,23 @@ def dump(game, clicks, fps, out):
         space.step(env.timestep)
         time_count += env.timestep
         step += 1
+        done = env.examine_success()
+        last = done or not time_count < env.max_time
         for b in space.bodies:
             if b.body_type == pymunk.Body.STATIC:
                 continue
-            out(f"state {step} {index[b]} {b.position.x!r} {b.position.y!r} {b.angle!r} "
-                f"{b.velocity.x!r} {b.velocity.y!r} {b.angular_velocity!r}\n")
-        out(f"arbiters {step} {' '.join(order)}\n")
-        out("".join(details))
-        if env.examine_success():
+            values = (b.position.x, b.position.y, b.angle, b.velocity.x, b.velocity.y, b.angular_velocity)
+            h = fnv(h, struct.pack("<Q6d", index[b], *values))
+            if not compact or last:
+                out(f"state {step} {index[b]} " + " ".join(repr(v) for v in values) + "\n")
+        h = fnv(h, " ".join(order).encode())
+        if compact:
+            if step % 30 == 0 or last:
+                out(f"digest {step} {h:016x}\n")
+        else:
+            out(f"arbiters {step} {' '.join(order)}\n")
+            out("".join(details))
+        if done:
             out(f"result 1 {step}\n")
             return
     out(f"result 0 {step}\n")
@@ -121,8 +148,9 @@ def main():
                 with open(name, "w") as f:
                     dump(rec["game"], rec["actions"], float(res["fps"]), f.write)
     else:
-        fps = float(sys.argv[3]) if len(sys.argv) > 3 else 60.0
-        dump(sys.argv[1], json.loads(sys.argv[2]), fps, sys.stdout.write)
+        args = [a for a in sys.argv[1:] if a != "--compact"]
+        fps = float(args[2]) if len(args) > 2 else 60.0
+        dump(args[0], json.loads(args[1]), fps, sys.stdout.write, compact="--compact" in sys.argv)
 
 
 if __name__ == "__main__":

@@ -1,150 +1,66 @@
-//! Replays a scene recorded from pymunk by `tools/iphyre_chipmunk_steps.py` on this crate's step and
-//! reports, step by step, where the two part: the first step whose contact (arbiter) order differs, and
-//! the largest position difference per step until it exceeds a threshold.
+//! Replays a pymunk episode recorded by `tools/iphyre_chipmunk_steps.py` on this crate's step and
+//! reports where the two part: the first step whose contact (arbiter) order differs, and the first step
+//! whose body positions differ by more than a threshold (or, for a `--compact` recording, the first
+//! checkpoint whose running digest differs).
 //!
 //! ```text
-//! cargo run -p chipmunk-step --example replay -- SCENE.txt [--all] [--eps PX]
+//! cargo run -p chipmunk-step --example replay -- RECORDING.txt [--all] [--eps PX]
 //! ```
 //!
-//! `--all` prints every step's largest difference and both contact orders; `--eps` (default 1e-6 px)
-//! is the difference at which the replay stops.
+//! `--all` prints every step's largest position difference, the state differences of each body and
+//! both contact lists where they differ; `--eps` (default 0: bit for bit) is the position difference
+//! at which the replay stops.
 
-use std::collections::HashMap;
 use std::process::ExitCode;
 
-use chipmunk_step::{
-    Body, Constraint, DampedSpring, Geometry, PinJoint, Space, Vect, default_bias,
-};
+#[path = "../tests/support/recording.rs"]
+mod recording;
 
-fn num(s: &str) -> f64 {
-    s.parse().unwrap_or_else(|_| panic!("not a number: {s:?}"))
-}
-
-fn int(s: &str) -> usize {
-    s.parse()
-        .unwrap_or_else(|_| panic!("not an integer: {s:?}"))
-}
+use recording::{Digest, Recording, order_of};
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(path) = args.first() else {
-        eprintln!("usage: replay SCENE.txt [--all] [--eps PX]");
+        eprintln!("usage: replay RECORDING.txt [--all] [--eps PX]");
         return ExitCode::from(2);
     };
     let all = args.iter().any(|a| a == "--all");
-    let eps = args
+    let eps: f64 = args
         .iter()
         .position(|a| a == "--eps")
-        .map(|i| num(&args[i + 1]))
-        .unwrap_or(1e-6);
-    let text = std::fs::read_to_string(path).expect("read the scene");
-
-    let mut space = Space::new(Vect::ZERO);
-    let mut dt = 0.0;
-    // Recorded per step: body states and contact order; removals per step.
-    let mut states: HashMap<usize, Vec<(usize, [f64; 6])>> = HashMap::new();
-    let mut orders: HashMap<usize, String> = HashMap::new();
-    let mut removals: HashMap<usize, Vec<usize>> = HashMap::new();
-    let mut contacts: HashMap<usize, Vec<String>> = HashMap::new();
-    let mut result = (0, 0);
-    for line in text.lines() {
-        let f: Vec<&str> = line.split_whitespace().collect();
-        match f.first().copied() {
-            Some("space") => {
-                space = Space::new(Vect::new(num(f[1]), num(f[2])));
-                space.iterations = int(f[3]);
-                dt = num(f[4]);
-            }
-            Some("body") => {
-                let p = Vect::new(num(f[5]), num(f[6]));
-                assert_eq!(num(f[7]), 0.0, "initial angles are 0");
-                let body = if f[2] == "dynamic" {
-                    Body::dynamic(num(f[3]), num(f[4]), p)
-                } else {
-                    Body::fixed(p)
-                };
-                assert_eq!(space.add_body(body), int(f[1]));
-            }
-            Some("circle") => {
-                let g = Geometry::Circle {
-                    offset: Vect::ZERO,
-                    r: num(f[2]),
-                };
-                space.add_shape(int(f[1]), g, num(f[3]), num(f[4]));
-            }
-            Some("segment") => {
-                let g = Geometry::Segment {
-                    a: Vect::new(num(f[2]), num(f[3])),
-                    b: Vect::new(num(f[4]), num(f[5])),
-                    r: num(f[6]),
-                };
-                space.add_shape(int(f[1]), g, num(f[7]), num(f[8]));
-            }
-            Some("pin") => {
-                let j = PinJoint::new(
-                    space.bodies(),
-                    int(f[1]),
-                    int(f[2]),
-                    Vect::ZERO,
-                    Vect::ZERO,
-                    default_bias(),
-                );
-                space.add_constraint(Constraint::Pin(j));
-            }
-            Some("spring") => {
-                let s = DampedSpring::new(
-                    int(f[1]),
-                    int(f[2]),
-                    Vect::ZERO,
-                    Vect::ZERO,
-                    num(f[3]),
-                    num(f[4]),
-                    num(f[5]),
-                );
-                space.add_constraint(Constraint::Spring(s));
-            }
-            Some("remove") => removals.entry(int(f[1])).or_default().push(int(f[2])),
-            Some("state") => states.entry(int(f[1])).or_default().push((
-                int(f[2]),
-                [
-                    num(f[3]),
-                    num(f[4]),
-                    num(f[5]),
-                    num(f[6]),
-                    num(f[7]),
-                    num(f[8]),
-                ],
-            )),
-            Some("arbiters") => {
-                orders.insert(int(f[1]), f[2..].join(" "));
-            }
-            Some("contact") => contacts
-                .entry(int(f[1]))
-                .or_default()
-                .push(f[2..].join(" ")),
-            Some("result") => result = (int(f[1]), int(f[2])),
-            _ => {}
+        .and_then(|i| args.get(i + 1))
+        .map_or(0.0, |s| s.parse().expect("--eps takes a number"));
+    let text = match std::fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) => {
+            eprintln!("replay: {path}: {e}");
+            return ExitCode::from(2);
         }
-    }
-
+    };
+    let mut rec = Recording::parse(&text);
+    let mut space = std::mem::replace(
+        &mut rec.space,
+        chipmunk_step::Space::new(Default::default()),
+    );
+    let mut digest = Digest::new();
+    let mut checkpoints = rec.digests.iter().peekable();
     let mut first_order = None;
-    for step in 1..=result.1 {
-        for &b in removals.get(&step).into_iter().flatten() {
+    for step in 1..=rec.steps {
+        for &b in rec.removals.get(&step).into_iter().flatten() {
             space.remove_body(b);
         }
-        space.step(dt);
-        let ours: Vec<String> = space
-            .contacts()
-            .map(|(a, b, n)| format!("{a}:{b}:{n}"))
-            .collect();
-        let ours = ours.join(" ");
-        let theirs = orders.get(&step).cloned().unwrap_or_default();
-        if ours != theirs && first_order.is_none() {
+        space.step(rec.dt);
+        digest.step(&space);
+        let ours = order_of(&space);
+        if let Some(theirs) = rec.orders.get(&step)
+            && &ours != theirs
+            && first_order.is_none()
+        {
             first_order = Some(step);
             println!("step {step}: contact order differs\n  pymunk: {theirs}\n  ours:   {ours}");
         }
         let mut worst = (0.0f64, usize::MAX);
-        for (b, s) in states.get(&step).into_iter().flatten() {
+        for (b, s) in rec.states.get(&step).into_iter().flatten() {
             let body = &space.bodies()[*b];
             let d = (body.p.x - s[0]).abs().max((body.p.y - s[1]).abs());
             let dv = [
@@ -167,37 +83,49 @@ fn main() -> ExitCode {
             let ours_c: Vec<String> = space
                 .contact_points()
                 .iter()
-                .map(|(a, b, n, pts)| {
-                    let mut s = format!("{a} {b} {:?} {:?}", n.x, n.y);
-                    for (p1, p2) in pts {
+                .map(|c| {
+                    let mut s = format!(
+                        "{} {} {:?} {:?}",
+                        c.body_a, c.body_b, c.normal.x, c.normal.y
+                    );
+                    for (p1, p2) in &c.points {
                         s += &format!(" {:?} {:?} {:?} {:?}", p1.x, p1.y, p2.x, p2.y);
                     }
                     s
                 })
                 .collect();
-            let theirs_c = contacts.get(&step).cloned().unwrap_or_default();
-            if ours_c != theirs_c {
+            if let Some(theirs_c) = rec.contacts.get(&step)
+                && &ours_c != theirs_c
+            {
                 println!("  contacts differ\n    pymunk: {theirs_c:?}\n    ours:   {ours_c:?}");
             }
-            println!(
-                "step {step}: max |dp| {:.3e} (body {}) | pymunk {theirs} | ours {ours}",
-                worst.0, worst.1
-            );
+            println!("step {step}: max |dp| {:.3e} (body {})", worst.0, worst.1);
         }
-        if !(worst.0 <= eps) {
+        if worst.0 > eps || worst.0.is_nan() {
             println!(
-                "step {step}: positions part by {:.3e} px (body {}) — first contact-order difference: {}",
+                "step {step}: positions part by {:.3e} px (body {}); first contact-order difference: {}",
                 worst.0,
                 worst.1,
                 first_order.map_or("none".into(), |s| format!("step {s}"))
             );
-            return ExitCode::SUCCESS;
+            return ExitCode::FAILURE;
+        }
+        if let Some(&&(at, hex)) = checkpoints.peek()
+            && at == step
+        {
+            checkpoints.next();
+            if hex != digest.0 {
+                println!(
+                    "step {step}: the running digest differs (steps up to {step} are not bit for bit)"
+                );
+                return ExitCode::FAILURE;
+            }
         }
     }
     println!(
         "agree within {eps:e} px over all {} steps (pymunk success {}); first contact-order difference: {}",
-        result.1,
-        result.0,
+        rec.steps,
+        u8::from(rec.success),
         first_order.map_or("none".into(), |s| format!("step {s}"))
     );
     ExitCode::SUCCESS

@@ -38,11 +38,7 @@ const PRIMES: [usize; 12] = [5, 13, 23, 47, 97, 193, 389, 769, 1543, 3079, 6151,
 
 /// The smallest table size ≥ `n`.
 fn next_prime(n: usize) -> usize {
-    PRIMES
-        .iter()
-        .copied()
-        .find(|&p| p >= n)
-        .unwrap_or_else(|| n | 1)
+    PRIMES.iter().copied().find(|&p| p >= n).unwrap_or(n | 1)
 }
 
 /// A candidate pair for the narrow phase, in the order Chipmunk reports it.

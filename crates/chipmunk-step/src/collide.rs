@@ -364,7 +364,7 @@ fn segment_segment(s1: &Cached, h1: u64, s2: &Cached, h2: u64, id: &mut u32) -> 
     // Chipmunk rejects a contact at a segment's end against the segment's end tangent; I-PHYRE's
     // segments have zero tangents, which reject nothing unless the axis is not finite.
     let z = n.dot(Vect::ZERO);
-    let tangents_pass = z <= 0.0 && z >= 0.0;
+    let tangents_pass = z == 0.0;
     let at_end_1 = points.a == a1 || points.a == b1;
     let at_end_2 = points.b == a2 || points.b == b2;
     if !(points.d <= r1 + r2 && (!at_end_1 || tangents_pass) && (!at_end_2 || tangents_pass)) {

@@ -26,5 +26,5 @@ mod vect;
 pub use body::{Body, BodyKind};
 pub use constraint::{Constraint, DampedSpring, PinJoint};
 pub use shape::Geometry;
-pub use space::{BodyId, Space, default_bias};
+pub use space::{BodyId, ContactReport, Space, default_bias};
 pub use vect::Vect;

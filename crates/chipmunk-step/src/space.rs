@@ -29,6 +29,19 @@ pub fn default_bias() -> f64 {
     ((1.0f32 - 0.1f32) as f64).powf(60.0)
 }
 
+/// One touching shape pair of a step, as [`Space::contact_points`] reports it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ContactReport {
+    /// The body of the first shape.
+    pub body_a: BodyId,
+    /// The body of the second shape.
+    pub body_b: BodyId,
+    /// The normal, from the first shape to the second.
+    pub normal: Vect,
+    /// Each contact point on the first and on the second shape, in world coordinates.
+    pub points: Vec<(Vect, Vect)>,
+}
+
 /// A body handle.
 pub type BodyId = usize;
 
@@ -196,17 +209,20 @@ impl Space {
         })
     }
 
-    /// The contacts of the last step in solver order, in detail: the two bodies, the normal (from the
-    /// first shape to the second) and each point on the first and on the second shape (world
-    /// coordinates, as Chipmunk's contact point sets give them).
-    pub fn contact_points(&self) -> Vec<(BodyId, BodyId, Vect, Vec<(Vect, Vect)>)> {
+    /// The contacts of the last step in solver order, in detail (as Chipmunk's contact point sets give
+    /// them, for comparing with a recording of the original).
+    pub fn contact_points(&self) -> Vec<ContactReport> {
         self.active
             .iter()
             .map(|k| {
                 let arb = &self.arbiters[k];
                 let (pa, pb) = (self.bodies[arb.body_a].p, self.bodies[arb.body_b].p);
-                let points = arb.points().map(|(r1, r2)| (pa + r1, pb + r2)).collect();
-                (arb.body_a, arb.body_b, arb.normal(), points)
+                ContactReport {
+                    body_a: arb.body_a,
+                    body_b: arb.body_b,
+                    normal: arb.normal(),
+                    points: arb.points().map(|(r1, r2)| (pa + r1, pb + r2)).collect(),
+                }
             })
             .collect()
     }

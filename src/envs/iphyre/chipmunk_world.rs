@@ -50,9 +50,10 @@ impl ChipmunkWorld {
             let p = Vect::new(c[0], c[1]);
             let (body, geometry) = match o.kind {
                 ObjectKind::Ball => (
+                    // pymunk's moment_for_circle(m, 0, r), computed as Chipmunk does.
                     Body::dynamic(
                         params.ball_mass,
-                        params.ball_mass * 0.5 * o.radius * o.radius,
+                        params.ball_mass * (0.5 * (0.0 + o.radius * o.radius)),
                         p,
                     ),
                     Geometry::Circle {

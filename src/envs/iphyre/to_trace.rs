@@ -44,7 +44,7 @@ fn extra_of(result: &EpisodeResult, game: &Game) -> JsonMap {
         "task_index": game.index,
         "fold": game.fold,
         "actions": clicks,
-        "simulator": {"engine": "rapier2d", "fps": result.fps, "screen": [600, 600]},
+        "simulator": {"engine": result.engine.description(), "fps": result.fps, "screen": [600, 600]},
     }))
 }
 
