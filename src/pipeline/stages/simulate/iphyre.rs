@@ -417,4 +417,29 @@ mod tests {
         }
         assert!(parse_clicks("", g, 15.0).unwrap().is_empty());
     }
+
+    #[test]
+    fn the_fingerprint_names_every_engine_but_rapier() {
+        let all = Games::default_games().unwrap();
+        let fingerprint = |engine: Option<Engine>| {
+            let sim = IphyreSimulation {
+                params: PhysicsParams {
+                    engine: engine.unwrap_or_default(),
+                    ..PhysicsParams::default()
+                },
+                work: Work::Replay {
+                    game: Box::new(all.get("support").unwrap().clone()),
+                    clicks: Vec::new(),
+                },
+            };
+            sim.fingerprint_extra().unwrap()
+        };
+        // Runs made on rapier2d before the engine field existed keep their fingerprint...
+        assert!(fingerprint(Some(Engine::Rapier)).get("engine").is_none());
+        // ...and the default (the Chipmunk step) never reuses them.
+        assert_eq!(fingerprint(None)["engine"], "chipmunk");
+        assert_eq!(fingerprint(Some(Engine::Box2d))["engine"], "box2d");
+        let (default, rapier) = (fingerprint(None), fingerprint(Some(Engine::Rapier)));
+        assert_ne!(default, rapier);
+    }
 }
