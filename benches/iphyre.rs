@@ -7,13 +7,14 @@
 //!
 //! `cargo bench --bench iphyre`. A one-off pass before criterion prints, per game, episodes/s and
 //! steps/s with recording, and the mean over games (the figure the original's table reports), then
-//! the same at 10 fps.
+//! the same at 10 fps. The engine is the default one (the Chipmunk step); `IPHYRE_BENCH_ENGINE=rapier`
+//! (or `box2d`) measures another in the same way.
 
 use std::hint::black_box;
 use std::time::Instant;
 
 use annotrace::envs::iphyre::{
-    Click, Episode, Game, Games, PhysicsParams, clicks_rng, random_clicks, trace_of,
+    Click, Engine, Episode, Game, Games, PhysicsParams, clicks_rng, random_clicks, trace_of,
 };
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 
@@ -87,11 +88,23 @@ fn one_off(work: &[(Game, Vec<Click>)], params: &PhysicsParams) {
     );
 }
 
+/// The default parameters at `fps`, on the engine `IPHYRE_BENCH_ENGINE` names (default: the default).
+fn params_at(fps: f64) -> PhysicsParams {
+    let engine = std::env::var("IPHYRE_BENCH_ENGINE").map_or(Engine::default(), |name| {
+        Engine::from_name(&name).expect("IPHYRE_BENCH_ENGINE: chipmunk, rapier or box2d")
+    });
+    PhysicsParams {
+        engine,
+        ..PhysicsParams::with_fps(fps)
+    }
+}
+
 fn bench(c: &mut Criterion) {
     let games = Games::default_games().expect("built-in games");
     let work = workload(&games);
-    one_off(&work, &PhysicsParams::default());
-    one_off(&work, &PhysicsParams::with_fps(10.0));
+    eprintln!("engine: {}", params_at(60.0).engine.name());
+    one_off(&work, &params_at(60.0));
+    one_off(&work, &params_at(10.0));
     let mut g = c.benchmark_group("iphyre");
     g.sample_size(10);
     g.throughput(Throughput::Elements(work.len() as u64));
@@ -100,7 +113,7 @@ fn bench(c: &mut Criterion) {
         ("60fps_outcome", 60.0, false),
         ("10fps_record", 10.0, true),
     ] {
-        let params = PhysicsParams::with_fps(fps);
+        let params = params_at(fps);
         g.bench_function(name, |b| {
             b.iter(|| {
                 for (game, clicks) in &work {

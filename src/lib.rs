@@ -11,7 +11,7 @@
 //! - [`trace`]: the trace model, its Arrow schemas and the paper's JSON format;
 //! - [`store`]: the run directory on disk — atomic files, Parquet datasets, staging and commit;
 //! - [`envs`]: simulators behind one `Environment` trait (billiards after pooltool 0.6.0, PHYRE and
-//!   I-PHYRE on rapier2d), producing traces;
+//!   I-PHYRE on a Chipmunk-faithful step), producing traces;
 //! - [`builtin`]: the built-in data compiled into the binary (libraries, goal files), and whether a
 //!   path means a file on disk or a built-in;
 //! - [`detect`]: sandboxed Python workers that run detector programs over traces, annotations and libraries;

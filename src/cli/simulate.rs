@@ -87,8 +87,8 @@ pub struct Args {
     /// [default: 6].
     #[arg(long)]
     stride: Option<u64>,
-    /// phyre: the physics engine, box2d (PHYRE's own, the default) or rapier; iphyre: rapier (the
-    /// default), chipmunk (annotrace's Chipmunk-faithful step) or box2d.
+    /// phyre: the physics engine, box2d (PHYRE's own, the default) or rapier; iphyre: chipmunk
+    /// (annotrace's Chipmunk-faithful step, the default), rapier or box2d.
     #[arg(long, value_parser = ["box2d", "rapier", "chipmunk"])]
     engine: Option<String>,
 }

@@ -2,7 +2,7 @@
 //!
 //! **Owns:** the [`Environment`] trait (scenes, action validation, simulate → [`Trace`], success,
 //! rendering) and its implementations: [`pool`] (billiards, pooltool 0.6.0 physics) and [`iphyre`]
-//! (I-PHYRE on rapier2d by default, or Box2D) and [`phyre`] (PHYRE's ball tier on Box2D by default, or rapier2d), which share the rapier state of
+//! (I-PHYRE on the Chipmunk-faithful step by default, or rapier2d or Box2D) and [`phyre`] (PHYRE's ball tier on Box2D by default, or rapier2d), which share the rapier state of
 //! [`rapier`]. Their renderers share the pixmap, PNG and strip plumbing of the private `draw` module; PHYRE's and
 //! I-PHYRE's Box2D worlds share the contact listener of the private `box2d_contacts` module.
 //! **Does not:** write run folders or order stages (`pipeline/`), parse command lines (`cli/`). It uses

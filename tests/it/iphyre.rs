@@ -384,9 +384,11 @@ fn outcomes_agree_with_the_original_on_the_reference_set() {
             pairs: set.pairs.iter().filter(|p| p.fps == fps).cloned().collect(),
         };
         assert_eq!(sub.pairs.len(), 40);
+        // The default engine (the Chipmunk step) agrees on all 40 at both rates (2026-11-24; rapier2d
+        // on 40 and 39); one pair of slack for platform float differences.
         let a = agreement(&sub, &games, &PhysicsParams::default()).unwrap();
         assert!(
-            a.success_rate() >= 0.9,
+            a.success_rate() >= 0.975,
             "{fps} fps: success agrees on {}/{} pairs; disagreeing: {:?}",
             a.success_agree,
             a.pairs,
@@ -395,21 +397,21 @@ fn outcomes_agree_with_the_original_on_the_reference_set() {
                 .map(|&i| &sub.pairs[i].game)
                 .collect::<Vec<_>>()
         );
-        assert!(a.eliminations_agree * 10 >= a.pairs * 9, "{a:?}");
+        assert!(a.eliminations_agree + 1 >= a.pairs, "{a:?}");
     }
 }
 
 /// The balanced outcome sets (docs/fidelity.md "Balanced outcome sets"): `iphyre_gen.py outcomes` with
 /// seeds 1503 (tuning) and 1504 (held-out), 10 click lists per game (5 solved by the original at 60 fps
-/// where its search found them), each scored at 60 and 10 fps. The floors are the agreement measured
-/// when the sets were committed minus 2 pairs per 100 (platform float differences); a change that
-/// loses solutions fails here.
-// (successes reproduced, overall, eliminations) floors at 60 and 10 fps. Measured 2026-11-23
-// (docs/fidelity.md): tuning 60 fps 178/194 (0.918), 378/400 (0.945), eliminations 399; 10 fps 140/154
-// (0.909), 371/400 (0.928), 400. Held-out 60 fps 173/196 (0.883), 371/400 (0.928), 398; 10 fps 136/156
-// (0.872), 371/400 (0.928), 398.
-const TUNE_FLOORS: [(f64, f64, f64); 2] = [(0.898, 0.925, 0.97), (0.889, 0.908, 0.97)];
-const HOLDOUT_FLOORS: [(f64, f64, f64); 2] = [(0.863, 0.908, 0.97), (0.852, 0.908, 0.97)];
+/// where its search found them), each scored at 60 and 10 fps, on the default engine (the
+/// Chipmunk-faithful step). The floors are the agreement measured minus 2 pairs per 100 (platform
+/// float differences: the step reproduces pymunk bit for bit on x86-64 Linux, where libm's sin, cos, pow
+/// and exp are glibc's as in pymunk's build); a change that loses solutions fails here.
+// (successes reproduced, overall, eliminations) floors at 60 and 10 fps. Measured 2026-11-24
+// (docs/fidelity.md): every pair of both sets at both rates agrees — tuning 194/194 and 154/154
+// successes, 400/400 overall and eliminations at 60 and 10 fps; held-out 196/196 and 156/156, 400/400.
+const TUNE_FLOORS: [(f64, f64, f64); 2] = [(0.98, 0.98, 0.98), (0.98, 0.98, 0.98)];
+const HOLDOUT_FLOORS: [(f64, f64, f64); 2] = [(0.98, 0.98, 0.98), (0.98, 0.98, 0.98)];
 
 fn check_balanced(file: &str, floors: [(f64, f64, f64); 2]) {
     check_balanced_with(file, floors, &PhysicsParams::default());
@@ -459,7 +461,7 @@ fn balanced_held_out_set_agrees_with_the_original() {
     check_balanced("balanced_holdout.jsonl.gz", HOLDOUT_FLOORS);
 }
 
-/// `engine = "box2d"` (Box2D with Chipmunk's semantics, not the default) keeps its own held-out floor:
+/// `engine = "box2d"` (Box2D with Chipmunk's semantics) keeps its own held-out floor:
 /// measured 2026-11-24 (docs/fidelity.md "I-PHYRE on Box2D") 60 fps 178/196 (0.908), 368/400 (0.920),
 /// eliminations 400; 10 fps 122/156 (0.782), 354/400 (0.885), 398; floors 2 points lower.
 #[test]
@@ -475,19 +477,18 @@ fn balanced_held_out_set_on_box2d_keeps_its_agreement() {
     );
 }
 
-/// `engine = "chipmunk"` (annotrace's Chipmunk-faithful step, not the default yet) keeps its own
-/// held-out floor: measured 2026-11-24 (docs/fidelity.md "I-PHYRE on a Chipmunk-faithful step") 60 fps
-/// 184/196 (0.939), 387/400 (0.968), eliminations 400; 10 fps 149/156 (0.955), 386/400 (0.965), 400;
-/// floors 2 points lower.
+/// `engine = "rapier"` (rapier2d, the default before the Chipmunk step) keeps its own held-out floor:
+/// measured 2026-11-23 (docs/fidelity.md) 60 fps 173/196 (0.883), 371/400 (0.928), eliminations 398;
+/// 10 fps 136/156 (0.872), 371/400 (0.928), 398; floors 2 points lower.
 #[test]
-fn balanced_held_out_set_on_the_chipmunk_step_keeps_its_agreement() {
+fn balanced_held_out_set_with_rapier_keeps_its_agreement() {
     let params = PhysicsParams {
-        engine: annotrace::envs::iphyre::Engine::Chipmunk,
+        engine: annotrace::envs::iphyre::Engine::Rapier,
         ..PhysicsParams::default()
     };
     check_balanced_with(
         "balanced_holdout.jsonl.gz",
-        [(0.919, 0.948, 0.97), (0.935, 0.945, 0.97)],
+        [(0.863, 0.908, 0.97), (0.852, 0.908, 0.97)],
         &params,
     );
 }

@@ -83,6 +83,21 @@ impl Arbiter {
         }
     }
 
+    /// The number of contact points.
+    pub(crate) fn len(&self) -> usize {
+        self.contacts.len()
+    }
+
+    /// The contact points' offsets from body a's and body b's centres.
+    pub(crate) fn points(&self) -> impl Iterator<Item = (Vect, Vect)> + '_ {
+        self.contacts.iter().map(|c| (c.r1, c.r2))
+    }
+
+    /// The normal, from shape a to shape b.
+    pub(crate) fn normal(&self) -> Vect {
+        self.n
+    }
+
     /// Takes this step's contacts, keeping the accumulated impulses of points whose hash matches one of
     /// the previous contacts.
     pub(crate) fn update(&mut self, m: Manifold, pa: Vect, pb: Vect, e: f64, u: f64) {

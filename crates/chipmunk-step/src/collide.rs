@@ -3,12 +3,12 @@
 //! identifies the point across steps (for warm starting).
 //!
 //! Circle–circle and circle–segment give one contact on the line between the closest points (hash 0).
-//! Segment–segment finds the two cores' closest points (or, when the cores cross, the least-penetration
-//! axis among the two segments' normals, which is where an expanding-polytope search on the Minkowski
-//! difference of two segments ends), then clips each capsule's support edge against the other's and
-//! keeps up to two points that overlap.
+//! Segment–segment runs Chipmunk's GJK on the two cores (from the pair's cached closest features when it
+//! has them, else from the axis across the two boxes' centres), with its EPA when the cores cross, then
+//! clips each capsule's support edge against the other's and keeps up to two points that overlap —
+//! the same operations in the same order as `cpCollision.c`, so the same floating-point results.
 
-use crate::shape::Cached;
+use crate::shape::{Bb, Cached, fmax, fmin};
 use crate::vect::Vect;
 
 /// Chipmunk's hash multiplier.
@@ -34,8 +34,10 @@ pub(crate) struct Manifold {
     pub points: Vec<RawContact>,
 }
 
-/// The contacts between `a` and `b`, whose hash ids are `ha` and `hb`. Circles must come first.
-pub(crate) fn collide(a: &Cached, ha: u64, b: &Cached, hb: u64) -> Manifold {
+/// The contacts between `a` and `b`, whose hash ids are `ha` and `hb`. Circles must come first. `id` is
+/// the pair's collision id (the closest features found last step, 0 for none), which segment pairs
+/// start their closest-point search from and update.
+pub(crate) fn collide(a: &Cached, ha: u64, b: &Cached, hb: u64, id: &mut u32) -> Manifold {
     match (a, b) {
         (&Cached::Circle { c: c1, r: r1 }, &Cached::Circle { c: c2, r: r2 }) => {
             circle_circle(c1, r1, c2, r2)
@@ -47,7 +49,7 @@ pub(crate) fn collide(a: &Cached, ha: u64, b: &Cached, hb: u64) -> Manifold {
             unreachable!("collide: the circle must be the first shape")
         }
         (s1 @ &Cached::Segment { .. }, s2 @ &Cached::Segment { .. }) => {
-            segment_segment(s1, ha, s2, hb)
+            segment_segment(s1, ha, s2, hb, id)
         }
     }
 }
@@ -76,9 +78,8 @@ fn circle_circle(c1: Vect, r1: f64, c2: Vect, r2: f64) -> Manifold {
 
 fn circle_segment(centre: Vect, r: f64, sa: Vect, sb: Vect, sn: Vect, sr: f64) -> Manifold {
     let seg_delta = sb - sa;
-    let t = (seg_delta.dot(centre - sa) / seg_delta.length_sq()).clamp(0.0, 1.0);
-    // A zero-length segment gives NaN above; Chipmunk's clamp maps it to its lower bound.
-    let t = if t.is_nan() { 0.0 } else { t };
+    // A zero-length segment gives NaN here, which Chipmunk's clamp maps to 1.
+    let t = clamp01(seg_delta.dot(centre - sa) / seg_delta.length_sq());
     let closest = sa + seg_delta * t;
     let mindist = r + sr;
     let delta = closest - centre;
@@ -101,10 +102,39 @@ fn circle_segment(centre: Vect, r: f64, sa: Vect, sb: Vect, sn: Vect, sr: f64) -
     m
 }
 
-/// The closest point to the origin on segment `a`–`b`, parametrised over [−1, 1] (Chipmunk's form).
+/// Chipmunk's bounds on the closest-point searches.
+const MAX_GJK_ITERATIONS: u32 = 30;
+const MAX_EPA_ITERATIONS: u32 = 30;
+
+/// Chipmunk's `cpfclamp`.
+fn clamp(f: f64, lo: f64, hi: f64) -> f64 {
+    fmin(fmax(f, lo), hi)
+}
+
+/// Chipmunk's `cpfclamp01`.
+fn clamp01(f: f64) -> f64 {
+    fmax(0.0, fmin(f, 1.0))
+}
+
+/// Whether `c` lies on the positive side of the line through `a` and `b` (Chipmunk's robust form).
+fn point_greater(a: Vect, b: Vect, c: Vect) -> bool {
+    (b.y - a.y) * (a.x + b.x - 2.0 * c.x) > (b.x - a.x) * (a.y + b.y - 2.0 * c.y)
+}
+
+/// Whether `p` is no further along `n` than the edge `v0`–`v1`.
+fn check_axis(v0: Vect, v1: Vect, p: Vect, n: Vect) -> bool {
+    p.dot(n) <= fmax(v0.dot(n), v1.dot(n))
+}
+
+/// The parameter in [−1, 1] of the point of segment `a`–`b` closest to the origin.
 fn closest_t(a: Vect, b: Vect) -> f64 {
     let delta = b - a;
-    -(delta.dot(a + b) / (delta.length_sq() + f64::MIN_POSITIVE)).clamp(-1.0, 1.0)
+    let d2 = delta.length_sq();
+    if d2 != 0.0 {
+        -clamp(delta.dot(a + b) / d2, -1.0, 1.0)
+    } else {
+        0.0
+    }
 }
 
 /// `a` at t = −1, `b` at t = 1.
@@ -113,51 +143,187 @@ fn lerp_t(a: Vect, b: Vect, t: f64) -> Vect {
     a * (0.5 - ht) + b * (0.5 + ht)
 }
 
-/// The separating axis (from segment 1 towards segment 2) and the signed distance between the two
-/// segments' cores (negative when they cross).
-fn core_axis(a1: Vect, b1: Vect, n1: Vect, a2: Vect, b2: Vect, n2: Vect) -> (Vect, f64) {
-    // The Minkowski difference (segment 2 − segment 1) is a parallelogram with corners q[i].
-    let q = [a2 - a1, a2 - b1, b2 - b1, b2 - a1];
-    let edges = [(q[0], q[1]), (q[1], q[2]), (q[2], q[3]), (q[3], q[0])];
-    let inside = {
-        // The origin is inside when it is on the same side of every edge.
-        let s: Vec<f64> = edges.iter().map(|(u, v)| (*v - *u).cross(-*u)).collect();
-        s.iter().all(|&x| x > 0.0) || s.iter().all(|&x| x < 0.0)
-    };
-    if !inside {
-        // The closest point of the parallelogram to the origin lies on one of its edges.
-        let mut best: Option<(f64, Vect, Vect, f64)> = None;
-        for (u, v) in edges {
-            let t = closest_t(u, v);
-            let p = lerp_t(u, v, t);
-            let d2 = p.length_sq();
-            if best.is_none_or(|b| d2 < b.0) {
-                best = Some((d2, u, v, t));
-            }
-        }
-        let (_, u, v, t) = best.expect("four edges");
-        let p = lerp_t(u, v, t);
-        if -1.0 < t && t < 1.0 {
-            // Vertex against edge: the axis is the edge's normal.
-            let mut n = (v - u).rperp().normalize();
-            if n.dot(p) < 0.0 {
-                n = -n;
-            }
-            (n, n.dot(p))
+/// Squared distance from the origin to segment `a`–`b`.
+fn closest_dist(a: Vect, b: Vect) -> f64 {
+    lerp_t(a, b, closest_t(a, b)).length_sq()
+}
+
+/// An end of a segment as a support point: its position and index (0 for `a`, 1 for `b`).
+#[derive(Debug, Clone, Copy)]
+struct SegmentCore {
+    ta: Vect,
+    tb: Vect,
+}
+
+impl SegmentCore {
+    /// The end furthest along `n` (`b` on a tie).
+    fn support(&self, n: Vect) -> (Vect, u32) {
+        if self.ta.dot(n) > self.tb.dot(n) {
+            (self.ta, 0)
         } else {
-            let d = p.length();
-            (p * (1.0 / (d + f64::MIN_POSITIVE)), d)
+            (self.tb, 1)
         }
-    } else {
-        // The cores cross: the least-penetration axis among ±n1, ±n2; the normal points against it.
-        let mut best = (f64::INFINITY, n1);
-        for u in [n1, -n1, n2, -n2] {
-            let h = q.iter().map(|c| c.dot(u)).fold(f64::NEG_INFINITY, f64::max);
-            if h < best.0 {
-                best = (h, u);
+    }
+
+    fn point(&self, i: u32) -> (Vect, u32) {
+        if i == 0 { (self.ta, 0) } else { (self.tb, i) }
+    }
+}
+
+/// A point of the Minkowski difference (shape 2 − shape 1) with the support points it came from.
+#[derive(Debug, Clone, Copy)]
+struct MinkowskiPoint {
+    a: Vect,
+    b: Vect,
+    ab: Vect,
+    id: u32,
+}
+
+impl MinkowskiPoint {
+    fn new((a, ia): (Vect, u32), (b, ib): (Vect, u32)) -> MinkowskiPoint {
+        MinkowskiPoint {
+            a,
+            b,
+            ab: b - a,
+            id: ((ia & 0xFF) << 8) | (ib & 0xFF),
+        }
+    }
+}
+
+/// The closest points of two shapes' cores, the separating axis and their signed distance.
+#[derive(Debug, Clone, Copy)]
+struct ClosestPoints {
+    a: Vect,
+    b: Vect,
+    n: Vect,
+    d: f64,
+    id: u32,
+}
+
+struct Gjk {
+    s1: SegmentCore,
+    s2: SegmentCore,
+}
+
+impl Gjk {
+    fn support(&self, n: Vect) -> MinkowskiPoint {
+        MinkowskiPoint::new(self.s1.support(-n), self.s2.support(n))
+    }
+
+    fn closest_points(v0: MinkowskiPoint, v1: MinkowskiPoint) -> ClosestPoints {
+        let t = closest_t(v0.ab, v1.ab);
+        let p = lerp_t(v0.ab, v1.ab, t);
+        let pa = lerp_t(v0.a, v1.a, t);
+        let pb = lerp_t(v0.b, v1.b, t);
+        let id = ((v0.id & 0xFFFF) << 16) | (v1.id & 0xFFFF);
+        let n = (v1.ab - v0.ab).rperp().normalize();
+        let d = n.dot(p);
+        if d <= 0.0 || (-1.0 < t && t < 1.0) {
+            ClosestPoints {
+                a: pa,
+                b: pb,
+                n,
+                d,
+                id,
+            }
+        } else {
+            // Vertex against vertex: the axis is the line between them.
+            let d2 = p.length();
+            ClosestPoints {
+                a: pa,
+                b: pb,
+                n: p * (1.0 / (d2 + f64::MIN_POSITIVE)),
+                d: d2,
+                id,
             }
         }
-        (-best.1, -best.0)
+    }
+
+    /// Expands the hull (which holds the origin) towards the difference's edge nearest to the origin.
+    fn epa(&self, hull: &[MinkowskiPoint], iteration: u32) -> ClosestPoints {
+        let count = hull.len();
+        let mut mini = 0;
+        let mut min_dist = f64::INFINITY;
+        let mut i = count - 1;
+        for j in 0..count {
+            let d = closest_dist(hull[i].ab, hull[j].ab);
+            if d < min_dist {
+                min_dist = d;
+                mini = i;
+            }
+            i = j;
+        }
+        let v0 = hull[mini];
+        let v1 = hull[(mini + 1) % count];
+        let p = self.support((v1.ab - v0.ab).perp());
+        let duplicate = p.id == v0.id || p.id == v1.id;
+        if !duplicate && point_greater(v0.ab, v1.ab, p.ab) && iteration < MAX_EPA_ITERATIONS {
+            let mut hull2 = Vec::with_capacity(count + 1);
+            hull2.push(p);
+            for i in 0..count {
+                let index = (mini + 1 + i) % count;
+                let h0 = hull2[hull2.len() - 1].ab;
+                let h1 = hull[index].ab;
+                let h2 = if i + 1 < count {
+                    hull[(index + 1) % count].ab
+                } else {
+                    p.ab
+                };
+                if point_greater(h0, h2, h1) {
+                    hull2.push(hull[index]);
+                }
+            }
+            self.epa(&hull2, iteration + 1)
+        } else {
+            Self::closest_points(v0, v1)
+        }
+    }
+
+    fn recurse(&self, v0: MinkowskiPoint, v1: MinkowskiPoint, iteration: u32) -> ClosestPoints {
+        if iteration > MAX_GJK_ITERATIONS {
+            return Self::closest_points(v0, v1);
+        }
+        if point_greater(v1.ab, v0.ab, Vect::ZERO) {
+            // The origin is behind the edge: flip it.
+            return self.recurse(v1, v0, iteration);
+        }
+        let t = closest_t(v0.ab, v1.ab);
+        let n = if -1.0 < t && t < 1.0 {
+            (v1.ab - v0.ab).perp()
+        } else {
+            -lerp_t(v0.ab, v1.ab, t)
+        };
+        let p = self.support(n);
+        if point_greater(p.ab, v0.ab, Vect::ZERO) && point_greater(v1.ab, p.ab, Vect::ZERO) {
+            // The triangle v0, p, v1 holds the origin: the cores overlap.
+            self.epa(&[v0, p, v1], 1)
+        } else if check_axis(v0.ab, v1.ab, p.ab, n) {
+            Self::closest_points(v0, v1)
+        } else if closest_dist(v0.ab, p.ab) < closest_dist(p.ab, v1.ab) {
+            self.recurse(v0, p, iteration + 1)
+        } else {
+            self.recurse(p, v1, iteration + 1)
+        }
+    }
+
+    /// The closest points, starting from the support points named by `id` (last step's result for this
+    /// pair) or, with no id, from the axis across the two boxes' centres; `id` becomes this result's.
+    fn run(&self, bb1: Bb, bb2: Bb, id: &mut u32) -> ClosestPoints {
+        let (v0, v1) = if *id != 0 {
+            (
+                MinkowskiPoint::new(
+                    self.s1.point((*id >> 24) & 0xFF),
+                    self.s2.point((*id >> 16) & 0xFF),
+                ),
+                MinkowskiPoint::new(self.s1.point((*id >> 8) & 0xFF), self.s2.point(*id & 0xFF)),
+            )
+        } else {
+            let axis = (bb1.center() - bb2.center()).perp();
+            (self.support(axis), self.support(-axis))
+        };
+        let points = self.recurse(v0, v1, 1);
+        *id = points.id;
+        points
     }
 }
 
@@ -170,7 +336,7 @@ fn support_edge(a: Vect, b: Vect, sn: Vect, hash_id: u64, n: Vect) -> [(Vect, u6
     }
 }
 
-fn segment_segment(s1: &Cached, h1: u64, s2: &Cached, h2: u64) -> Manifold {
+fn segment_segment(s1: &Cached, h1: u64, s2: &Cached, h2: u64, id: &mut u32) -> Manifold {
     let (
         &Cached::Segment {
             a: a1,
@@ -188,9 +354,20 @@ fn segment_segment(s1: &Cached, h1: u64, s2: &Cached, h2: u64) -> Manifold {
     else {
         unreachable!("segment_segment on non-segments")
     };
-    let (n, d) = core_axis(a1, b1, n1, a2, b2, n2);
+    let gjk = Gjk {
+        s1: SegmentCore { ta: a1, tb: b1 },
+        s2: SegmentCore { ta: a2, tb: b2 },
+    };
+    let points = gjk.run(s1.bb(), s2.bb(), id);
+    let n = points.n;
     let mut m = Manifold::default();
-    if d > r1 + r2 {
+    // Chipmunk rejects a contact at a segment's end against the segment's end tangent; I-PHYRE's
+    // segments have zero tangents, which reject nothing unless the axis is not finite.
+    let z = n.dot(Vect::ZERO);
+    let tangents_pass = z == 0.0;
+    let at_end_1 = points.a == a1 || points.a == b1;
+    let at_end_2 = points.b == a2 || points.b == b2;
+    if !(points.d <= r1 + r2 && (!at_end_1 || tangents_pass) && (!at_end_2 || tangents_pass)) {
         return m;
     }
     let e1 = support_edge(a1, b1, n1, h1, n);
@@ -200,7 +377,6 @@ fn segment_segment(s1: &Cached, h1: u64, s2: &Cached, h2: u64) -> Manifold {
     let (d2a, d2b) = (e2[0].0.cross(n), e2[1].0.cross(n));
     let den1 = 1.0 / (d1b - d1a + f64::MIN_POSITIVE);
     let den2 = 1.0 / (d2b - d2a + f64::MIN_POSITIVE);
-    let clamp01 = |x: f64| x.clamp(0.0, 1.0);
     // Each end of one edge projected onto the other, clamped to it; kept where the surfaces overlap.
     let candidates = [
         (
@@ -241,7 +417,7 @@ mod tests {
     fn a_bar_on_a_bar_touches_at_both_overlapping_ends() {
         let lower = seg(Vect::new(0.0, 0.0), Vect::new(100.0, 0.0), 10.0);
         let upper = seg(Vect::new(50.0, -19.0), Vect::new(150.0, -19.0), 10.0);
-        let m = collide(&upper, 1, &lower, 2);
+        let m = collide(&upper, 1, &lower, 2, &mut 0);
         assert_eq!(m.points.len(), 2);
         assert!((m.n.y - 1.0).abs() < 1e-12, "{:?}", m.n);
         let mut xs: Vec<f64> = m.points.iter().map(|c| c.p1.x).collect();
@@ -259,7 +435,7 @@ mod tests {
     fn crossing_cores_are_pushed_apart_along_the_shorter_axis() {
         let a = seg(Vect::new(0.0, 0.0), Vect::new(100.0, 0.0), 10.0);
         let b = seg(Vect::new(50.0, -2.0), Vect::new(50.0, 40.0), 10.0);
-        let m = collide(&a, 1, &b, 2);
+        let m = collide(&a, 1, &b, 2, &mut 0);
         assert!(!m.points.is_empty());
         // Moving b by 2 px + radii down... the least penetration is along +y (2 px to clear the core).
         assert!((m.n.y - 1.0).abs() < 1e-12, "{:?}", m.n);
@@ -272,13 +448,13 @@ mod tests {
             c: Vect::new(115.0, 0.0),
             r: 10.0,
         };
-        let m = collide(&c, 1, &s, 2);
+        let m = collide(&c, 1, &s, 2, &mut 0);
         assert_eq!(m.points.len(), 1);
         assert!((m.n.x + 1.0).abs() < 1e-12);
         let far = Cached::Circle {
             c: Vect::new(121.0, 0.0),
             r: 10.0,
         };
-        assert!(collide(&far, 1, &s, 2).points.is_empty());
+        assert!(collide(&far, 1, &s, 2, &mut 0).points.is_empty());
     }
 }

@@ -59,6 +59,9 @@ pub struct DampedSpring {
     n_mass: f64,
     target_vrn: f64,
     v_coef: f64,
+    /// The impulse applied this step (spring plus damping), which Chipmunk accumulates: each damping
+    /// impulse is applied as the change of this sum, which can differ from the impulse in the last bit.
+    j_acc: f64,
 }
 
 /// The anchors' world offsets, the unit vector from anchor a to anchor b and their distance.
@@ -132,6 +135,7 @@ impl DampedSpring {
             n_mass: 0.0,
             target_vrn: 0.0,
             v_coef: 0.0,
+            j_acc: 0.0,
         }
     }
 }
@@ -161,7 +165,8 @@ impl Constraint {
                 s.target_vrn = 0.0;
                 s.v_coef = 1.0 - (-s.damping * dt * k).exp();
                 let f_spring = (s.rest_length - dist) * s.stiffness;
-                let j = n * (f_spring * dt);
+                s.j_acc = f_spring * dt;
+                let j = n * s.j_acc;
                 let (a, b) = pair_mut(bodies, s.a, s.b);
                 a.apply_impulse(-j, r1);
                 b.apply_impulse(j, r2);
@@ -197,7 +202,9 @@ impl Constraint {
                 let vrn = (b.velocity_at(s.r2) - a.velocity_at(s.r1)).dot(s.n);
                 let v_damp = (s.target_vrn - vrn) * s.v_coef;
                 s.target_vrn = vrn + v_damp;
-                let j = s.n * (v_damp * s.n_mass);
+                let j_damp = (s.j_acc + v_damp * s.n_mass) - s.j_acc;
+                s.j_acc += j_damp;
+                let j = s.n * j_damp;
                 a.apply_impulse(-j, s.r1);
                 b.apply_impulse(j, s.r2);
             }

@@ -11,9 +11,11 @@
 //!
 //! **Owns:** the space, its bodies, shapes, constraints and contact cache, and the step.
 //! **Does not:** know about games, pixels or clicks (the I-PHYRE world in annotrace does), sleeping,
-//! polygons, sensors, collision callbacks or spatial indexing (every shape pair is tested).
+//! polygons, sensors or collision callbacks. Its spatial index (`bbtree`) is there for the order in
+//! which it reports touching pairs, which is the contact solver's order and shows in trajectories.
 
 mod arbiter;
+mod bbtree;
 mod body;
 mod collide;
 mod constraint;
@@ -24,5 +26,5 @@ mod vect;
 pub use body::{Body, BodyKind};
 pub use constraint::{Constraint, DampedSpring, PinJoint};
 pub use shape::Geometry;
-pub use space::{BodyId, Space};
+pub use space::{BodyId, ContactReport, Space, default_bias};
 pub use vect::Vect;

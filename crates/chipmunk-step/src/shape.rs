@@ -35,15 +35,13 @@ pub struct Shape {
     pub friction: f64,
     /// Elasticity (multiplied with the other shape's).
     pub elasticity: f64,
-    /// A number unique to the shape in its space, mixed into contact hashes.
+    /// The shape's number in its space (Chipmunk's `hashid`: the count of shapes added before it),
+    /// mixed into contact hashes and deciding where the spatial index keeps it.
     pub(crate) hash_id: u64,
+    /// Whether the shape sits in the static index (its body was static when it was added).
+    pub(crate) is_static: bool,
     /// World-space cache, refreshed after every position update.
     pub(crate) cache: Cached,
-    /// The box Chipmunk's dynamic tree keeps for the shape: its bounding box grown by a tenth of its size
-    /// (or its velocity over a tenth of a time unit, if larger) when last re-inserted.
-    pub(crate) leaf_bb: Bb,
-    /// Whether the shape left its `leaf_bb` in this step's position update (and was re-inserted).
-    pub(crate) reinserted: bool,
 }
 
 /// A shape in world coordinates.
@@ -62,13 +60,26 @@ pub(crate) enum Cached {
     },
 }
 
-/// An axis-aligned box.
+/// 0.1 as Chipmunk writes it (`0.1f`, a single-precision literal): 0.100000001490116…
+pub(crate) const TENTH_F32: f64 = 0.1f32 as f64;
+
+/// Chipmunk's `cpfmin`: `a` when `a < b`, else `b`.
+pub(crate) fn fmin(a: f64, b: f64) -> f64 {
+    if a < b { a } else { b }
+}
+
+/// Chipmunk's `cpfmax`: `a` when `a > b`, else `b`.
+pub(crate) fn fmax(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// An axis-aligned box (left, bottom, right, top).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Bb {
-    l: f64,
-    b: f64,
-    r: f64,
-    t: f64,
+    pub l: f64,
+    pub b: f64,
+    pub r: f64,
+    pub t: f64,
 }
 
 impl Bb {
@@ -77,22 +88,54 @@ impl Bb {
         self.l <= o.l && self.r >= o.r && self.b <= o.b && self.t >= o.t
     }
 
-    /// The box a spatial tree keeps for a shape with this box moving at `v`.
+    /// The box a Chipmunk tree keeps for a shape with this box moving at `v`: grown on every side by a
+    /// tenth (`0.1f`) of its size, or on the side it moves to by its velocity over a tenth of a time unit if that
+    /// is more.
     pub(crate) fn grown(&self, v: Vect) -> Bb {
-        let x = (self.r - self.l) * 0.1;
-        let y = (self.t - self.b) * 0.1;
-        let v = v * 0.1;
+        let x = (self.r - self.l) * TENTH_F32;
+        let y = (self.t - self.b) * TENTH_F32;
+        let v = v * TENTH_F32;
         Bb {
-            l: self.l + (-x).min(v.x),
-            b: self.b + (-y).min(v.y),
-            r: self.r + x.max(v.x),
-            t: self.t + y.max(v.y),
+            l: self.l + fmin(-x, v.x),
+            b: self.b + fmin(-y, v.y),
+            r: self.r + fmax(x, v.x),
+            t: self.t + fmax(y, v.y),
         }
     }
 
     /// Whether two boxes touch or overlap.
     pub(crate) fn intersects(&self, o: &Bb) -> bool {
         self.l <= o.r && o.l <= self.r && self.b <= o.t && o.b <= self.t
+    }
+
+    /// The smallest box holding both.
+    pub(crate) fn merge(&self, o: &Bb) -> Bb {
+        Bb {
+            l: fmin(self.l, o.l),
+            b: fmin(self.b, o.b),
+            r: fmax(self.r, o.r),
+            t: fmax(self.t, o.t),
+        }
+    }
+
+    /// The area.
+    pub(crate) fn area(&self) -> f64 {
+        (self.r - self.l) * (self.t - self.b)
+    }
+
+    /// The area of [`merge`](Self::merge)`(o)`.
+    pub(crate) fn merged_area(&self, o: &Bb) -> f64 {
+        (fmax(self.r, o.r) - fmin(self.l, o.l)) * (fmax(self.t, o.t) - fmin(self.b, o.b))
+    }
+
+    /// Twice the Manhattan distance between the centres.
+    pub(crate) fn proximity(&self, o: &Bb) -> f64 {
+        (self.l + self.r - o.l - o.r).abs() + (self.b + self.t - o.b - o.t).abs()
+    }
+
+    /// The centre (as Chipmunk computes it: a lerp of the corners at one half).
+    pub(crate) fn center(&self) -> Vect {
+        Vect::new(self.l, self.b).lerp(Vect::new(self.r, self.t), 0.5)
     }
 }
 
@@ -125,12 +168,16 @@ impl Cached {
                 r: c.x + r,
                 t: c.y + r,
             },
-            Cached::Segment { a, b, r, .. } => Bb {
-                l: a.x.min(b.x) - r,
-                b: a.y.min(b.y) - r,
-                r: a.x.max(b.x) + r,
-                t: a.y.max(b.y) + r,
-            },
+            Cached::Segment { a, b, r, .. } => {
+                let (l, rr) = if a.x < b.x { (a.x, b.x) } else { (b.x, a.x) };
+                let (bo, t) = if a.y < b.y { (a.y, b.y) } else { (b.y, a.y) };
+                Bb {
+                    l: l - r,
+                    b: bo - r,
+                    r: rr + r,
+                    t: t + r,
+                }
+            }
         }
     }
 }

@@ -2,8 +2,9 @@
 //! Chipmunk 7's order:
 //!
 //! 1. move every dynamic body by its velocity plus bias velocity;
-//! 2. find the touching shape pairs at the new positions (every pair: the scenes are small) and update
-//!    their arbiters, matching contact points to last step's by hash; forget arbiters unused for
+//! 2. find the touching shape pairs at the new positions, in the order Chipmunk's spatial index reports
+//!    them ([`Index`](crate::bbtree::Index)), and update their arbiters in that order (which is the
+//!    solver's), matching contact points to last step's by hash; forget arbiters unused for
 //!    `collision_persistence` steps;
 //! 3. pre-step contacts (effective masses, overlap bias, bounce target) and constraints (a spring
 //!    applies its spring impulse here);
@@ -14,11 +15,32 @@
 use std::collections::HashMap;
 
 use crate::arbiter::{Arbiter, ArbiterState};
+use crate::bbtree::{Index, Query};
 use crate::body::{Body, BodyKind};
 use crate::collide::collide;
 use crate::constraint::Constraint;
-use crate::shape::{Cached, Geometry, Shape, transform};
+use crate::shape::{Cached, Geometry, Shape, TENTH_F32, transform};
 use crate::vect::Vect;
+
+/// Chipmunk's default `collisionBias` and constraint `errorBias`, `pow(1.0f - 0.1f, 60)`: the base is
+/// the single-precision 0.9 (0.899999976158…), so the value is 0.0017970074436…, not 0.9⁶⁰ =
+/// 0.0017970102999….
+pub fn default_bias() -> f64 {
+    ((1.0f32 - 0.1f32) as f64).powf(60.0)
+}
+
+/// One touching shape pair of a step, as [`Space::contact_points`] reports it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ContactReport {
+    /// The body of the first shape.
+    pub body_a: BodyId,
+    /// The body of the second shape.
+    pub body_b: BodyId,
+    /// The normal, from the first shape to the second.
+    pub normal: Vect,
+    /// Each contact point on the first and on the second shape, in world coordinates.
+    pub points: Vec<(Vect, Vect)>,
+}
 
 /// A body handle.
 pub type BodyId = usize;
@@ -30,9 +52,10 @@ pub struct Space {
     pub gravity: Vect,
     /// Solver iterations per step: 10.
     pub iterations: usize,
-    /// Overlap allowed without correction: 0.1.
+    /// Overlap allowed without correction: Chipmunk's `0.1f` (0.100000001490116…).
     pub collision_slop: f64,
-    /// Fraction of the overlap left uncorrected after one time unit: 0.9⁶⁰ (10 % per 1/60).
+    /// Fraction of the overlap left uncorrected after one time unit: [`default_bias`] (10 % corrected
+    /// per 1/60).
     pub collision_bias: f64,
     /// Steps an unused arbiter is kept for warm starting: 3.
     pub collision_persistence: u64,
@@ -43,8 +66,12 @@ pub struct Space {
     shapes: Vec<Shape>,
     shape_alive: Vec<bool>,
     constraints: Vec<Option<Constraint>>,
-    /// Arbiters by (first, second) shape index as first found.
+    /// Arbiters by shape pair (smaller shape index first).
     arbiters: HashMap<(usize, usize), Arbiter>,
+    /// The static and dynamic shape trees, which decide the order of the touching pairs.
+    index: Index,
+    /// The broad phase's candidate pairs of the current step (kept to reuse the allocation).
+    queries: Vec<Query>,
     /// The pairs touching in the last step, in solver order.
     active: Vec<(usize, usize)>,
     stamp: u64,
@@ -57,8 +84,8 @@ impl Space {
         Space {
             gravity,
             iterations: 10,
-            collision_slop: 0.1,
-            collision_bias: 0.9f64.powi(60),
+            collision_slop: TENTH_F32,
+            collision_bias: default_bias(),
             collision_persistence: 3,
             damping: 1.0,
             bodies: Vec::new(),
@@ -67,6 +94,8 @@ impl Space {
             shape_alive: Vec::new(),
             constraints: Vec::new(),
             arbiters: HashMap::new(),
+            index: Index::new(),
+            queries: Vec::new(),
             active: Vec::new(),
             stamp: 0,
             prev_dt: 0.0,
@@ -90,19 +119,26 @@ impl Space {
     ) -> usize {
         let b = &self.bodies[body];
         let cache = transform(&geometry, b.p, b.rot);
-        let leaf_bb = cache.bb().grown(b.v);
+        let s = self.shapes.len();
+        // Chipmunk numbers shapes in the order they are added (`shapeIDCounter`).
+        let hash_id = s as u64;
+        let is_static = b.kind == BodyKind::Static;
+        if is_static {
+            self.index.insert_static(s, cache.bb());
+        } else {
+            self.index.insert_dynamic(s, hash_id, cache.bb().grown(b.v));
+        }
         self.shapes.push(Shape {
             body,
             geometry,
             friction,
             elasticity,
-            hash_id: self.shapes.len() as u64,
+            hash_id,
+            is_static,
             cache,
-            leaf_bb,
-            reinserted: false,
         });
         self.shape_alive.push(true);
-        self.shapes.len() - 1
+        s
     }
 
     /// Adds a constraint; returns its index.
@@ -138,8 +174,9 @@ impl Space {
         }
         self.alive[id] = false;
         for (s, shape) in self.shapes.iter().enumerate() {
-            if shape.body == id {
+            if shape.body == id && self.shape_alive[s] {
                 self.shape_alive[s] = false;
+                self.index.remove(s, shape.hash_id, shape.is_static);
             }
         }
         let shape_alive = &self.shape_alive;
@@ -163,6 +200,33 @@ impl Space {
             .map(|&(a, b)| (self.shapes[a].body, self.shapes[b].body))
     }
 
+    /// The contacts of the last step in solver order: the bodies of the first and second shape of each
+    /// touching pair and its number of contact points.
+    pub fn contacts(&self) -> impl Iterator<Item = (BodyId, BodyId, usize)> + '_ {
+        self.active.iter().map(|k| {
+            let arb = &self.arbiters[k];
+            (arb.body_a, arb.body_b, arb.len())
+        })
+    }
+
+    /// The contacts of the last step in solver order, in detail (as Chipmunk's contact point sets give
+    /// them, for comparing with a recording of the original).
+    pub fn contact_points(&self) -> Vec<ContactReport> {
+        self.active
+            .iter()
+            .map(|k| {
+                let arb = &self.arbiters[k];
+                let (pa, pb) = (self.bodies[arb.body_a].p, self.bodies[arb.body_b].p);
+                ContactReport {
+                    body_a: arb.body_a,
+                    body_b: arb.body_b,
+                    normal: arb.normal(),
+                    points: arb.points().map(|(r1, r2)| (pa + r1, pb + r2)).collect(),
+                }
+            })
+            .collect()
+    }
+
     /// Advances the space by `dt`.
     pub fn step(&mut self, dt: f64) {
         if dt == 0.0 {
@@ -184,19 +248,30 @@ impl Space {
             }
         }
         for (s, shape) in self.shapes.iter_mut().enumerate() {
-            if self.shape_alive[s] {
+            if self.shape_alive[s] && !shape.is_static {
                 let b = &self.bodies[shape.body];
                 shape.cache = transform(&shape.geometry, b.p, b.rot);
-                let bb = shape.cache.bb();
-                shape.reinserted = b.kind == BodyKind::Dynamic && !shape.leaf_bb.contains(&bb);
-                if shape.reinserted {
-                    shape.leaf_bb = bb.grown(b.v);
-                }
             }
         }
 
-        // 2. Collisions.
-        self.collide_all();
+        // 2. Collisions, in the spatial index's order.
+        let mut queries = std::mem::take(&mut self.queries);
+        queries.clear();
+        let (shapes, bodies) = (&self.shapes, &self.bodies);
+        self.index.reindex_query(
+            |s| {
+                let bb = shapes[s].cache.bb();
+                (bb, bb.grown(bodies[shapes[s].body].v))
+            },
+            &mut queries,
+        );
+        for q in &queries {
+            let id = self.collide_shapes(q);
+            if let Some(pair) = q.pair {
+                self.index.set_pair_id(pair, id);
+            }
+        }
+        self.queries = queries;
         let stamp = self.stamp;
         let persistence = self.collision_persistence;
         self.arbiters.retain(|_, arb| {
@@ -247,62 +322,44 @@ impl Space {
         }
     }
 
-    /// Finds every touching pair of shapes on different bodies (not both static) and updates its
-    /// arbiter; the touching pairs become `active`.
-    fn collide_all(&mut self) {
-        let n = self.shapes.len();
-        for i in 0..n {
-            if !self.shape_alive[i] {
-                continue;
-            }
-            for j in (i + 1)..n {
-                if !self.shape_alive[j] {
-                    continue;
-                }
-                let (si, sj) = (&self.shapes[i], &self.shapes[j]);
-                if si.body == sj.body {
-                    continue;
-                }
-                let (bi, bj) = (&self.bodies[si.body], &self.bodies[sj.body]);
-                if bi.kind == BodyKind::Static && bj.kind == BodyKind::Static {
-                    continue;
-                }
-                if !si.cache.bb().intersects(&sj.cache.bb()) {
-                    continue;
-                }
-                // Circles first. Between a dynamic and a static shape Chipmunk's tree reports the dynamic
-                // one first in a step that re-inserted it, else the static one (from its cached pair).
-                let swap = match (&si.cache, &sj.cache) {
-                    (Cached::Segment { .. }, Cached::Circle { .. }) => true,
-                    (Cached::Circle { .. }, Cached::Segment { .. }) => false,
-                    _ => match (bi.kind, bj.kind) {
-                        (BodyKind::Static, BodyKind::Dynamic) => sj.reinserted,
-                        (BodyKind::Dynamic, BodyKind::Static) => !si.reinserted,
-                        _ => false,
-                    },
-                };
-                let (a, b) = if swap { (j, i) } else { (i, j) };
-                let (sa, sb) = (&self.shapes[a], &self.shapes[b]);
-                let m = collide(&sa.cache, sa.hash_id, &sb.cache, sb.hash_id);
-                if m.points.is_empty() {
-                    continue;
-                }
-                let key = (i, j);
-                let (pa, pb) = (self.bodies[sa.body].p, self.bodies[sb.body].p);
-                let (e, u) = (sa.elasticity * sb.elasticity, sa.friction * sb.friction);
-                let (body_a, body_b) = (sa.body, sb.body);
-                let arb = self
-                    .arbiters
-                    .entry(key)
-                    .or_insert_with(|| Arbiter::new(a, b, body_a, body_b));
-                arb.shape_a = a;
-                arb.shape_b = b;
-                arb.body_a = body_a;
-                arb.body_b = body_b;
-                arb.update(m, pa, pb, e, u);
-                arb.stamp = self.stamp;
-                self.active.push(key);
-            }
+    /// Tests the candidate pair `q` and, when its shapes touch, updates its arbiter and appends it to the
+    /// solver's list (Chipmunk's `cpSpaceCollideShapes`). Returns the collision id to keep for the pair.
+    fn collide_shapes(&mut self, q: &Query) -> u32 {
+        let (sa, sb) = (&self.shapes[q.a], &self.shapes[q.b]);
+        if sa.body == sb.body || !sa.cache.bb().intersects(&sb.cache.bb()) {
+            return q.id;
         }
+        // The narrow phase puts a circle first.
+        let (a, b) = match (&sa.cache, &sb.cache) {
+            (Cached::Segment { .. }, Cached::Circle { .. }) => (q.b, q.a),
+            _ => (q.a, q.b),
+        };
+        let (sa, sb) = (&self.shapes[a], &self.shapes[b]);
+        let mut id = q.id;
+        let m = collide(&sa.cache, sa.hash_id, &sb.cache, sb.hash_id, &mut id);
+        if m.points.is_empty() {
+            return id;
+        }
+        let (body_a, body_b) = (sa.body, sb.body);
+        if self.bodies[body_a].kind == BodyKind::Static
+            && self.bodies[body_b].kind == BodyKind::Static
+        {
+            return id;
+        }
+        let (pa, pb) = (self.bodies[body_a].p, self.bodies[body_b].p);
+        let (e, u) = (sa.elasticity * sb.elasticity, sa.friction * sb.friction);
+        let key = (a.min(b), a.max(b));
+        let arb = self
+            .arbiters
+            .entry(key)
+            .or_insert_with(|| Arbiter::new(a, b, body_a, body_b));
+        arb.shape_a = a;
+        arb.shape_b = b;
+        arb.body_a = body_a;
+        arb.body_b = body_b;
+        arb.update(m, pa, pb, e, u);
+        arb.stamp = self.stamp;
+        self.active.push(key);
+        id
     }
 }

@@ -20,7 +20,9 @@
 
 use std::collections::BTreeSet;
 
-use chipmunk_step::{Body, Constraint, DampedSpring, Geometry, PinJoint, Space, Vect};
+use chipmunk_step::{
+    Body, Constraint, DampedSpring, Geometry, PinJoint, Space, Vect, default_bias,
+};
 
 use super::error::Result;
 use super::game::{Game, ObjectKind};
@@ -48,9 +50,10 @@ impl ChipmunkWorld {
             let p = Vect::new(c[0], c[1]);
             let (body, geometry) = match o.kind {
                 ObjectKind::Ball => (
+                    // pymunk's moment_for_circle(m, 0, r), computed as Chipmunk does.
                     Body::dynamic(
                         params.ball_mass,
-                        params.ball_mass * 0.5 * o.radius * o.radius,
+                        params.ball_mass * (0.5 * (0.0 + o.radius * o.radius)),
                         p,
                     ),
                     Geometry::Circle {
@@ -76,8 +79,8 @@ impl ChipmunkWorld {
             debug_assert_eq!(id, o.index);
             space.add_shape(id, geometry, params.friction, params.restitution);
         }
-        // pymunk's default error bias for joints: 10 % of the error left per 1/60 s.
-        let error_bias = 0.9f64.powi(60);
+        // pymunk's default error bias for joints (Chipmunk's, with its single-precision 0.9).
+        let error_bias = default_bias();
         for &[a, b] in &game.joints {
             let joint = PinJoint::new(space.bodies(), a, b, Vect::ZERO, Vect::ZERO, error_bias);
             space.add_constraint(Constraint::Pin(joint));

@@ -1,7 +1,9 @@
 //! I-PHYRE (interactive physical reasoning, Li et al. ICLR 2024): 40 games of capsule blocks and balls on
 //! a 600×600 screen, where an agent removes eliminable blocks at chosen times so that every ball falls out
-//! of the bottom. Re-implemented on rapier2d (and, as `engine = "box2d"`, on box2d-rs set to Chipmunk's
-//! semantics) after iphyre 0.2.3 (pymunk 6.11.1), following `docs/envs/iphyre.md` §R1–§R9.
+//! of the bottom. Re-implemented after iphyre 0.2.3 (pymunk 6.11.1), following `docs/envs/iphyre.md` §R1–§R9,
+//! on annotrace's Chipmunk-faithful step by default (the `chipmunk-step` crate: the original's
+//! trajectories bit for bit), or on rapier2d (`engine = "rapier"`) or box2d-rs set to Chipmunk's semantics
+//! (`engine = "box2d"`).
 //!
 //! **Owns:** the games as data ([`Games`], default `data/games/iphyre_games.json`), the physics constants
 //! ([`PhysicsParams`], [`Engine`]), the world in either engine ([`World`]: bodies, capsules, rods, springs,

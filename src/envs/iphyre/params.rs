@@ -21,16 +21,16 @@ pub enum Engine {
     /// solved by sequential impulses with accumulated impulses and warm starting, no continuous
     /// collision, no sleeping (`box2d_world.rs`). The rapier-only fields of [`PhysicsParams`] do not
     /// apply; the `box2d_*` ones do. Measured against the original it is not better than rapier2d
-    /// overall (docs/fidelity.md, "I-PHYRE on Box2D"), so it is not the default.
+    /// overall (docs/fidelity.md, "I-PHYRE on Box2D").
     Box2d,
-    /// annotrace's Chipmunk-faithful step (the `chipmunk-step` crate, `chipmunk_world.rs`): Chipmunk 7's
-    /// integration order, bias-velocity overlap correction solved with the velocities, its circle and
-    /// segment contacts with contact hashing, pin joints and springs in the same loop. Only
-    /// `chipmunk_iterations` of the engine-specific fields applies (docs/fidelity.md, "I-PHYRE on a
-    /// Chipmunk-faithful step").
-    Chipmunk,
-    /// rapier2d with the tuning knobs of [`PhysicsParams`] (`rapier_world.rs`); the default.
+    /// annotrace's Chipmunk-faithful step (the `chipmunk-step` crate, `chipmunk_world.rs`), the default:
+    /// Chipmunk 7's step, narrow phase and contact order (its bounding-box tree's), which reproduces the
+    /// original bit for bit on every episode of the balanced sets. Only `chipmunk_iterations` of the
+    /// engine-specific fields applies (docs/fidelity.md, "I-PHYRE on a Chipmunk-faithful step").
     #[default]
+    Chipmunk,
+    /// rapier2d with the tuning knobs of [`PhysicsParams`] (`rapier_world.rs`); the default until the
+    /// Chipmunk step reproduced the original (runs made before the `engine` field existed used it).
     Rapier,
 }
 
@@ -41,6 +41,15 @@ impl Engine {
             Engine::Box2d => "box2d",
             Engine::Chipmunk => "chipmunk",
             Engine::Rapier => "rapier",
+        }
+    }
+
+    /// What a trace's `simulator.engine` says: the library behind the engine.
+    pub fn description(self) -> &'static str {
+        match self {
+            Engine::Box2d => "box2d-rs 0.0.4 (Box2D 2.4.1)",
+            Engine::Chipmunk => "chipmunk-step (Chipmunk 7.0.3 as pymunk 6.11.1 builds it)",
+            Engine::Rapier => "rapier2d",
         }
     }
 
@@ -59,7 +68,7 @@ impl Engine {
 /// in screen pixels (600×600, y down) and seconds.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PhysicsParams {
-    /// The engine: rapier2d (default), Box2D with Chipmunk's semantics, or the Chipmunk-faithful step.
+    /// The engine: the Chipmunk-faithful step (default), rapier2d, or Box2D with Chipmunk's semantics.
     pub engine: Engine,
     /// Downward gravity (px/s²): 100.
     pub gravity: f64,
@@ -134,7 +143,7 @@ pub struct PhysicsParams {
 impl Default for PhysicsParams {
     fn default() -> Self {
         PhysicsParams {
-            engine: Engine::Rapier,
+            engine: Engine::Chipmunk,
             gravity: 100.0,
             fps: 60.0,
             max_time: 15.0,

@@ -11,7 +11,7 @@
 use super::action::{Click, ClickSchedule, Due, hits_block, validate_clicks};
 use super::error::Result;
 use super::game::Game;
-use super::params::PhysicsParams;
+use super::params::{Engine, PhysicsParams};
 use super::success::{all_balls_out, ball_out, reward};
 use super::world::{ObjectState, World};
 
@@ -103,6 +103,8 @@ pub struct EpisodeResult {
     pub reward: f64,
     /// The frame rate used.
     pub fps: f64,
+    /// The engine that ran it.
+    pub engine: Engine,
 }
 
 /// One game being played: the world, the click schedule and the record so far.
@@ -163,6 +165,7 @@ impl Episode {
                 eliminations: 0,
                 reward: 0.0,
                 fps: params.fps,
+                engine: params.engine,
             },
         };
         episode.record_frame();

@@ -44,7 +44,7 @@ fn extra_of(result: &EpisodeResult, game: &Game) -> JsonMap {
         "task_index": game.index,
         "fold": game.fold,
         "actions": clicks,
-        "simulator": {"engine": "rapier2d", "fps": result.fps, "screen": [600, 600]},
+        "simulator": {"engine": result.engine.description(), "fps": result.fps, "screen": [600, 600]},
     }))
 }
 
@@ -247,6 +247,9 @@ mod tests {
         assert_eq!(applied.payload.as_ref().unwrap()["agents"], json!(["0"]));
         assert!(tr.outcome.success);
         assert_eq!(tr.outcome.metrics["effective_eliminations"], json!(2));
+        // The trace names the engine that made it (the default: the Chipmunk step).
+        let engine = tr.extra["simulator"]["engine"].as_str().unwrap();
+        assert!(engine.starts_with("chipmunk-step"), "{engine}");
     }
 
     #[test]
