@@ -32,6 +32,8 @@
 mod atomic;
 pub mod manifest;
 mod parquet;
+#[cfg(feature = "s3")]
+pub mod remote;
 mod traces;
 pub mod verify;
 
@@ -105,6 +107,30 @@ pub enum StoreError {
         /// What is wrong.
         problem: Problem,
     },
+    /// An object store refused or failed a request (a run at `s3://…`), or its location is malformed.
+    #[error("{location}: {message}")]
+    Remote {
+        /// The run or object (`s3://bucket/prefix/key`).
+        location: String,
+        /// What failed.
+        message: String,
+    },
+    /// A conditional write to an object store lost to another writer: nothing of it was published.
+    #[error("{location}: {message}")]
+    Conflict {
+        /// The run (`s3://bucket/prefix`).
+        location: String,
+        /// What conflicted.
+        message: String,
+    },
+    /// A run location on object storage given to an annotrace built without the `s3` feature.
+    #[error(
+        "{location}: this annotrace was built without object-storage support; rebuild with `cargo build --features s3`"
+    )]
+    RemoteUnsupported {
+        /// The location given.
+        location: String,
+    },
     /// The manifest was written by a newer annotrace.
     #[error(
         "{}: manifest format {found} is newer than this annotrace reads (format {}); use a newer annotrace",
@@ -131,6 +157,11 @@ impl StoreError {
             source,
         }
     }
+}
+
+/// Whether a run location names an object store (`s3://bucket/prefix`) rather than a local folder.
+pub fn remote_url(location: &Path) -> Option<&str> {
+    location.to_str().filter(|s| s.starts_with("s3://"))
 }
 
 /// Folder names in a run that are not tables.
@@ -363,6 +394,11 @@ impl Staging {
     /// The stage this area belongs to.
     pub fn stage_id(&self) -> &str {
         &self.stage_id
+    }
+
+    /// The staging folder (`.staging/<stage>/`).
+    pub fn dir(&self) -> &Path {
+        &self.dir
     }
 
     fn done_dir(&self) -> PathBuf {
