@@ -172,19 +172,17 @@ fn commit_finished_slices(
         let record = remote
             .load_manifest()?
             .and_then(|(m, _, _)| m.stages.get(id).cloned());
-        match record {
-            Some(r) if &r.fingerprint == fp && r.status == StageStatus::Running => {
-                if ctx.try_commit(i, fp)?.is_none() {
-                    let done = ctx.slices_done(id, fp)?;
-                    return Err(RunError::ShardsUnfinished {
-                        id: id.clone(),
-                        missing: missing_slices(&done)
-                            .unwrap_or_else(|| "its commit did not complete".into()),
-                    });
-                }
-            }
-            // Finished, or never started by a shard (the runner's --finalize check says so).
-            _ => {}
+        // A stage finished, or never started by a shard (the runner's --finalize check says so), is
+        // left as it is.
+        let running =
+            record.is_some_and(|r| &r.fingerprint == fp && r.status == StageStatus::Running);
+        if running && ctx.try_commit(i, fp)?.is_none() {
+            let done = ctx.slices_done(id, fp)?;
+            return Err(RunError::ShardsUnfinished {
+                id: id.clone(),
+                missing: missing_slices(&done)
+                    .unwrap_or_else(|| "its commit did not complete".into()),
+            });
         }
     }
     Ok(())

@@ -356,13 +356,13 @@ impl RemoteRun {
                 expected: Some(expected),
                 found: data.len() as u64,
             })
-        } else if let Some(expected) = sha256.filter(|&s| s != found_sha) {
-            Some(super::Problem::Checksum {
-                expected: expected.to_string(),
-                found: found_sha,
-            })
         } else {
-            None
+            sha256
+                .filter(|&s| s != found_sha)
+                .map(|expected| super::Problem::Checksum {
+                    expected: expected.to_string(),
+                    found: found_sha,
+                })
         };
         if let Some(problem) = problem {
             return Err(StoreError::Damaged {
