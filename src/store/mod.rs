@@ -25,6 +25,9 @@
 //! finished stage lists (a foreign file, one of an interrupted commit) is invisible. Every listed file's
 //! size is checked as it is listed (a stat); [`verify`] also checks checksums.
 //!
+//! With the cargo feature `s3`, `remote` holds the same layout on an object store (`s3://bucket/prefix`)
+//! and the local copy a remote run is worked on through (`pipeline::remote` publishes its commits).
+//!
 //! One exception: [`JOURNAL_TABLES`] (`llm_calls`) are appended to file by file outside any stage (so
 //! that calls recorded before a kill survive it) and are listed from their folder; each of their files
 //! is written atomically, so none is ever partial.
