@@ -29,6 +29,7 @@ mod export;
 mod import;
 mod import_survey;
 mod llm_args;
+mod location;
 mod one_stage;
 mod plot;
 mod progress;
@@ -276,17 +277,28 @@ fn init_logging(quiet: bool) {
         .try_init();
 }
 
-/// Opens a run folder for SQL; a folder that does not exist is the user's mistake (exit 2).
-pub(crate) fn open_query(dir: &std::path::Path) -> Result<annotrace::query::RunQuery, CliError> {
-    if !dir.is_dir() {
-        return Err(CliError::input(anyhow::anyhow!(
-            "{}: no such run folder",
-            dir.display()
-        )));
+/// Opens a run for SQL (a local folder, or `s3://…` through a pulled copy); a folder that does not
+/// exist is the user's mistake (exit 2).
+pub(crate) fn open_query(dir: &std::path::Path) -> Result<OpenQuery, CliError> {
+    let local = location::local_run(dir)?;
+    let query = annotrace::query::RunQuery::open(&annotrace::store::RunDir::new(local.path()))?;
+    Ok(OpenQuery {
+        query,
+        _local: local,
+    })
+}
+
+/// A run's query session, with the local copy it reads (kept as long as the session).
+pub(crate) struct OpenQuery {
+    query: annotrace::query::RunQuery,
+    _local: location::LocalRun,
+}
+
+impl std::ops::Deref for OpenQuery {
+    type Target = annotrace::query::RunQuery;
+    fn deref(&self) -> &Self::Target {
+        &self.query
     }
-    Ok(annotrace::query::RunQuery::open(
-        &annotrace::store::RunDir::new(dir),
-    )?)
 }
 
 /// The fault plan from `ANNOTRACE_FAULT`, for tests of resumption.

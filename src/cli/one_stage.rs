@@ -93,14 +93,7 @@ pub(crate) fn absolute(p: &Path) -> Result<String, CliError> {
 
 /// Fails (exit 2) when the run folder does not exist.
 pub(crate) fn existing_run(run: &Path) -> Result<(), CliError> {
-    if run.is_dir() {
-        Ok(())
-    } else {
-        Err(CliError::input(anyhow::anyhow!(
-            "{}: no such run folder",
-            run.display()
-        )))
-    }
+    super::location::check_exists(run)
 }
 
 /// A validation error of the one-stage pipeline, worded for the command line: the internal file, line

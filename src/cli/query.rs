@@ -50,14 +50,10 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> CliResult {
-    if !args.run.is_dir() {
-        return Err(CliError::input(anyhow::anyhow!(
-            "{}: no such run folder",
-            args.run.display()
-        )));
-    }
+    // A run on object storage is read through a local copy (any local --out is outside it).
+    let local = super::location::local_run(&args.run)?;
     if let Some(out) = &args.out {
-        check_output_path(&args.run, out).map_err(CliError::input)?;
+        check_output_path(local.path(), out).map_err(CliError::input)?;
     }
     let mut settings =
         QuerySettings::resolve(args.memory_limit, args.timeout, &|k| std::env::var(k).ok())
@@ -65,7 +61,7 @@ pub fn run(args: Args) -> CliResult {
     settings.partitions = usize::from(args.threads);
     // Opening reads the manifest and checks every listed file: a damaged run folder is bad input (2),
     // a failing disk an I/O error (4), as the error's category says.
-    let q = RunQuery::open_with(&RunDir::new(&args.run), settings)?;
+    let q = RunQuery::open_with(&RunDir::new(local.path()), settings)?;
     // The query's own faults (bad or refused SQL, over its limits) are the user's: exit code 2.
     let result = q.sql(&args.sql).map_err(|e| {
         if e.is_users() {

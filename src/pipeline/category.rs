@@ -146,6 +146,11 @@ impl Categorize for StoreError {
             StoreError::Schema { .. } | StoreError::Json { .. } => ErrorCategory::Input,
             // A published file missing, resized or changed: the run folder's data is wrong.
             StoreError::Damaged { .. } | StoreError::ManifestFormat { .. } => ErrorCategory::Input,
+            // The object store is unreachable or refused the request (credentials, endpoint).
+            StoreError::Remote { .. } => ErrorCategory::Service,
+            // Another writer committed first: as with a run folder another process holds.
+            StoreError::Conflict { .. } => ErrorCategory::Locked,
+            StoreError::RemoteUnsupported { .. } => ErrorCategory::Input,
         }
     }
 }

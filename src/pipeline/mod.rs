@@ -11,6 +11,8 @@ mod category;
 mod params;
 mod progress;
 mod registry;
+#[cfg(feature = "s3")]
+mod remote;
 mod runner;
 mod sharded;
 mod spec;

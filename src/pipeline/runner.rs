@@ -491,11 +491,38 @@ fn relative(run: &RunDir, path: &Path) -> String {
         .replace('\\', "/")
 }
 
-/// Runs a pipeline.
+/// Called after the manifest records a stage `finished` or `failed` (with the stage's id and the
+/// manifest as saved): how a run on object storage publishes each commit (`pipeline::remote`).
+pub(super) type OnCommit<'a> = dyn Fn(&str, &Manifest) -> Result<(), RunError> + 'a;
+
+/// Runs a pipeline. A run location `s3://bucket/prefix` runs on a local copy published to the object
+/// store stage by stage (feature `s3`, `pipeline::remote`).
 pub fn run(
     spec: &PipelineSpec,
     opts: &RunOptions,
     progress: &dyn Progress,
+) -> Result<RunReport, RunError> {
+    if let Some(url) = remote_location(spec, opts) {
+        #[cfg(feature = "s3")]
+        return super::remote::run(spec, opts, None, progress, &url);
+        #[cfg(not(feature = "s3"))]
+        return Err(StoreError::RemoteUnsupported { location: url }.into());
+    }
+    run_local(spec, opts, progress, None)
+}
+
+/// The run location when it is on object storage (`s3://…`).
+pub(super) fn remote_location(spec: &PipelineSpec, opts: &RunOptions) -> Option<String> {
+    let dir = opts.run_dir.clone().or_else(|| spec.run_dir.clone())?;
+    crate::store::remote_url(&dir).map(str::to_string)
+}
+
+/// Runs a pipeline in a local run folder, calling `on_commit` after each stage's commit.
+pub(super) fn run_local(
+    spec: &PipelineSpec,
+    opts: &RunOptions,
+    progress: &dyn Progress,
+    on_commit: Option<&OnCommit<'_>>,
 ) -> Result<RunReport, RunError> {
     let (built, run) = prepare(spec, opts)?;
     let existed = run.root().exists();
@@ -514,7 +541,7 @@ pub fn run(
         });
     }
 
-    let result = run_locked(spec, opts, progress, &built, &run);
+    let result = run_locked(spec, opts, progress, &built, &run, on_commit);
     if result.is_err() && !existed && opts.remove_new_run_on_failure {
         // A run folder this invocation created and that holds no finished stage is removed whole, so a
         // failed first import leaves nothing behind.
@@ -537,6 +564,8 @@ pub(super) struct Session<'a> {
     pub(super) progress: &'a dyn Progress,
     pub(super) built: &'a Built,
     pub(super) run: &'a RunDir,
+    /// Called after each stage's commit (`None` for a local run).
+    pub(super) on_commit: Option<&'a OnCommit<'a>>,
 }
 
 fn run_locked(
@@ -545,6 +574,7 @@ fn run_locked(
     progress: &dyn Progress,
     built: &Built,
     run: &RunDir,
+    on_commit: Option<&OnCommit<'_>>,
 ) -> Result<RunReport, RunError> {
     let mut manifest = Manifest::load(run)?.unwrap_or_default();
     let format = manifest.format;
@@ -573,6 +603,7 @@ fn run_locked(
         progress,
         built,
         run,
+        on_commit,
     };
     let plan = plan_with(spec, opts, built, run, &manifest);
     let mut reports = Vec::new();
@@ -663,6 +694,7 @@ impl Session<'_> {
         rec.finished = Some(now());
         manifest.stages.insert(id.to_string(), rec.clone());
         manifest.save(run)?;
+        self.committed(id, manifest)?;
         staging.remove()?;
         progress.stage_finished(id, "resumed commit");
         Ok(Some(StageReport {
@@ -672,6 +704,14 @@ impl Session<'_> {
             summary: rec.summary,
             seconds: 0.0,
         }))
+    }
+
+    /// Tells the `on_commit` hook that stage `id` is recorded finished or failed in `manifest`.
+    fn committed(&self, id: &str, manifest: &Manifest) -> Result<(), RunError> {
+        match self.on_commit {
+            Some(hook) => hook(id, manifest),
+            None => Ok(()),
+        }
     }
 
     /// Prepares the staging folder: a resumed stage keeps its finished shards, any other starts empty.
@@ -789,6 +829,7 @@ impl Session<'_> {
             progress,
             built,
             run,
+            ..
         } = *self;
         let def = &spec.stages[i];
         let started = Instant::now();
@@ -803,6 +844,7 @@ impl Session<'_> {
                 record.finished = Some(now());
                 manifest.stages.insert(def.id.clone(), record);
                 manifest.save(run)?;
+                self.committed(&def.id, manifest)?;
                 return Err(RunError::Stage {
                     id: def.id.clone(),
                     source,
@@ -845,6 +887,7 @@ impl Session<'_> {
         record.seconds = Some(seconds);
         manifest.stages.insert(def.id.clone(), record);
         manifest.save(run)?;
+        self.committed(&def.id, manifest)?;
         steps.step()?;
         staging.remove()?;
         steps.step()?;

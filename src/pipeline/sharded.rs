@@ -41,7 +41,7 @@ use crate::store::manifest::{Manifest, StageRecord, StageStatus, now};
 use crate::store::{RunDir, StoreError};
 
 /// How often a waiting shard reads the manifest again.
-const POLL: Duration = Duration::from_millis(500);
+pub(super) const POLL: Duration = Duration::from_millis(500);
 
 /// Slice `index` of `count`: the units of a stage's work list whose index is `index` modulo `count`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -169,7 +169,7 @@ pub(super) fn check_slices(
 
 /// `None` when the slices done (index, count) cover every index of some count; otherwise which are
 /// missing, for the count with the most done.
-fn missing_slices(done: &[(usize, usize)]) -> Option<String> {
+pub(super) fn missing_slices(done: &[(usize, usize)]) -> Option<String> {
     let counts: BTreeSet<usize> = done.iter().map(|&(_, n)| n).collect();
     let mut best: Option<(usize, Vec<usize>)> = None;
     for n in counts {
@@ -202,7 +202,7 @@ fn missing_slices(done: &[(usize, usize)]) -> Option<String> {
 /// The stages a shard process runs, in run order: every selected stage up to the last selected
 /// shardable one (unshardable ones run whole, once, by whichever shard gets there first). The rest is
 /// left to `--finalize`.
-fn shard_stages(spec: &PipelineSpec, opts: &RunOptions, built: &Built) -> Vec<usize> {
+pub(super) fn shard_stages(spec: &PipelineSpec, opts: &RunOptions, built: &Built) -> Vec<usize> {
     let selected = opts.until.as_ref().map(|u| spec.upstream(u));
     let in_run: Vec<usize> = built
         .order
@@ -237,6 +237,12 @@ pub fn run_shard(
     slice: Slice,
     progress: &dyn Progress,
 ) -> Result<RunReport, RunError> {
+    if let Some(url) = super::runner::remote_location(spec, opts) {
+        #[cfg(feature = "s3")]
+        return super::remote::run(spec, opts, Some(slice), progress, &url);
+        #[cfg(not(feature = "s3"))]
+        return Err(StoreError::RemoteUnsupported { location: url }.into());
+    }
     let (built, run) = prepare(spec, opts)?;
     fs::create_dir_all(run.root()).map_err(|e| StoreError::io(run.root(), e))?;
     let lock_path = slice_lock_path(&run, slice);
@@ -258,6 +264,7 @@ pub fn run_shard(
             progress,
             built: &built,
             run: &run,
+            on_commit: None,
         },
         slice,
         waiting_noted: std::cell::Cell::new(false),

@@ -230,7 +230,15 @@ impl Ctx<'_> {
                         ));
                     }
                 },
-                "run_dir" => h.run_dir = Some(project_dir.join(cx.string(&p.value, "`run_dir`")?)),
+                "run_dir" => {
+                    let dir = cx.string(&p.value, "`run_dir`")?;
+                    // An object-store location (`s3://…`) is kept as written.
+                    h.run_dir = Some(if dir.starts_with("s3://") {
+                        PathBuf::from(dir)
+                    } else {
+                        project_dir.join(dir)
+                    });
+                }
                 _ => {
                     return Err(cx.unknown_key(
                         p,

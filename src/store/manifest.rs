@@ -206,14 +206,19 @@ impl Manifest {
     /// Writes the manifest atomically (in format [`FORMAT`]). The rename of the new manifest over the
     /// old one is the commit point of every status change.
     pub fn save(&mut self, run: &RunDir) -> Result<(), StoreError> {
+        let path = run.manifest_path();
+        write_atomic(&path, &self.to_bytes())
+            .map(|_| ())
+            .map_err(|e| StoreError::Io { path, source: e })
+    }
+
+    /// The bytes [`Manifest::save`] writes (stamped with the time, [`FORMAT`] and this version).
+    pub fn to_bytes(&mut self) -> Vec<u8> {
         self.updated = now();
         self.format = FORMAT;
         self.annotrace_version = crate::VERSION.to_string();
-        let path = run.manifest_path();
         let text = serde_json::to_string_pretty(self).expect("the manifest serialises");
-        write_atomic(&path, format!("{text}\n").as_bytes())
-            .map(|_| ())
-            .map_err(|e| StoreError::Io { path, source: e })
+        format!("{text}\n").into_bytes()
     }
 
     /// The published files: every output of a `finished` stage, with the stage's id, in stage order.

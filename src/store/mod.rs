@@ -25,6 +25,9 @@
 //! finished stage lists (a foreign file, one of an interrupted commit) is invisible. Every listed file's
 //! size is checked as it is listed (a stat); [`verify`] also checks checksums.
 //!
+//! With the cargo feature `s3`, `remote` holds the same layout on an object store (`s3://bucket/prefix`)
+//! and the local copy a remote run is worked on through (`pipeline::remote` publishes its commits).
+//!
 //! One exception: [`JOURNAL_TABLES`] (`llm_calls`) are appended to file by file outside any stage (so
 //! that calls recorded before a kill survive it) and are listed from their folder; each of their files
 //! is written atomically, so none is ever partial.
@@ -32,6 +35,8 @@
 mod atomic;
 pub mod manifest;
 mod parquet;
+#[cfg(feature = "s3")]
+pub mod remote;
 mod traces;
 pub mod verify;
 
@@ -105,6 +110,30 @@ pub enum StoreError {
         /// What is wrong.
         problem: Problem,
     },
+    /// An object store refused or failed a request (a run at `s3://…`), or its location is malformed.
+    #[error("{location}: {message}")]
+    Remote {
+        /// The run or object (`s3://bucket/prefix/key`).
+        location: String,
+        /// What failed.
+        message: String,
+    },
+    /// A conditional write to an object store lost to another writer: nothing of it was published.
+    #[error("{location}: {message}")]
+    Conflict {
+        /// The run (`s3://bucket/prefix`).
+        location: String,
+        /// What conflicted.
+        message: String,
+    },
+    /// A run location on object storage given to an annotrace built without the `s3` feature.
+    #[error(
+        "{location}: this annotrace was built without object-storage support; rebuild with `cargo build --features s3`"
+    )]
+    RemoteUnsupported {
+        /// The location given.
+        location: String,
+    },
     /// The manifest was written by a newer annotrace.
     #[error(
         "{}: manifest format {found} is newer than this annotrace reads (format {}); use a newer annotrace",
@@ -131,6 +160,11 @@ impl StoreError {
             source,
         }
     }
+}
+
+/// Whether a run location names an object store (`s3://bucket/prefix`) rather than a local folder.
+pub fn remote_url(location: &Path) -> Option<&str> {
+    location.to_str().filter(|s| s.starts_with("s3://"))
 }
 
 /// Folder names in a run that are not tables.
@@ -363,6 +397,11 @@ impl Staging {
     /// The stage this area belongs to.
     pub fn stage_id(&self) -> &str {
         &self.stage_id
+    }
+
+    /// The staging folder (`.staging/<stage>/`).
+    pub fn dir(&self) -> &Path {
+        &self.dir
     }
 
     fn done_dir(&self) -> PathBuf {

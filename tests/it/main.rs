@@ -24,6 +24,8 @@ mod render;
 mod report;
 mod reward;
 mod run;
+#[cfg(feature = "s3")]
+mod s3;
 mod sandbox;
 mod shard;
 mod simulate;

@@ -8,7 +8,7 @@ use std::process::{Child, Stdio};
 use crate::common::{Ran, TestRun};
 
 /// simulate (12 scenes in 6 units of 2) → annotate, accuracy → SQL.
-const PIPELINE: &str = r#"[pipeline]
+pub(crate) const PIPELINE: &str = r#"[pipeline]
 name = "p"
 seed = 5
 
@@ -77,29 +77,32 @@ fn sorted(csv: String) -> String {
     lines.join("\n")
 }
 
+/// The tables of the pipeline's run.
+pub(crate) const TABLES: [&str; 9] = [
+    "scenes",
+    "traces",
+    "timesteps",
+    "frames",
+    "events",
+    "detectors",
+    "annotations",
+    "accuracy",
+    "counts",
+];
+
+/// `detector_calls` without its timing columns.
+pub(crate) const CALLS_SQL: &str = "SELECT detector_id, trace_id, label, status, error, error_line, n_patterns FROM detector_calls";
+
 /// The run's tables as `annotrace tables` prints them (names, row counts, schemas) and every table's
 /// rows as sorted CSV (`detector_calls` without its timing columns, which differ between any two runs).
-fn tables_and_rows(t: &TestRun, run: &str) -> (String, Vec<String>) {
+pub(crate) fn tables_and_rows(t: &TestRun, run: &str) -> (String, Vec<String>) {
     let tables = t.run(&["tables", "--run", run]);
     tables.ok();
     let mut rows = Vec::new();
-    for name in [
-        "scenes",
-        "traces",
-        "timesteps",
-        "frames",
-        "events",
-        "detectors",
-        "annotations",
-        "accuracy",
-        "counts",
-    ] {
+    for name in TABLES {
         rows.push(sorted(t.csv(run, &format!("SELECT * FROM {name}"))));
     }
-    rows.push(sorted(t.csv(
-        run,
-        "SELECT detector_id, trace_id, label, status, error, error_line, n_patterns FROM detector_calls",
-    )));
+    rows.push(sorted(t.csv(run, CALLS_SQL)));
     (tables.stdout.clone(), rows)
 }
 
