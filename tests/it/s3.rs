@@ -1,6 +1,6 @@
 //! Runs on object storage (feature `s3`), against a local S3-compatible server started by the test:
 //! moto in server mode, on loopback, from a venv cached under `$HOME/.cache/annotrace/moto-venv`
-//! (created with `python3 -m venv` and `pip install 'moto[server]'` the first time; override with
+//! (created with `python3 -m venv` and `pip install 'moto[server]==5.2.5'` the first time; override with
 //! `ANNOTRACE_MOTO_VENV`). The sharded pipeline of `shard.rs` runs as separate `annotrace` processes
 //! into `s3://…`, one killed and rerun, then `--finalize`, and every table equals the single-process
 //! local run; conditional puts refuse the losing writer.
@@ -46,7 +46,7 @@ fn moto_venv() -> PathBuf {
                 "install",
                 "--quiet",
                 "--disable-pip-version-check",
-                "moto[server]>=5.1",
+                "moto[server]==5.2.5",
             ])
             .status()
             .expect("pip runs")
