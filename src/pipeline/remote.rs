@@ -434,17 +434,7 @@ impl Remote<'_> {
         let def = &s.spec.stages[i];
         let staging = s.run.staging(&def.id);
         staging.remove()?;
-        s.progress
-            .note(&def.id, &format!("computing slice {slice}"));
-        s.progress.stage_started(&def.id, def.kind.name, None);
-        let ctx = s.context(i, staging.clone(), Some(slice));
-        s.built.stages[i]
-            .run(&ctx)
-            .map_err(|source| RunError::Stage {
-                id: def.id.clone(),
-                source,
-            })?;
-        drop(ctx);
+        s.run_slice(i, &staging, slice)?;
         let prefix = slices_prefix(&def.id, fp);
         let mut files = Vec::new();
         for file in walk(staging.dir())? {

@@ -813,6 +813,28 @@ impl Session<'_> {
         }
     }
 
+    /// Computes `slice` of stage number `i` into `staging` (a shard's share of a shardable stage),
+    /// announcing it on the progress display; the caller records the slice done.
+    pub(super) fn run_slice(
+        &self,
+        i: usize,
+        staging: &Staging,
+        slice: super::sharded::Slice,
+    ) -> Result<(), RunError> {
+        let def = &self.spec.stages[i];
+        self.progress
+            .note(&def.id, &format!("computing slice {slice}"));
+        self.progress.stage_started(&def.id, def.kind.name, None);
+        let ctx = self.context(i, staging.clone(), Some(slice));
+        self.built.stages[i]
+            .run(&ctx)
+            .map(drop)
+            .map_err(|source| RunError::Stage {
+                id: def.id.clone(),
+                source,
+            })
+    }
+
     /// Runs stage number `i` (recorded `running` as `record`) over its whole work list and commits its
     /// outputs, recording each step in the manifest. A stage whose units were computed by shards only
     /// computes what no slice owns and sums the shards' records here.

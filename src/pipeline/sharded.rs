@@ -410,16 +410,7 @@ impl Shard<'_> {
                 &format!("slice {slice}: {dropped} partial file(s) of an earlier attempt dropped"),
             );
         }
-        s.progress
-            .note(&def.id, &format!("computing slice {slice}"));
-        s.progress.stage_started(&def.id, def.kind.name, None);
-        let ctx = s.context(i, staging.clone(), Some(slice));
-        s.built.stages[i]
-            .run(&ctx)
-            .map_err(|source| RunError::Stage {
-                id: def.id.clone(),
-                source,
-            })?;
+        s.run_slice(i, &staging, slice)?;
         staging.mark_slice(slice.index, slice.count, fp)?;
         s.progress
             .stage_finished(&def.id, &format!("slice {slice} done"));
