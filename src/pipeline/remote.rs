@@ -31,8 +31,7 @@ use serde::{Deserialize, Serialize};
 
 use super::progress::Progress;
 use super::runner::{
-    Action, Built, PlannedStage, RunError, RunOptions, RunReport, Session, StageReport, plan_with,
-    prepare, run_local,
+    Action, Built, RunError, RunOptions, RunReport, Session, StageReport, prepare, run_local,
 };
 use super::sharded::{POLL, Slice, missing_slices, shard_stages};
 use super::spec::PipelineSpec;
@@ -328,32 +327,6 @@ impl Remote<'_> {
         &self.session.spec.stages[i].id
     }
 
-    /// The plan line of stage `i` against the mirror's manifest.
-    fn planned(&self, manifest: &Manifest, i: usize) -> PlannedStage {
-        let s = &self.session;
-        let pos = s
-            .built
-            .order
-            .iter()
-            .position(|&j| j == i)
-            .expect("every stage is in the order");
-        plan_with(s.spec, s.opts, s.built, s.run, manifest)
-            .into_iter()
-            .nth(pos)
-            .expect("one plan line per stage")
-    }
-
-    fn cached(&self, id: &str, record: &StageRecord) -> StageReport {
-        self.session.progress.stage_cached(id);
-        StageReport {
-            id: id.to_string(),
-            cached: true,
-            rows: record.rows.clone(),
-            summary: record.summary.clone(),
-            seconds: 0.0,
-        }
-    }
-
     fn local_manifest(&self) -> Result<Manifest, RunError> {
         Ok(Manifest::load(self.session.run)?.unwrap_or_default())
     }
@@ -364,9 +337,9 @@ impl Remote<'_> {
         let s = &self.session;
         let id = self.id(i).to_string();
         let mut manifest = self.local_manifest()?;
-        let planned = self.planned(&manifest, i);
+        let planned = self.session.planned(&manifest, i);
         if planned.action == Action::Cached {
-            return Ok(self.cached(&id, &manifest.stages[&id]));
+            return Ok(self.session.cached(&id, &manifest.stages[&id]));
         }
         let staging = s.run.staging(&id);
         s.reset_staging(&mut manifest, &staging, &id, false)?;
@@ -393,9 +366,9 @@ impl Remote<'_> {
         let s = &self.session;
         let id = self.id(i).to_string();
         let mut manifest = self.local_manifest()?;
-        let planned = self.planned(&manifest, i);
+        let planned = self.session.planned(&manifest, i);
         if planned.action == Action::Cached {
-            return Ok(self.cached(&id, &manifest.stages[&id]));
+            return Ok(self.session.cached(&id, &manifest.stages[&id]));
         }
         let fp = planned.fingerprint.clone();
         // Start: record it `running` (unpublishing an older version) unless a shard has.
@@ -405,7 +378,7 @@ impl Remote<'_> {
         })?;
         if record.status == StageStatus::Finished {
             self.remote.pull(self.root)?;
-            return Ok(self.cached(&id, &record));
+            return Ok(self.session.cached(&id, &record));
         }
         manifest.stages.insert(id.clone(), record);
         manifest.save(s.run)?;

@@ -614,15 +614,7 @@ fn run_locked(
             Action::Cached => {
                 // A run killed after the commit point, before the staging area was removed.
                 run.staging(&def.id).remove()?;
-                progress.stage_cached(&def.id);
-                let r = &manifest.stages[&def.id];
-                reports.push(StageReport {
-                    id: def.id.clone(),
-                    cached: true,
-                    rows: r.rows.clone(),
-                    summary: r.summary.clone(),
-                    seconds: 0.0,
-                });
+                reports.push(session.cached(&def.id, &manifest.stages[&def.id]));
                 continue;
             }
             Action::Run(_) => {}
@@ -811,6 +803,32 @@ impl Session<'_> {
             shards_started: AtomicUsize::new(0),
             slice,
         }
+    }
+
+    /// The report of a stage found finished in the manifest (`record`), announced as cached.
+    pub(super) fn cached(&self, id: &str, record: &StageRecord) -> StageReport {
+        self.progress.stage_cached(id);
+        StageReport {
+            id: id.to_string(),
+            cached: true,
+            rows: record.rows.clone(),
+            summary: record.summary.clone(),
+            seconds: 0.0,
+        }
+    }
+
+    /// The plan line of stage number `i` against `manifest`.
+    pub(super) fn planned(&self, manifest: &Manifest, i: usize) -> PlannedStage {
+        let pos = self
+            .built
+            .order
+            .iter()
+            .position(|&j| j == i)
+            .expect("every stage is in the order");
+        plan_with(self.spec, self.opts, self.built, self.run, manifest)
+            .into_iter()
+            .nth(pos)
+            .expect("one plan line per stage")
     }
 
     /// Computes `slice` of stage number `i` into `staging` (a shard's share of a shardable stage),

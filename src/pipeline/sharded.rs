@@ -33,8 +33,7 @@ use std::time::Duration;
 
 use super::progress::Progress;
 use super::runner::{
-    Action, Built, PlannedStage, RunError, RunOptions, RunReason, RunReport, Session, StageReport,
-    plan_with, prepare,
+    Action, Built, RunError, RunOptions, RunReason, RunReport, Session, StageReport, prepare,
 };
 use super::spec::PipelineSpec;
 use crate::store::manifest::{Manifest, StageRecord, StageStatus, now};
@@ -306,39 +305,16 @@ impl Shard<'_> {
         f(&mut manifest)
     }
 
-    fn planned(&self, manifest: &Manifest, i: usize) -> PlannedStage {
-        let s = &self.session;
-        let plan = plan_with(s.spec, s.opts, s.built, s.run, manifest);
-        let pos = s
-            .built
-            .order
-            .iter()
-            .position(|&j| j == i)
-            .expect("every stage is in the order");
-        plan.into_iter().nth(pos).expect("one plan line per stage")
-    }
-
-    fn cached(&self, id: &str, record: &StageRecord) -> StageReport {
-        self.session.progress.stage_cached(id);
-        StageReport {
-            id: id.to_string(),
-            cached: true,
-            rows: record.rows.clone(),
-            summary: record.summary.clone(),
-            seconds: 0.0,
-        }
-    }
-
     /// An unshardable stage a shardable one needs: run whole, under the run lock, by the first shard
     /// that gets there; the others find it finished.
     fn whole_stage(&self, i: usize) -> Result<Option<StageReport>, RunError> {
         let s = &self.session;
         let id = &s.spec.stages[i].id;
         self.locked(|manifest| {
-            let planned = self.planned(manifest, i);
+            let planned = self.session.planned(manifest, i);
             if planned.action == Action::Cached {
                 s.run.staging(id).remove()?;
-                return Ok(Some(self.cached(id, &manifest.stages[id])));
+                return Ok(Some(self.session.cached(id, &manifest.stages[id])));
             }
             let staging = s.run.staging(id);
             let previous = manifest.stages.get(id).cloned();
@@ -365,10 +341,10 @@ impl Shard<'_> {
         let s = &self.session;
         let id = &s.spec.stages[i].id;
         self.locked(|manifest| {
-            let planned = self.planned(manifest, i);
+            let planned = self.session.planned(manifest, i);
             let staging = s.run.staging(id);
             match (&planned.action, manifest.stages.get(id).cloned()) {
-                (Action::Cached, Some(r)) => return Ok(Err(self.cached(id, &r))),
+                (Action::Cached, Some(r)) => return Ok(Err(self.session.cached(id, &r))),
                 (Action::Run(RunReason::Resume), Some(r)) if r.status == StageStatus::Running => {
                     return Ok(Ok(planned.fingerprint));
                 }
