@@ -22,6 +22,7 @@ pub const FUNCTION_NAMES: &[&str] = &[
     "GT",
     "LT",
     "NEARBY_AT",
+    "NEAR",
     "OBJECT_ID",
     "CUE_HIT",
     "POCKETED",
@@ -257,12 +258,13 @@ impl Checker<'_> {
             "CUE_HIT" | "POCKETED" => self.billiards_fact(f, e.pos, args)?,
             "AFTER" | "WITHIN" => self.after(f, e.pos, args)?,
             "NEARBY_AT" => self.nearby_at(f, e.pos, args)?,
+            "NEAR" => self.near(f, e.pos, args)?,
             "OBJECT_ID" => {
                 return Err(err(
                     ErrorCategory::ArgumentType,
                     e.pos,
                     "OBJECT_ID returns an object id, not a predicate: use it as an argument of NEARBY_AT, \
-                     CUE_HIT or a ball= filter",
+                     NEAR, CUE_HIT or a ball= filter",
                 ));
             }
             _ => {
@@ -351,6 +353,30 @@ impl Checker<'_> {
                 self.obj(f, b.slots[0].expect("required"))?,
             ))
         }
+    }
+
+    /// `NEAR(a, b, threshold_strength)`: two objects, the threshold above 0 (default 0.1).
+    fn near(&self, f: &str, pos: Pos, args: &[Arg]) -> Result<NodeKind, RewardError> {
+        let b = bind(f, pos, args, &["a", "b", "threshold_strength"], 2, false)?;
+        let threshold = match b.get(2) {
+            Some(x) => {
+                let v = number(f, "threshold_strength", x)?;
+                if v <= 0.0 {
+                    return Err(err(
+                        ErrorCategory::ArgumentType,
+                        x.pos,
+                        format!("NEAR: `threshold_strength` must be > 0, found {v}"),
+                    ));
+                }
+                v
+            }
+            None => 0.1,
+        };
+        Ok(NodeKind::Near {
+            a: self.obj(f, b.slots[0].expect("required"))?,
+            b: self.obj(f, b.slots[1].expect("required"))?,
+            threshold,
+        })
     }
 
     /// `NEARBY_AT(obj_id, x, y, t, threshold_strength)`: `t` in [0, 1], the threshold above 0

@@ -5,6 +5,7 @@
 //! clause (or a whole program that is not an `AND`) scores 1/0 by its truth, except the quantitative
 //! primitives, which score their distance to satisfaction with an inverse-log shaping clamped to
 //! [0, 1] ([`shape`]): `NEARBY_AT` the distance beyond the threshold radius (as a multiple of it),
+//! `NEAR` the smallest gap between two objects' outlines beyond its radius (the same way),
 //! `COUNT`/`GT`/`LT`/`PATTERN_COUNT` the number of occurrences missing or in excess. Success is the
 //! truth of the whole expression, so a program scores 1 exactly when it succeeds.
 
@@ -126,24 +127,55 @@ impl Eval<'_, '_> {
         }
     }
 
+    /// The ids an object reference stands for: an id, or with `OBJECT_ID` every object of that
+    /// colour and shape (PHYRE, I-PHYRE; billiards: one ball).
+    fn ids(&self, o: &ObjRef) -> Result<Vec<String>, RewardError> {
+        match o {
+            ObjRef::Id(s) => Ok(vec![s.clone()]),
+            ObjRef::Lookup { color, shape, pos } => self.trace.object_ids(color, shape, *pos),
+        }
+    }
+
     fn passes(&self, f: &Filter, o: &Occurrence) -> Result<bool, RewardError> {
         let same = |a: &str, b: &str| value_matches(&Value::from(a), &Value::from(b));
         if let Some(b) = &f.ball {
-            let id = self.id(b)?;
+            let ids = self.ids(b)?;
             let subject = o
                 .objects
                 .first()
                 .map(String::as_str)
                 .or_else(|| o.params.get("ball").and_then(Value::as_str));
-            if !subject.is_some_and(|s| same(s, &id)) {
+            if !subject.is_some_and(|s| ids.iter().any(|id| same(s, id))) {
                 return Ok(false);
             }
         }
+        // `contains=[…]`: each reference names a different object of the pattern (two
+        // `OBJECT_ID("red", "ball")` need two red balls).
+        let mut wanted = Vec::with_capacity(f.contains.len());
         for c in &f.contains {
-            let id = self.id(c)?;
-            if !o.objects.iter().any(|x| same(x, &id)) {
-                return Ok(false);
+            wanted.push(self.ids(c)?);
+        }
+        fn assign(wanted: &[Vec<String>], objects: &[String], used: &mut Vec<bool>) -> bool {
+            let Some((first, rest)) = wanted.split_first() else {
+                return true;
+            };
+            for (k, x) in objects.iter().enumerate() {
+                if !used[k]
+                    && first.iter().any(|id| {
+                        value_matches(&Value::from(x.as_str()), &Value::from(id.as_str()))
+                    })
+                {
+                    used[k] = true;
+                    if assign(rest, objects, used) {
+                        return true;
+                    }
+                    used[k] = false;
+                }
             }
+            false
+        }
+        if !assign(&wanted, &o.objects, &mut vec![false; o.objects.len()]) {
+            return Ok(false);
         }
         for (k, want) in &f.params {
             let have = o.params.get(k).or_else(|| {
@@ -264,6 +296,19 @@ impl Eval<'_, '_> {
         Ok(if d <= r { 0.0 } else { d / r - 1.0 })
     }
 
+    /// How far two objects stay from touching, in threshold radii beyond the radius (0 = within it).
+    fn near_deviation(
+        &self,
+        n: &Node,
+        a: &ObjRef,
+        b: &ObjRef,
+        threshold: f64,
+    ) -> Result<f64, RewardError> {
+        let gap = self.trace.min_gap(&self.ids(a)?, &self.ids(b)?, n.pos)?;
+        let r = threshold * nearby_scale(self.program.env);
+        Ok(if gap <= r { 0.0 } else { gap / r - 1.0 })
+    }
+
     fn truth(&self, n: &Node) -> Result<bool, RewardError> {
         Ok(match &n.kind {
             NodeKind::Pattern(_)
@@ -298,6 +343,7 @@ impl Eval<'_, '_> {
                 t,
                 threshold,
             } => self.nearby_deviation(n, obj, *x, *y, *t, *threshold)? == 0.0,
+            NodeKind::Near { a, b, threshold } => self.near_deviation(n, a, b, *threshold)? == 0.0,
         })
     }
 
@@ -319,6 +365,7 @@ impl Eval<'_, '_> {
                 t,
                 threshold,
             } => shape(self.nearby_deviation(n, obj, *x, *y, *t, *threshold)?),
+            NodeKind::Near { a, b, threshold } => shape(self.near_deviation(n, a, b, *threshold)?),
             _ => {
                 if self.truth(n)? {
                     1.0

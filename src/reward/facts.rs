@@ -120,8 +120,22 @@ impl<'a> AnnotatedTrace<'a> {
         &self.pockets
     }
 
-    /// The id of the object of `color` and `shape` in the trace's first timestep.
+    /// The id of the object of `color` and `shape` in the trace's first timestep (the first of
+    /// [`AnnotatedTrace::object_ids`]).
     pub fn object_id(&self, color: &str, shape: &str, pos: Pos) -> Result<String, RewardError> {
+        Ok(self.object_ids(color, shape, pos)?.remove(0))
+    }
+
+    /// Every object of `color` and `shape` in the trace's first timestep, in trace order (at least
+    /// one, else a runtime error). A shape of `object` (or `any`, `*`) matches every shape; PHYRE and
+    /// I-PHYRE colours may list alternatives (`"blue|purple"`). Billiards
+    /// gives one ball: the solid of that colour when present, else the stripe.
+    pub fn object_ids(
+        &self,
+        color: &str,
+        shape: &str,
+        pos: Pos,
+    ) -> Result<Vec<String>, RewardError> {
         let color = color.trim().to_lowercase();
         let shape = shape.trim().to_lowercase();
         let first = self.trace.timesteps.first().map(|t| t.objects.as_slice());
@@ -131,33 +145,46 @@ impl<'a> AnnotatedTrace<'a> {
                 .flatten()
                 .any(|o| o.body.object_id() == id)
         };
-        let found = match self.trace.env {
+        let found: Vec<String> = match self.trace.env {
             Env::Pooltool => pool_ball_of(&color, &shape)
                 .into_iter()
                 .find(|id| present(id))
-                .map(str::to_string),
-            _ => first.into_iter().flatten().find_map(|o| match &o.body {
-                Body::Phyre(p) => (p.color.eq_ignore_ascii_case(&color)
-                    && shape_matches(&p.shape, &shape))
-                .then(|| o.body.object_id()),
-                Body::Iphyre(p) => {
-                    let is_ball = p.x1 == p.x2 && p.y1 == p.y2;
-                    let c = if is_ball {
-                        "red"
-                    } else if p.eliminable > 0.5 {
-                        "gray"
-                    } else if p.dynamic > 0.5 {
-                        "blue"
-                    } else {
-                        "black"
-                    };
-                    let s = if is_ball { "ball" } else { "block" };
-                    (colour_eq(c, &color) && shape_matches(s, &shape)).then(|| o.body.object_id())
-                }
-                Body::Pool(_) => None,
-            }),
+                .map(str::to_string)
+                .into_iter()
+                .collect(),
+            _ => first
+                .into_iter()
+                .flatten()
+                .filter_map(|o| match &o.body {
+                    Body::Phyre(p) => (color
+                        .split('|')
+                        .any(|c| colour_eq(&p.color.to_lowercase(), c.trim()))
+                        && shape_matches(&p.shape, &shape))
+                    .then(|| o.body.object_id()),
+                    Body::Iphyre(p) => {
+                        let is_ball = p.x1 == p.x2 && p.y1 == p.y2;
+                        let c = if is_ball {
+                            "red"
+                        } else if p.eliminable > 0.5 {
+                            "gray"
+                        } else if p.dynamic > 0.5 {
+                            "blue"
+                        } else {
+                            "black"
+                        };
+                        let s = if is_ball { "ball" } else { "block" };
+                        (color.split('|').any(|w| colour_eq(c, w.trim()))
+                            && shape_matches(s, &shape))
+                        .then(|| o.body.object_id())
+                    }
+                    Body::Pool(_) => None,
+                })
+                .collect(),
         };
-        found.ok_or_else(|| {
+        if !found.is_empty() {
+            return Ok(found);
+        }
+        Err({
             RewardError::new(
                 ErrorCategory::Runtime,
                 pos,
@@ -169,6 +196,150 @@ impl<'a> AnnotatedTrace<'a> {
         })
     }
 
+    /// The smallest gap (environment units, 0 when touching or overlapping) between the outlines of
+    /// an object of `a` and a different object of `b` over the trace's timesteps ([`outline_gap`]);
+    /// infinite when both exist but never as two different objects. A runtime error when the trace
+    /// holds no object of `a` or none of `b` with an outline.
+    pub fn min_gap(&self, a: &[String], b: &[String], pos: Pos) -> Result<f64, RewardError> {
+        let mut best: Option<f64> = None;
+        let (mut seen_a, mut seen_b) = (false, false);
+        for step in &self.trace.timesteps {
+            let find = |ids: &[String]| -> Vec<(String, Capsule)> {
+                step.objects
+                    .iter()
+                    .filter_map(|o| {
+                        let id = o.body.object_id();
+                        if !ids.contains(&id) {
+                            return None;
+                        }
+                        capsule(&o.body).map(|c| (id, c))
+                    })
+                    .collect()
+            };
+            let (xs, ys) = (find(a), find(b));
+            seen_a |= !xs.is_empty();
+            seen_b |= !ys.is_empty();
+            for (ia, ca) in &xs {
+                for (ib, cb) in &ys {
+                    if ia != ib {
+                        let g = outline_gap(ca, cb);
+                        best = Some(best.map_or(g, |x: f64| x.min(g)));
+                    }
+                }
+            }
+        }
+        if best.is_none() && seen_a && seen_b {
+            // Both exist, but never as two different objects (one red ball asked to meet a red
+            // ball): they never come near.
+            return Ok(f64::INFINITY);
+        }
+        best.ok_or_else(|| {
+            RewardError::new(
+                ErrorCategory::Runtime,
+                pos,
+                format!(
+                    "NEAR: no object {a:?} or {b:?} with an outline in trace {}",
+                    self.trace.trace_id
+                ),
+            )
+        })
+    }
+}
+
+/// An object's outline as a capsule: the segment from `p` to `q` thickened by `r`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Capsule {
+    /// One end of the core segment.
+    pub p: [f64; 2],
+    /// The other end.
+    pub q: [f64; 2],
+    /// The thickness around it.
+    pub r: f64,
+}
+
+/// PHYRE bars are 5.12 px thick (`docs/envs/phyre.md`).
+const PHYRE_BAR_THICKNESS: f64 = 5.12;
+
+/// The outline of a body as a capsule: billiards balls and PHYRE balls are circles, I-PHYRE blocks
+/// and balls are capsules already (balls have equal ends), a PHYRE bar is its segment of length
+/// √(diameter² − 5.12²) thickened by half its 5.12 px; a PHYRE jar is approximated by the circle of
+/// its diameter around its position. PHYRE walls (and any other shape) have none.
+pub fn capsule(body: &Body) -> Option<Capsule> {
+    match body {
+        Body::Pool(b) => {
+            let c = [b.position[0], b.position[1]];
+            Some(Capsule {
+                p: c,
+                q: c,
+                r: b.radius,
+            })
+        }
+        Body::Phyre(o) => {
+            let c = [o.x, o.y];
+            match o.shape.to_ascii_lowercase().as_str() {
+                "ball" | "jar" => Some(Capsule {
+                    p: c,
+                    q: c,
+                    r: o.diameter / 2.0,
+                }),
+                "bar" => {
+                    let half = (o.diameter.powi(2) - PHYRE_BAR_THICKNESS.powi(2))
+                        .max(0.0)
+                        .sqrt()
+                        / 2.0;
+                    let (s, k) = o.angle.sin_cos();
+                    Some(Capsule {
+                        p: [c[0] - half * k, c[1] - half * s],
+                        q: [c[0] + half * k, c[1] + half * s],
+                        r: PHYRE_BAR_THICKNESS / 2.0,
+                    })
+                }
+                _ => None,
+            }
+        }
+        Body::Iphyre(o) => Some(Capsule {
+            p: [o.x1, o.y1],
+            q: [o.x2, o.y2],
+            r: o.radius,
+        }),
+    }
+}
+
+/// The gap between two capsules: the distance between their core segments less both thicknesses,
+/// 0 when they touch or overlap.
+pub fn outline_gap(a: &Capsule, b: &Capsule) -> f64 {
+    (segment_distance(a.p, a.q, b.p, b.q) - a.r - b.r).max(0.0)
+}
+
+fn point_segment(x: [f64; 2], p: [f64; 2], q: [f64; 2]) -> f64 {
+    let d = [q[0] - p[0], q[1] - p[1]];
+    let l2 = d[0] * d[0] + d[1] * d[1];
+    let u = if l2 <= 0.0 {
+        0.0
+    } else {
+        (((x[0] - p[0]) * d[0] + (x[1] - p[1]) * d[1]) / l2).clamp(0.0, 1.0)
+    };
+    (p[0] + u * d[0] - x[0]).hypot(p[1] + u * d[1] - x[1])
+}
+
+fn segment_distance(p1: [f64; 2], q1: [f64; 2], p2: [f64; 2], q2: [f64; 2]) -> f64 {
+    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| {
+        (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+    };
+    let (d1, d2) = (cross(p2, q2, p1), cross(p2, q2, q1));
+    let (d3, d4) = (cross(p1, q1, p2), cross(p1, q1, q2));
+    if ((d1 > 0.0 && d2 < 0.0) || (d1 < 0.0 && d2 > 0.0))
+        && ((d3 > 0.0 && d4 < 0.0) || (d3 < 0.0 && d4 > 0.0))
+    {
+        return 0.0;
+    }
+    point_segment(p1, p2, q2)
+        .min(point_segment(q1, p2, q2))
+        .min(point_segment(p2, p1, q1))
+        .min(point_segment(q2, p1, q1))
+}
+
+impl AnnotatedTrace<'_> {
     /// The planar position of object `id` at normalised time `t` in [0, 1] (the last timestep at or
     /// before that instant).
     pub fn position_at(&self, id: &str, t: f64, pos: Pos) -> Result<(f64, f64), RewardError> {
@@ -211,6 +382,9 @@ fn colour_eq(a: &str, b: &str) -> bool {
 }
 
 fn shape_matches(have: &str, want: &str) -> bool {
+    if matches!(want, "object" | "any" | "*") {
+        return true;
+    }
     let canon = |s: &str| match s {
         "circle" | "ball" | "disc" => "ball".to_string(),
         "bar" | "block" | "rod" | "stick" | "rectangle" => "block".to_string(),

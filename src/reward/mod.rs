@@ -57,7 +57,10 @@ pub fn labels_used(program: &Program) -> Vec<String> {
             }
             NodeKind::And(xs) | NodeKind::Or(xs) => xs.iter().for_each(|x| walk(x, out)),
             NodeKind::Not(x) => walk(x, out),
-            NodeKind::CueHit(_) | NodeKind::Pocketed { .. } | NodeKind::NearbyAt { .. } => {}
+            NodeKind::CueHit(_)
+            | NodeKind::Pocketed { .. }
+            | NodeKind::NearbyAt { .. }
+            | NodeKind::Near { .. } => {}
         }
     }
     let mut out = Vec::new();

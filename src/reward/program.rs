@@ -103,6 +103,16 @@ pub enum NodeKind {
         /// Threshold as a fraction of the environment's scale.
         threshold: f64,
     },
+    /// `NEAR(a, b, threshold_strength)`: at some timestep the outlines of an object `a` and a
+    /// different object `b` are within `threshold_strength × scale` of each other.
+    Near {
+        /// One object (with `OBJECT_ID`, PHYRE / I-PHYRE: any object of that colour and shape).
+        a: ObjRef,
+        /// The other.
+        b: ObjRef,
+        /// Threshold as a fraction of the environment's scale.
+        threshold: f64,
+    },
 }
 
 impl NodeKind {
@@ -119,11 +129,15 @@ impl NodeKind {
         }
     }
 
-    /// Whether the node scores by distance to satisfaction rather than 0/1 (counts and `NEARBY_AT`).
+    /// Whether the node scores by distance to satisfaction rather than 0/1 (counts, `NEARBY_AT` and
+    /// `NEAR`).
     pub fn is_quantitative(&self) -> bool {
         matches!(
             self,
-            NodeKind::PatternCount { .. } | NodeKind::Count { .. } | NodeKind::NearbyAt { .. }
+            NodeKind::PatternCount { .. }
+                | NodeKind::Count { .. }
+                | NodeKind::NearbyAt { .. }
+                | NodeKind::Near { .. }
         )
     }
 }

@@ -30,7 +30,8 @@ pub fn dsl_reference(env: Env) -> String {
 - NEARBY_AT(obj_id, x, y, t, threshold_strength=0.1): the object is within the radius of (x, y) at normalised time t in [0, 1] (0 = start, 1 = end). Units: ",
     );
     s.push_str(units);
-    s.push_str(".\n- OBJECT_ID(color, shape): the id of the object with that colour and shape, for use as an argument.\n");
+    s.push_str(".\n- NEAR(a, b, threshold_strength=0.1): at some moment the outlines of objects a and b are within the radius of each other (same units); partial credit by their closest approach.\n\
+- OBJECT_ID(color, shape): the id of the object with that colour and shape, for use as an argument (shape \"object\" matches any shape; in ball=, contains= and NEAR it stands for every such object).\n");
     if env == Env::Pooltool {
         s.push_str(
             "- CUE_HIT(ball): true when the first ball the cue ball touches is `ball` (an event at that contact).\n\
@@ -39,8 +40,8 @@ Ball ids are strings: \"cue\", \"1\" ... \"9\" (1 yellow, 2 blue, 3 red, 4 purpl
         );
     }
     s.push_str(
-        "Scoring: when the expression is a top-level AND, the reward is the fraction of its clauses that hold (COUNT, GT, LT, PATTERN_COUNT and NEARBY_AT give partial credit by their distance to satisfaction), so an AND of several steps towards the goal is easiest to optimise.\n\
-Rules: use only the labels and parameter keys of the library summary; arguments of NEARBY_AT are positional; no comments.\n",
+        "Scoring: when the expression is a top-level AND, the reward is the fraction of its clauses that hold (COUNT, GT, LT, PATTERN_COUNT, NEARBY_AT and NEAR give partial credit by their distance to satisfaction), so an AND of several steps towards the goal is easiest to optimise.\n\
+Rules: use only the labels and parameter keys of the library summary; arguments of NEARBY_AT and NEAR are positional; no comments.\n",
     );
     s
 }

@@ -9,8 +9,13 @@
 //!   `to`), `CURVE(b)` (between two events of b its heading turns by more than 8° while another ball
 //!   passes within 4 radii without touching it);
 //! - PHYRE / I-PHYRE: `CONTACT(a, b)` (`contact_begin`, `"*"` for any), `EXIT(obj)` (`ball_exit`),
-//!   `SUCCESS()` (the task's success). Objects are ids or words naming roles read off the first frame
-//!   (all must hold): colours and shapes (`"green"`, `"red ball"`), `"user"` (PHYRE's placed ball),
+//!   `REMOVE(obj)` (I-PHYRE: an effective `action_applied` that removed the block),
+//!   `SUCCESS()` (the task's success), `TURN(obj, degrees)` (the first timestep at which the object's
+//!   orientation differs from its first frame's by at least `degrees`: PHYRE's `angle`, an I-PHYRE
+//!   block's segment; balls of I-PHYRE have none), `SWING(obj, degrees)` (I-PHYRE: the first timestep
+//!   at which the rod from the object's centre to its pin-joint partner's has turned by `degrees`). Objects are ids or words naming roles read off the
+//!   first frame (all must hold): colours and shapes (`"green"`, `"red ball"`), `"user"` (PHYRE's
+//!   placed ball), PHYRE's `"dynamic"` (red, green, blue, gray) and `"static"` (black, purple),
 //!   I-PHYRE's `"ball"`, `"eliminable"`, `"dynamic"`, `"fixed"`, `"block"`.
 //!
 //! Combinators: `SEQ(e1, e2, …)` (distinct occurrences in time order, each no earlier than the previous),
@@ -42,6 +47,9 @@ const EVENTS: &[&str] = &[
     "CONTACT",
     "EXIT",
     "SUCCESS",
+    "TURN",
+    "REMOVE",
+    "SWING",
     "SEQ",
 ];
 const CONDITIONS: &[&str] = &["ALL", "ANY", "NOT", "NONE", "AT_LEAST"];
@@ -85,9 +93,9 @@ fn check(e: &Expr) -> Result<(), RewardError> {
     };
     let n = args.len();
     let (lo, hi) = match name.as_str() {
-        "FIRST_HIT" | "CUSHION" | "CURVE" | "EXIT" | "NOT" | "NONE" => (1, 1),
+        "FIRST_HIT" | "CUSHION" | "CURVE" | "EXIT" | "REMOVE" | "NOT" | "NONE" => (1, 1),
         "POCKET" => (1, 2),
-        "TRANSITION" | "AT_LEAST" | "CONTACT" => (2, 2),
+        "TRANSITION" | "AT_LEAST" | "CONTACT" | "TURN" | "SWING" => (2, 2),
         "HIT" => (2, 5),
         "SUCCESS" => (0, 0),
         "SEQ" | "ALL" | "ANY" => (1, usize::MAX),
@@ -195,6 +203,14 @@ fn roles(trace: &Trace) -> std::collections::HashMap<String, Vec<String>> {
                 if p.is_user_input {
                     r.push("user");
                 }
+                // PHYRE's colours are its body types: black and purple bodies are static.
+                r.push(
+                    if ["black", "purple"].contains(&p.color.to_ascii_lowercase().as_str()) {
+                        "static"
+                    } else {
+                        "dynamic"
+                    },
+                );
                 (p.object_index, r)
             }
             Body::Iphyre(b) => {
@@ -486,6 +502,28 @@ impl<'a> Verifier<'a> {
                     .collect()
             }
             "SUCCESS" => self.success_hits(),
+            "SWING" => {
+                self.require_env(e, &name, false)?;
+                self.swings(&arg(0)?, number(&args[1].value)?)
+            }
+            "REMOVE" => {
+                self.require_env(e, &name, false)?;
+                let b = arg(0)?;
+                self.events(&["action_applied"])
+                    .into_iter()
+                    .filter(|(_, _, ids, p)| {
+                        p.and_then(|p| p.get("effective"))
+                            .and_then(Value::as_bool)
+                            .unwrap_or(false)
+                            && ids.iter().any(|x| self.matches(x, &b))
+                    })
+                    .map(|(i, t, _, _)| (t, i))
+                    .collect()
+            }
+            "TURN" => {
+                self.require_env(e, &name, false)?;
+                self.turns(&arg(0)?, number(&args[1].value)?)
+            }
             "SEQ" => self.seq_hits(args)?,
             _ => {
                 return Err(err(
@@ -526,6 +564,87 @@ impl<'a> Verifier<'a> {
             }
             _ => !self.occurrences(e)?.is_empty(),
         })
+    }
+
+    /// `TURN(obj, degrees)`: for each object that matches, the first timestep at which its
+    /// orientation is at least `degrees` away from its first frame's (angles compared modulo a full
+    /// turn; an I-PHYRE block's orientation is its segment's, modulo a half turn).
+    fn turns(&self, obj: &str, degrees: f64) -> Vec<Hit> {
+        let orientation = |b: &Body| -> Option<(String, f64, f64)> {
+            match b {
+                Body::Phyre(p) => {
+                    Some((p.object_index.to_string(), p.angle, std::f64::consts::TAU))
+                }
+                Body::Iphyre(p) if !(p.x1 == p.x2 && p.y1 == p.y2) => Some((
+                    p.index.to_string(),
+                    (p.y2 - p.y1).atan2(p.x2 - p.x1),
+                    std::f64::consts::PI,
+                )),
+                _ => None,
+            }
+        };
+        let mut first: std::collections::HashMap<String, f64> = Default::default();
+        let mut out: Vec<Hit> = Vec::new();
+        let mut done: std::collections::HashSet<String> = Default::default();
+        for (k, step) in self.trace.timesteps.iter().enumerate() {
+            for o in &step.objects {
+                let Some((id, a, period)) = orientation(&o.body) else {
+                    continue;
+                };
+                if done.contains(&id) || !self.matches(&id, obj) {
+                    continue;
+                }
+                let a0 = *first.entry(id.clone()).or_insert(a);
+                let d = (a - a0).rem_euclid(period);
+                if d.min(period - d).to_degrees() >= degrees {
+                    out.push((step.t, usize::MAX - k));
+                    done.insert(id);
+                }
+            }
+        }
+        out
+    }
+
+    /// `SWING(obj, degrees)`: for each I-PHYRE object that matches and has a pin-joint partner, the
+    /// first timestep at which the rod between their centres points at least `degrees` away from its
+    /// first frame's direction.
+    fn swings(&self, obj: &str, degrees: f64) -> Vec<Hit> {
+        let tau = std::f64::consts::TAU;
+        let mut first: std::collections::HashMap<String, f64> = Default::default();
+        let mut done: std::collections::HashSet<String> = Default::default();
+        let mut out: Vec<Hit> = Vec::new();
+        for (k, step) in self.trace.timesteps.iter().enumerate() {
+            let blocks: Vec<&crate::trace::IphyreObject> = step
+                .objects
+                .iter()
+                .filter_map(|o| match &o.body {
+                    Body::Iphyre(b) if b.joint > 0 => Some(b),
+                    _ => None,
+                })
+                .collect();
+            for b in &blocks {
+                let id = b.index.to_string();
+                if done.contains(&id) || !self.matches(&id, obj) {
+                    continue;
+                }
+                let Some(p) = blocks
+                    .iter()
+                    .find(|p| p.joint == b.joint && p.index != b.index)
+                else {
+                    continue;
+                };
+                let c = |o: &crate::trace::IphyreObject| ((o.x1 + o.x2) / 2.0, (o.y1 + o.y2) / 2.0);
+                let ((bx, by), (px, py)) = (c(b), c(p));
+                let a = (py - by).atan2(px - bx);
+                let a0 = *first.entry(id.clone()).or_insert(a);
+                let d = (a - a0).rem_euclid(tau);
+                if d.min(tau - d).to_degrees() >= degrees {
+                    out.push((step.t, usize::MAX / 2 - k));
+                    done.insert(id);
+                }
+            }
+        }
+        out
     }
 
     /// The cut angle (degrees) of striker `x` on `y` at contact time `t`: the angle between x's
@@ -676,14 +795,83 @@ mod goal_rule_tests {
                 }
             }
         }
+        // `("turn", t, [id, degrees])` is no event: from time t on, object id is turned by that much
+        // (PHYRE: its angle; I-PHYRE: its segment about its centre).
+        for (_, at, agents) in log.0.iter().filter(|e| e.0 == "turn") {
+            let deg: f64 = agents[1].parse().unwrap();
+            for ts in t.timesteps.iter_mut().filter(|s| s.t >= *at) {
+                for o in &mut ts.objects {
+                    match &mut o.body {
+                        Body::Phyre(p) if p.object_index.to_string() == agents[0] => {
+                            p.angle = deg.to_radians();
+                        }
+                        Body::Iphyre(b) if b.index.to_string() == agents[0] => {
+                            let (cx, cy) = ((b.x1 + b.x2) / 2.0, (b.y1 + b.y2) / 2.0);
+                            let h = (b.x2 - b.x1).hypot(b.y2 - b.y1) / 2.0;
+                            let (sn, cs) = deg.to_radians().sin_cos();
+                            (b.x1, b.y1, b.x2, b.y2) =
+                                (cx - h * cs, cy - h * sn, cx + h * cs, cy + h * sn);
+                        }
+                        _ => {}
+                    }
+                }
+            }
+        }
+        // `("swing", t, [a, b, degrees])`: a and b share pin joint 1, and from time t on a has swung
+        // about b's centre by that much.
+        for (_, at, agents) in log.0.iter().filter(|e| e.0 == "swing") {
+            let deg: f64 = agents[2].parse().unwrap();
+            let (sn, cs) = deg.to_radians().sin_cos();
+            for ts in &mut t.timesteps {
+                let centre = ts.objects.iter().find_map(|o| match &o.body {
+                    Body::Iphyre(b) if b.index.to_string() == agents[1] => {
+                        Some(((b.x1 + b.x2) / 2.0, (b.y1 + b.y2) / 2.0))
+                    }
+                    _ => None,
+                });
+                let (cx, cy) = centre.unwrap();
+                let moved = ts.t >= *at;
+                for o in &mut ts.objects {
+                    let Body::Iphyre(b) = &mut o.body else {
+                        continue;
+                    };
+                    let id = b.index.to_string();
+                    if id == agents[0] || id == agents[1] {
+                        b.joint = 1;
+                    }
+                    if id == agents[0] && moved {
+                        let r = |x: f64, y: f64| {
+                            (
+                                cx + (x - cx) * cs - (y - cy) * sn,
+                                cy + (x - cx) * sn + (y - cy) * cs,
+                            )
+                        };
+                        ((b.x1, b.y1), (b.x2, b.y2)) = (r(b.x1, b.y1), r(b.x2, b.y2));
+                    }
+                }
+            }
+        }
+        // `action_applied` removed its agent; `click_missed` is an `action_applied` that removed
+        // nothing.
         t.events = log
             .0
             .iter()
-            .map(|(kind, at, agents)| Event {
-                kind: kind.to_string(),
-                t: Some(*at),
-                payload: Some(json!({ "agents": agents })),
-                extra: JsonMap::new(),
+            .filter(|e| e.0 != "turn" && e.0 != "swing")
+            .map(|(kind, at, agents)| {
+                let (kind, payload) = match *kind {
+                    "action_applied" => (*kind, json!({ "agents": agents, "effective": true })),
+                    "click_missed" => (
+                        "action_applied",
+                        json!({ "agents": [], "effective": false }),
+                    ),
+                    _ => (*kind, json!({ "agents": agents })),
+                };
+                Event {
+                    kind: kind.to_string(),
+                    t: Some(*at),
+                    payload: Some(payload),
+                    extra: JsonMap::new(),
+                }
             })
             .collect();
         t.outcome.success = log.1;
@@ -714,7 +902,13 @@ mod goal_rule_tests {
     }
 
     const C: &str = "contact_begin";
+    const TURN: &str = "turn";
 
+    /// The hand-made traces of each PHYRE goal: (goal, where it holds, where it does not). Objects:
+    /// 0 black bar, 1 green ball, 2 blue bar, 3 black wall, 4 the red user ball. The "does not"
+    /// traces include the ones that fooled the first drafts of the rules (session 9): a success
+    /// with two contacts the red ball took no part in, a single contact counted as knocking
+    /// something over, two contacts with static bodies as "roll, then hit a dynamic object".
     #[test]
     fn phyre_goal_rules_hold_exactly_on_their_traces() {
         check(
@@ -727,12 +921,24 @@ mod goal_rule_tests {
                 ),
                 (
                     "bounce-then-solve",
-                    (&[(C, 0.1, &["4", "0"]), (C, 0.2, &["1", "2"])], true),
-                    (&[(C, 0.1, &["4", "0"])], true),
+                    (&[(C, 0.01, &["4", "0"]), (C, 0.02, &["1", "2"])], true),
+                    // Fooled the first rule (success and two contacts, none of the red ball).
+                    (&[(C, 0.1, &["1", "0"]), (C, 0.2, &["1", "2"])], true),
                 ),
-                ("tip-over", (&[(C, 0.1, &["4", "2"])], false), (&[], false)),
                 (
-                    "green-touches-blue",
+                    "tip-over",
+                    (
+                        &[(C, 0.005, &["4", "2"]), (TURN, 0.02, &["2", "60"])],
+                        false,
+                    ),
+                    // Fooled the first rule (any contact), and a turn before the red ball came.
+                    (
+                        &[(C, 0.005, &["4", "2"]), (TURN, 0.02, &["2", "20"])],
+                        false,
+                    ),
+                ),
+                (
+                    "green-touches-goal",
                     (&[(C, 0.1, &["1", "2"])], false),
                     (&[(C, 0.1, &["1", "0"])], false),
                 ),
@@ -744,7 +950,8 @@ mod goal_rule_tests {
                 (
                     "roll-then-hit",
                     (&[(C, 0.1, &["4", "0"]), (C, 0.2, &["4", "2"])], false),
-                    (&[(C, 0.1, &["4", "0"])], false),
+                    // Fooled the first rule (two contacts of the red ball, both with static bodies).
+                    (&[(C, 0.1, &["4", "0"]), (C, 0.2, &["4", "3"])], false),
                 ),
                 (
                     "solve-without-red-on-green",
@@ -752,7 +959,7 @@ mod goal_rule_tests {
                     (&[(C, 0.1, &["4", "1"]), (C, 0.2, &["1", "2"])], true),
                 ),
                 (
-                    "hit-blue",
+                    "hit-goal",
                     (&[(C, 0.1, &["2", "4"])], false),
                     (&[(C, 0.1, &["1", "4"])], false),
                 ),
@@ -762,30 +969,41 @@ mod goal_rule_tests {
                     (&[(C, 0.1, &["1", "0"]), (C, 0.2, &["4", "1"])], false),
                 ),
                 (
-                    "single-touch-solve",
+                    "solve-without-black",
                     (&[(C, 0.1, &["4", "2"]), (C, 0.2, &["1", "2"])], true),
-                    (&[(C, 0.1, &["4", "2"]), (C, 0.2, &["4", "0"])], true),
+                    (&[(C, 0.1, &["4", "2"]), (C, 0.2, &["4", "3"])], true),
                 ),
             ],
         );
     }
 
+    /// The same for I-PHYRE. Objects: 0 eliminable (gray), 1 dynamic (blue), 2 fixed (black), 3
+    /// and 4 balls. The "does not" traces include the ones that fooled the first drafts: an exit of
+    /// anything with no block removed, keeping the balls on screen by doing nothing, an exit with a
+    /// contact of a blue block but nothing swinging.
     #[test]
     fn iphyre_goal_rules_hold_exactly_on_their_traces() {
         const X: &str = "ball_exit";
+        const R: &str = "action_applied";
         check(
             Env::Iphyre,
             &[
                 (
                     "remove-then-fall",
-                    (&[(X, 1.0, &["3"])], false),
-                    (&[], false),
+                    (&[(R, 0.5, &["0"]), (X, 1.0, &["3"])], false),
+                    // Fooled the first rule (an exit without a removal).
+                    (&[("click_missed", 0.5, &[]), (X, 1.0, &["3"])], false),
                 ),
-                ("fall-without-swing", (&[], true), (&[], false)),
+                (
+                    "solve-without-black",
+                    (&[(C, 0.5, &["3", "0"]), (X, 1.0, &["3"])], true),
+                    (&[(C, 0.5, &["3", "2"]), (X, 1.0, &["3"])], true),
+                ),
                 (
                     "slide-then-exit",
                     (&[(C, 0.5, &["3", "2"]), (X, 1.0, &["3"])], false),
-                    (&[(X, 0.5, &["3"]), (C, 1.0, &["4", "2"])], false),
+                    // Fooled the first rule (the ball's resting contact with its gray support).
+                    (&[(C, 0.5, &["3", "0"]), (X, 1.0, &["3"])], false),
                 ),
                 (
                     "ball-hits-blue",
@@ -794,8 +1012,9 @@ mod goal_rule_tests {
                 ),
                 (
                     "keep-balls-on-screen",
-                    (&[(C, 0.5, &["3", "2"])], false),
-                    (&[(C, 0.5, &["3", "2"]), (X, 1.0, &["4"])], false),
+                    (&[(R, 0.5, &["0"]), (C, 0.6, &["3", "2"])], false),
+                    // Fooled the first rule (nothing removed, the balls resting where they were).
+                    (&[(C, 0.0, &["3", "0"])], false),
                 ),
                 (
                     "two-balls-collide",
@@ -809,13 +1028,25 @@ mod goal_rule_tests {
                 ),
                 (
                     "fall-onto-black",
-                    (&[(C, 0.5, &["3", "2"])], false),
-                    (&[(C, 0.5, &["3", "0"])], false),
+                    (&[(R, 0.2, &["0"]), (C, 0.5, &["3", "2"])], false),
+                    (&[(C, 0.1, &["3", "2"]), (R, 0.2, &["0"])], false),
                 ),
                 (
                     "swing-then-exit",
-                    (&[(C, 0.5, &["3", "1"]), (X, 1.0, &["3"])], false),
-                    (&[(X, 1.0, &["3"])], false),
+                    (
+                        &[("swing", 0.02, &["3", "1", "40"]), (X, 1.0, &["3"])],
+                        false,
+                    ),
+                    // Fooled the first rule (a blue block touched, nothing swinging); a block that
+                    // turns in place is no swing either.
+                    (
+                        &[
+                            (C, 0.5, &["3", "1"]),
+                            (TURN, 0.02, &["1", "40"]),
+                            (X, 1.0, &["3"]),
+                        ],
+                        false,
+                    ),
                 ),
                 (
                     "exit-alone",

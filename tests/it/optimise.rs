@@ -461,3 +461,79 @@ fn an_invalid_phyre_placement_scores_zero_without_a_program_error() {
     assert_eq!(timings.program_errors, 0);
     assert_eq!(timings.dense_samples, 0);
 }
+
+/// The PHYRE and I-PHYRE goal programs name objects with `OBJECT_ID` (the red ball, the green
+/// object, the goal object `"blue|purple"`, a blue block, …): on a simulated trace of every PHYRE
+/// template and every I-PHYRE game they run without a runtime error, except the blue-block goals in
+/// the games without a blue block and the black-block goals in those without a black one (goals the
+/// scene cannot reach, reported as program errors).
+/// Invalid PHYRE placements never reach a program (see the test above), so no program has to cope
+/// with a trace that lacks the red ball.
+#[test]
+fn goal_programs_find_their_objects_in_every_phyre_template_and_iphyre_game() {
+    use annotrace::envs::iphyre::IphyreEnv;
+    use annotrace::envs::phyre::{PhyreEnv, TaskSet};
+    use annotrace::optimise::{IphyreProblem, PhyreProblem, Problem, invalid_action};
+    use annotrace::reward::goals::GoalSet;
+    use annotrace::reward::{AnnotatedTrace, ErrorCategory, evaluate};
+
+    let programs = |file: &str| {
+        let set = GoalSet::load(&repo().join("data/goals").join(file), &repo()).unwrap();
+        set.goals
+            .iter()
+            .map(|g| (g.id.clone(), compile(&g.program, &set.schema).unwrap()))
+            .collect::<Vec<_>>()
+    };
+    let phyre = PhyreProblem {
+        env: PhyreEnv::default(),
+    };
+    let tasks = TaskSet::default_tasks().unwrap();
+    // The first task of each template.
+    let mut firsts: Vec<String> = Vec::new();
+    for id in tasks.ids() {
+        let tpl = id.split(':').next().unwrap();
+        if !firsts.iter().any(|t| t.starts_with(tpl)) {
+            firsts.push(id.to_string());
+        }
+    }
+    assert_eq!(firsts.len(), 25);
+    let goals = programs("phyre.toml");
+    for tpl in &firsts {
+        let task = tasks.get(tpl).unwrap();
+        let trace = (1..10)
+            .flat_map(|i| (1..10).map(move |j| [i as f64 / 10.0, j as f64 / 10.0, 0.2]))
+            .map(|x| phyre.simulate(&task, &x).unwrap())
+            .find(|t| !invalid_action(t))
+            .expect("a small ball fits somewhere");
+        for (id, p) in &goals {
+            evaluate(p, &AnnotatedTrace::new(&trace, &[]))
+                .unwrap_or_else(|e| panic!("{tpl}: {id}: {e}"));
+        }
+    }
+    let env = IphyreEnv::new().unwrap();
+    let games = env.games.all().to_vec();
+    let iphyre = IphyreProblem {
+        env,
+        horizon: 5.0,
+        never: 0.25,
+    };
+    let goals = programs("iphyre.toml");
+    for game in &games {
+        let trace = iphyre
+            .simulate(game, &vec![0.5; iphyre.dims(game).len()])
+            .unwrap();
+        let blue = game.blocks().any(|o| o.dynamic);
+        let black = game.blocks().any(|o| !o.dynamic && !o.eliminable);
+        for (id, p) in &goals {
+            let lacks = (!blue && p.source.contains("\"blue\""))
+                || (!black && p.source.contains("\"black\""));
+            match evaluate(p, &AnnotatedTrace::new(&trace, &[])) {
+                Ok(_) => {}
+                Err(e) if lacks => {
+                    assert_eq!(e.category, ErrorCategory::Runtime, "{}: {id}", game.name)
+                }
+                Err(e) => panic!("{}: {id}: {e}", game.name),
+            }
+        }
+    }
+}
