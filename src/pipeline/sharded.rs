@@ -20,7 +20,7 @@
 //!   shard to reach a stage records it `running` (unpublishing an older version of it), the shard that
 //!   finds every slice of it done commits it (the runner's commit steps; a second committer finds it
 //!   `finished` and does nothing), and unshardable stages before a shardable one run whole under the
-//!   lock, once;
+//!   lock, once (resuming from the finished shards of an attempt that died, as an unsharded run does);
 //! - a stage waits until every stage before it in the run order is `finished` (polling the manifest),
 //!   so each stage sees the run the single-process run would show it;
 //! - stages after the last shardable one (SQL, exports, plots, reports) are left to `--finalize`, an
@@ -318,18 +318,24 @@ impl Shard<'_> {
             }
             let staging = s.run.staging(id);
             let previous = manifest.stages.get(id).cloned();
-            let resuming = previous.as_ref().is_some_and(|p| {
+            let mut resuming = previous.as_ref().is_some_and(|p| {
                 p.fingerprint == planned.fingerprint
                     && planned.action == Action::Run(RunReason::Resume)
             });
             if let Some(prev) = previous
                 .as_ref()
                 .filter(|p| resuming && p.status == StageStatus::Committing)
-                && let Some(report) = s.finish_commit(manifest, &staging, id, prev)?
             {
-                return Ok(Some(report));
+                match s.finish_commit(manifest, &staging, id, prev)? {
+                    Some(report) => return Ok(Some(report)),
+                    // Its files are not all there: the stage runs again from the start.
+                    None => resuming = false,
+                }
             }
-            s.reset_staging(manifest, &staging, id, false)?;
+            // A stage whose earlier attempt died (its process held the run lock, so no other one
+            // writes its staging area) keeps its finished shards, as in an unsharded run: an
+            // `evolve` goes on from its saved rounds.
+            s.reset_staging(manifest, &staging, id, resuming)?;
             let record = s.begin(manifest, &planned, i)?;
             s.run_and_commit(manifest, record, i, staging).map(Some)
         })

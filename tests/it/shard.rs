@@ -341,3 +341,193 @@ fn shard_options_are_checked() {
     t.run(&["run", "pipelines/p.toml", "--shard", "0/2", "--finalize"])
         .code(2);
 }
+
+/// simulate (12 scenes in 6 units) → evolve (offline mutate proposer, 2 labels, tiny budget; run
+/// whole by one shard) → benchmark (2 seeds × 3 racks = 6 (seed, task) units, annotated feedback from
+/// the grown library) → SQL.
+const EVOLVE_BENCH_PIPELINE: &str = r#"[pipeline]
+name = "q"
+seed = 5
+
+[[stage]]
+id = "sim"
+kind = "simulate"
+env = "pooltool"
+scenes = 12
+shots = 1
+scenes_per_shard = 2
+
+[[stage]]
+id = "evo"
+kind = "evolve"
+inputs = ["sim"]
+env = "pooltool"
+proposer = "mutate"
+labels = ["ball slowing", "cushion rebound"]
+budget = 4
+parallel = 2
+max_traces = 12
+time_penalty = false
+timeout = 3.0
+workers = 1
+
+[[stage]]
+id = "bench"
+kind = "benchmark"
+inputs = ["evo"]
+env = "pooltool"
+tasks = 3
+seeds = 2
+attempts = 2
+agent = "random"
+feedback = "annotations"
+library_from = "evo"
+workers = 1
+
+[[stage]]
+id = "solved"
+kind = "sql"
+inputs = ["bench"]
+sql = "SELECT seed, task, max(CAST(success AS INT)) AS solved, count(*) AS attempts FROM benchmark GROUP BY seed, task ORDER BY seed, task"
+"#;
+
+/// The evolve and benchmark tables as sorted CSV, without the columns that hold seconds (they differ
+/// between any two runs).
+fn evolve_bench_rows(t: &TestRun, run: &str) -> Vec<String> {
+    [
+        "SELECT * FROM scenes",
+        "SELECT * FROM traces",
+        "SELECT * FROM events",
+        "SELECT * EXCLUDE (mean_time_s, propose_s, eval_s) FROM candidates",
+        "SELECT * EXCLUDE (wall_s, propose_s, outside_proposer_share) FROM evolution_labels",
+        "SELECT * FROM evolution_histograms",
+        "SELECT * FROM evolution_samples",
+        "SELECT * FROM evolution_convergence",
+        "SELECT * FROM trace_distances",
+        "SELECT * FROM benchmark",
+        "SELECT * FROM solved",
+    ]
+    .into_iter()
+    .map(|q| sorted(t.csv(run, q)))
+    .collect()
+}
+
+#[test]
+fn evolve_and_benchmark_in_a_sharded_run_equal_the_single_process_run() {
+    let t = TestRun::new();
+    t.write("pipelines/q.toml", EVOLVE_BENCH_PIPELINE);
+    t.run(&["run", "pipelines/q.toml", "--run-dir", "runs/single"])
+        .ok();
+    let args = |i: &'static str| {
+        [
+            "run",
+            "pipelines/q.toml",
+            "--run-dir",
+            "runs/sharded",
+            "--shard",
+            i,
+        ]
+    };
+    // Shard 1 alone: it takes over the absent slices of `sim`, runs `evo` whole and is killed after
+    // its first round was saved.
+    let killed = t.run_env(&args("1/3"), &[("ANNOTRACE_FAULT", "evo:after-shards=2")]);
+    assert_ne!(killed.code, Some(0), "the fault kills the shard");
+    let evo = t.path("runs/sharded/.staging/evo/_done");
+    assert!(evo.join("L000.R00000.json").exists(), "a round was saved");
+    // Rerun, it finishes `evo` from its saved rounds, then is killed in its second benchmark unit
+    // (units 1 and 4 are its own: seed 0 task 1, seed 1 task 1).
+    let killed = t.run_env(&args("1/3"), &[("ANNOTRACE_FAULT", "bench:mid-shard=1")]);
+    assert_ne!(killed.code, Some(0), "the fault kills the shard");
+    killed
+        .stderr_has("[evo] resuming: finished shards kept")
+        .stderr_has("[evo] done");
+    let bench = t.path("runs/sharded/.staging/bench/_done");
+    assert!(bench.join("00001-s000-t00001.json").exists());
+    assert!(!bench.join("00004-s001-t00001.json").exists());
+    let kept = t
+        .path("runs/sharded/.staging/bench/benchmark/env=pooltool/bench.00001-s000-t00001.parquet");
+    let kept_inode = std::fs::metadata(&kept).unwrap().ino();
+    t.run(&[
+        "run",
+        "pipelines/q.toml",
+        "--run-dir",
+        "runs/sharded",
+        "--finalize",
+    ])
+    .code(1)
+    .stderr_has("stage bench: no slice is finished");
+
+    // The three shards as separate processes, then the finalisation.
+    let children = [
+        spawn(&t, &args("2/3"), &[]),
+        spawn(&t, &args("1/3"), &[]),
+        spawn(&t, &args("0/3"), &[]),
+    ];
+    for r in children.into_iter().map(wait) {
+        r.ok();
+    }
+    let published_unit =
+        t.path("runs/sharded/benchmark/env=pooltool/bench.00001-s000-t00001.parquet");
+    assert_eq!(
+        std::fs::metadata(&published_unit).unwrap().ino(),
+        kept_inode,
+        "the finished unit was kept, not played again"
+    );
+    assert!(
+        !t.path("runs/sharded/solved").exists(),
+        "SQL is left to --finalize"
+    );
+    t.run(&[
+        "run",
+        "pipelines/q.toml",
+        "--run-dir",
+        "runs/sharded",
+        "--finalize",
+    ])
+    .ok()
+    .stderr_has("[solved] done");
+
+    assert_eq!(
+        evolve_bench_rows(&t, "runs/sharded"),
+        evolve_bench_rows(&t, "runs/single")
+    );
+    // Every published file — tables and the exported library folder — is byte-identical, except
+    // the two evolve tables with seconds columns (compared above without them).
+    let strip = |v: Vec<(String, Vec<u8>)>| -> Vec<(String, Vec<u8>)> {
+        v.into_iter()
+            .filter(|(p, _)| !p.starts_with("candidates/") && !p.starts_with("evolution_labels/"))
+            .collect()
+    };
+    let (a, b) = (
+        strip(published(&t.path("runs/sharded"))),
+        strip(published(&t.path("runs/single"))),
+    );
+    assert_eq!(
+        a.iter().map(|(p, _)| p).collect::<Vec<_>>(),
+        b.iter().map(|(p, _)| p).collect::<Vec<_>>()
+    );
+    assert!(a.iter().any(|(p, _)| p.starts_with("exports/evo/library/")));
+    assert!(a.iter().any(|(p, _)| p.starts_with("benchmark/")));
+    for ((p, x), (_, y)) in a.iter().zip(&b) {
+        assert!(x == y, "{p} differs from the single-process run");
+    }
+    let summary = |run: &str| {
+        crate::common::read_json(&t.path(run).join("manifest.json"))["stages"]["bench"]["summary"]
+            .clone()
+    };
+    for key in [
+        "solved",
+        "attempts_played",
+        "success_rate",
+        "tasks",
+        "seeds",
+    ] {
+        assert_eq!(
+            summary("runs/sharded")[key],
+            summary("runs/single")[key],
+            "{key}"
+        );
+    }
+    t.run(&["verify", "--run", "runs/sharded"]).ok();
+    assert!(!t.path("runs/sharded/.staging").exists());
+}
