@@ -511,10 +511,19 @@ fn evolve_and_benchmark_in_a_sharded_run_equal_the_single_process_run() {
     for ((p, x), (_, y)) in a.iter().zip(&b) {
         assert!(x == y, "{p} differs from the single-process run");
     }
-    let summary = |run: &str| {
-        crate::common::read_json(&t.path(run).join("manifest.json"))["stages"]["bench"]["summary"]
-            .clone()
+    let record = |run: &str, stage: &str| {
+        crate::common::read_json(&t.path(run).join("manifest.json"))["stages"][stage].clone()
     };
+    // The rows per table the manifest records (the resumed evolve counts its own D_x rows, as the
+    // uninterrupted one does; the benchmark sums its units' records).
+    for stage in ["sim", "evo", "bench", "solved"] {
+        assert_eq!(
+            record("runs/sharded", stage)["rows"],
+            record("runs/single", stage)["rows"],
+            "{stage}"
+        );
+    }
+    let summary = |run: &str| record(run, "bench")["summary"].clone();
     for key in [
         "solved",
         "attempts_played",
@@ -528,6 +537,16 @@ fn evolve_and_benchmark_in_a_sharded_run_equal_the_single_process_run() {
             "{key}"
         );
     }
+    let evo = |run: &str| record(run, "evo")["summary"].clone();
+    assert_eq!(
+        evo("runs/sharded")["dx"]["pairs"],
+        evo("runs/single")["dx"]["pairs"]
+    );
+    assert_eq!(evo("runs/sharded")["dx"]["reused"], false);
+    assert_eq!(
+        evo("runs/sharded")["labels"].as_array().map(Vec::len),
+        Some(2)
+    );
     t.run(&["verify", "--run", "runs/sharded"]).ok();
     assert!(!t.path("runs/sharded/.staging").exists());
 }

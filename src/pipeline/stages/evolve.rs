@@ -694,7 +694,11 @@ impl EvolveStage {
     ) -> Result<(DistanceMatrix, String, bool), StageError> {
         let ids: Vec<String> = train.iter().map(|t| t.trace_id.clone()).collect();
         let sid = set_id_with(&ids, self.samples, self.dx);
-        let mut files: Vec<PathBuf> = ctx
+        // This stage's own matrix, computed by an earlier attempt (a resumed or sharded run) and
+        // still staged, is not a reuse: its rows are this stage's, counted as an uninterrupted run
+        // counts them.
+        let own = ctx.staging().table_files("trace_distances")?;
+        let published: Vec<PathBuf> = ctx
             .run()
             .table("trace_distances")?
             .files
@@ -702,11 +706,11 @@ impl EvolveStage {
             .filter(|f| f.env == Some(env))
             .map(|f| f.path)
             .collect();
-        files.extend(ctx.staging().table_files("trace_distances")?);
-        for f in files {
+        let staged = own.len();
+        for (k, f) in own.into_iter().chain(published).enumerate() {
             let batches = crate::store::read_file(&f)?;
             if let Some(m) = matrix_from_batches(&sid, &ids, &batches) {
-                return Ok((m, sid, true));
+                return Ok((m, sid, k >= staged));
             }
         }
         let m = DistanceMatrix::compute_with(train, self.samples, self.dx);
