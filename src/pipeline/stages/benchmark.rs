@@ -192,8 +192,17 @@ impl BenchmarkSummary {
             return format!("skipped: {why}");
         }
         let total = self.tasks * self.seeds;
+        // A resumed or sharded run's commit may have played nothing itself: no harness figure then.
+        let harness = if self.attempts_played_now == 0 {
+            String::new()
+        } else {
+            format!(
+                "; harness {:.1} ms per attempt",
+                self.harness_ms_per_attempt()
+            )
+        };
         format!(
-            "{} {}{} agent, {} feedback{}: {}/{} task runs solved ({:.1} %) over {} seed(s), {} attempts; harness {:.1} ms per attempt",
+            "{} {}{} agent, {} feedback{}: {}/{} task runs solved ({:.1} %) over {} seed(s), {} attempts{harness}",
             self.env,
             self.agent,
             if self.model.is_empty() {
@@ -212,7 +221,6 @@ impl BenchmarkSummary {
             100.0 * self.success_rate,
             self.seeds,
             self.attempts_played,
-            self.harness_ms_per_attempt(),
         )
     }
 }
