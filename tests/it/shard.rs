@@ -1,5 +1,7 @@
 //! Sharded runs: a pipeline computed by separate `annotrace run --shard i/n` processes over one run
-//! folder, one of them killed and rerun, then `--finalize`, gives the tables of the single-process run.
+//! folder, one of them killed and rerun, then `--finalize`, gives the tables of the single-process run:
+//! simulate, annotate and accuracy; an evolve stage run whole by a shard (killed and resumed) before a
+//! sharded benchmark; an LLM benchmark asking each request once across shards and replaying byte for byte.
 
 use std::os::unix::fs::MetadataExt;
 use std::path::Path;
@@ -549,4 +551,112 @@ fn evolve_and_benchmark_in_a_sharded_run_equal_the_single_process_run() {
     );
     t.run(&["verify", "--run", "runs/sharded"]).ok();
     assert!(!t.path("runs/sharded/.staging").exists());
+}
+
+/// A benchmark with the LLM agent (2 seeds × 3 PHYRE tasks, image-only feedback) whose `llm` settings
+/// are `llm`.
+fn llm_bench_pipeline(llm: &str) -> String {
+    format!(
+        r#"[pipeline]
+name = "l"
+seed = 9
+
+[[stage]]
+id = "bench"
+kind = "benchmark"
+env = "phyre"
+agent = "llm"
+feedback = "image-only"
+tasks = 3
+seeds = 2
+attempts = 3
+llm = {{ {llm}, model = "vlm", max_retries = 0 }}
+"#
+    )
+}
+
+#[test]
+fn an_llm_benchmark_sharded_asks_each_request_once_and_replays_byte_for_byte() {
+    use crate::common::chat_server::{ChatServer, Reply};
+    // The answer depends on the request alone (its number of earlier attempts), as a model at
+    // temperature 0 with a fixed seed would.
+    let server = ChatServer::responder(|s| {
+        let turn = s.body["messages"]
+            .as_array()
+            .map_or(0, |m| m.iter().filter(|m| m["role"] == "assistant").count());
+        Reply::chat(&format!("Cell: {}, Radius: 2", 10 + 7 * turn))
+    });
+    let t = TestRun::new();
+    let live = llm_bench_pipeline(&format!("base_url = \"{}\"", server.url()));
+    t.write("pipelines/live.toml", &live);
+    t.run(&["run", "pipelines/live.toml", "--run-dir", "runs/single"])
+        .ok();
+    let single_asked = server.seen().len();
+    assert!(single_asked >= 6, "{single_asked}");
+
+    // Two shard processes against the endpoint: every request is asked once in all, each process
+    // records its own llm_calls files, and the table equals the single process's but for the
+    // model's seconds.
+    let args =
+        |p: &'static str, i: &'static str| ["run", p, "--run-dir", "runs/sharded", "--shard", i];
+    let children = [
+        spawn(&t, &args("pipelines/live.toml", "0/2"), &[]),
+        spawn(&t, &args("pipelines/live.toml", "1/2"), &[]),
+    ];
+    for r in children.into_iter().map(wait) {
+        r.ok();
+    }
+    t.run(&[
+        "run",
+        "pipelines/live.toml",
+        "--run-dir",
+        "runs/sharded",
+        "--finalize",
+    ])
+    .ok();
+    assert_eq!(
+        server.seen().len(),
+        2 * single_asked,
+        "each request asked once more"
+    );
+    let rows = "SELECT * EXCLUDE (seconds) FROM benchmark";
+    assert_eq!(
+        sorted(t.csv("runs/sharded", rows)),
+        sorted(t.csv("runs/single", rows))
+    );
+    let sessions = t.csv(
+        "runs/sharded",
+        "SELECT count(DISTINCT session) AS sessions, count(*) AS calls FROM llm_calls",
+    );
+    assert_eq!(sessions, format!("sessions,calls\n2,{single_asked}\n"));
+    drop(server);
+
+    // Sharded again without an endpoint, replaying the single run's calls: the benchmark files are
+    // the single run's, byte for byte.
+    t.write(
+        "pipelines/replay.toml",
+        &llm_bench_pipeline("replay = \"runs/single\""),
+    );
+    let children = [
+        spawn(&t, &args("pipelines/replay.toml", "1/2"), &[]),
+        spawn(&t, &args("pipelines/replay.toml", "0/2"), &[]),
+    ];
+    for r in children.into_iter().map(wait) {
+        r.ok();
+    }
+    let bench_files = |run: &str| -> Vec<(String, Vec<u8>)> {
+        published(&t.path(run))
+            .into_iter()
+            .filter(|(p, _)| p.starts_with("benchmark/"))
+            .collect()
+    };
+    let (a, b) = (bench_files("runs/sharded"), bench_files("runs/single"));
+    assert_eq!(a.len(), 6, "one file per (seed, task)");
+    assert_eq!(
+        a.iter().map(|(p, _)| p).collect::<Vec<_>>(),
+        b.iter().map(|(p, _)| p).collect::<Vec<_>>()
+    );
+    for ((p, x), (_, y)) in a.iter().zip(&b) {
+        assert!(x == y, "{p}: the replayed file differs");
+    }
 }

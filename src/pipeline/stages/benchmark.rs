@@ -5,9 +5,10 @@
 //! a killed or failed run (an endpoint down mid-benchmark) resumes at the first unfinished task, and the
 //! stage is shardable (`annotrace run --shard i/n` computes the (seed, task) units `K ≡ i mod n`; every
 //! unit's draws and requests are keyed by (seed, task, attempt) alone, so its rows do not depend on
-//! which process plays it or on what it played before). An LLM agent's client replays the answers this run already recorded before
-//! asking the endpoint, so the calls of a task interrupted half-way are not asked again; with `llm.replay`
-//! pointing at another run it reproduces that run's table without an endpoint.
+//! which process plays it or on what it played before). An LLM agent's client replays the answers this
+//! run already recorded before asking the endpoint, so the calls of a task interrupted half-way are not
+//! asked again; with `llm.replay` pointing at another run it reproduces that run's table without an
+//! endpoint. Each process's client records its own `llm_calls` files (named after its session).
 
 use std::path::PathBuf;
 use std::sync::Arc;
