@@ -532,6 +532,9 @@ impl Stage for BenchmarkStage {
             "worker": self.setup.as_ref().map(|_| crate::detect::worker_fingerprint()),
             "templates": crate::bench::agent::TEMPLATES.iter().map(|(n, t)| format!("{n}:{}", crate::digest::sha256_hex(t.as_bytes()))).collect::<Vec<_>>(),
             "endpoint": (self.agent == AgentKind::Llm).then(|| self.endpoint_configured()),
+            // The units' names (`KKKKK-sSSS-tTTTTT` since they became shardable; before, `sSSS-tTTTTT`):
+            // a stage interrupted under the old names restarts rather than resuming beside them.
+            "units": 2,
         }))
     }
 
