@@ -32,6 +32,14 @@ pub trait Stage: Send + Sync {
     fn shardable(&self) -> bool {
         false
     }
+
+    /// Whether, in a sharded run, the stage may be computed while an earlier stage that also says so
+    /// and is not upstream of it is still running (sibling `evolve` searches): it reads nothing such
+    /// a sibling writes except a cache whose use its commit decides, and stages are still committed
+    /// in run order. Only meaningful for a [`Stage::shardable`] stage. Default: no.
+    fn runs_beside_siblings(&self) -> bool {
+        false
+    }
 }
 
 /// What a finished stage reports.

@@ -430,19 +430,27 @@ fn evolve_and_benchmark_in_a_sharded_run_equal_the_single_process_run() {
             i,
         ]
     };
-    // Shard 1 alone: it takes over the absent slices of `sim`, runs `evo` whole and is killed after
-    // its first round was saved.
+    // Shard 1 alone: it takes over the absent slices of `sim`, then, waiting for `evo` (one unit,
+    // owned by slice 0) before `bench`, computes that slice too and is killed after two saved rounds.
     let killed = t.run_env(&args("1/3"), &[("ANNOTRACE_FAULT", "evo:after-shards=2")]);
     assert_ne!(killed.code, Some(0), "the fault kills the shard");
     let evo = t.path("runs/sharded/.staging/evo/_done");
     assert!(evo.join("L000.R00000.json").exists(), "a round was saved");
-    // Rerun, it finishes `evo` from its saved rounds, then is killed in its second benchmark unit
-    // (units 1 and 4 are its own: seed 0 task 1, seed 1 task 1).
+    // Rerun, it takes slice 0 of `evo` over again, goes on from the saved rounds, commits `evo`, and
+    // is killed in its second benchmark unit (units 1 and 4 are its own: seed 0 task 1, seed 1 task 1).
     let killed = t.run_env(&args("1/3"), &[("ANNOTRACE_FAULT", "bench:mid-shard=1")]);
     assert_ne!(killed.code, Some(0), "the fault kills the shard");
     killed
-        .stderr_has("[evo] resuming: finished shards kept")
-        .stderr_has("[evo] done");
+        .stderr_has("[evo] shard 1/3: slice 0/3 has no running process; computing it here")
+        .stderr_has("[evo] done: 2 label(s)");
+    let err = &killed.stderr;
+    let replayed = err
+        .find("[evo] replaying the rounds")
+        .expect("the saved rounds are replayed");
+    assert!(
+        replayed < err.find("[evo] done: slice 0/3 done").unwrap(),
+        "{err}"
+    );
     let bench = t.path("runs/sharded/.staging/bench/_done");
     assert!(bench.join("00001-s000-t00001.json").exists());
     assert!(!bench.join("00004-s001-t00001.json").exists());
@@ -659,4 +667,156 @@ fn an_llm_benchmark_sharded_asks_each_request_once_and_replays_byte_for_byte() {
     for ((p, x), (_, y)) in a.iter().zip(&b) {
         assert!(x == y, "{p}: the replayed file differs");
     }
+}
+
+/// simulate → two sibling searches over the same training split (same seed; the islands and the
+/// hill-climb strategies), none an input of the other → SQL over both.
+const SIBLINGS_PIPELINE: &str = r#"[pipeline]
+name = "s"
+seed = 5
+
+[[stage]]
+id = "sim"
+kind = "simulate"
+env = "pooltool"
+scenes = 12
+shots = 1
+scenes_per_shard = 2
+
+[[stage]]
+id = "evo_a"
+kind = "evolve"
+inputs = ["sim"]
+env = "pooltool"
+proposer = "mutate"
+labels = ["ball slowing", "cushion rebound"]
+budget = 4
+parallel = 2
+max_traces = 12
+time_penalty = false
+timeout = 3.0
+workers = 1
+
+[[stage]]
+id = "evo_b"
+kind = "evolve"
+inputs = ["sim"]
+env = "pooltool"
+proposer = "mutate"
+strategy = "hill-climb"
+labels = ["ball slowing"]
+budget = 4
+parallel = 2
+max_traces = 12
+time_penalty = false
+timeout = 3.0
+workers = 1
+
+[[stage]]
+id = "best"
+kind = "sql"
+inputs = ["evo_a", "evo_b"]
+sql = "SELECT run_stage, label, best_nu, accepted FROM evolution_labels ORDER BY run_stage, label"
+"#;
+
+#[test]
+fn sibling_evolve_stages_run_side_by_side_in_shards_and_equal_the_single_process_run() {
+    let t = TestRun::new();
+    t.write("pipelines/s.toml", SIBLINGS_PIPELINE);
+    t.run(&["run", "pipelines/s.toml", "--run-dir", "runs/single"])
+        .ok();
+    let args = |i: &'static str| {
+        [
+            "run",
+            "pipelines/s.toml",
+            "--run-dir",
+            "runs/sharded",
+            "--shard",
+            i,
+        ]
+    };
+    // Slice 0 owns `evo_a` (unit 0), slice 1 `evo_b` (unit 1): each computes its own search without
+    // waiting for the other's.
+    let children = [spawn(&t, &args("0/2"), &[]), spawn(&t, &args("1/2"), &[])];
+    let ran: Vec<Ran> = children.into_iter().map(wait).collect();
+    for r in &ran {
+        r.ok();
+    }
+    ran[0].stderr_has("[evo_a] computing slice 0/2");
+    ran[1].stderr_has("[evo_b] computing slice 1/2");
+    for r in &ran {
+        assert!(
+            !r.stderr.lines().any(|l| l.starts_with("[evo_b]")
+                && l.contains("waiting for stage(s)")
+                && l.contains("evo_a")),
+            "evo_b waited for evo_a: {}",
+            r.stderr
+        );
+    }
+    t.run(&[
+        "run",
+        "pipelines/s.toml",
+        "--run-dir",
+        "runs/sharded",
+        "--finalize",
+    ])
+    .ok()
+    .stderr_has("[best] done");
+
+    let rows = |run: &str| -> Vec<String> {
+        [
+            "SELECT * EXCLUDE (mean_time_s, propose_s, eval_s) FROM candidates",
+            "SELECT * EXCLUDE (wall_s, propose_s, outside_proposer_share) FROM evolution_labels",
+            "SELECT * FROM evolution_histograms",
+            "SELECT * FROM evolution_convergence",
+            "SELECT * FROM trace_distances",
+            "SELECT * FROM best",
+        ]
+        .into_iter()
+        .map(|q| sorted(t.csv(run, q)))
+        .collect()
+    };
+    assert_eq!(rows("runs/sharded"), rows("runs/single"));
+    let strip = |v: Vec<(String, Vec<u8>)>| -> Vec<(String, Vec<u8>)> {
+        v.into_iter()
+            .filter(|(p, _)| !p.starts_with("candidates/") && !p.starts_with("evolution_labels/"))
+            .collect()
+    };
+    let (a, b) = (
+        strip(published(&t.path("runs/sharded"))),
+        strip(published(&t.path("runs/single"))),
+    );
+    assert_eq!(
+        a.iter().map(|(p, _)| p).collect::<Vec<_>>(),
+        b.iter().map(|(p, _)| p).collect::<Vec<_>>()
+    );
+    for ((p, x), (_, y)) in a.iter().zip(&b) {
+        assert!(x == y, "{p} differs from the single-process run");
+    }
+    // The shared D_x matrix is written once, by the first search in run order; the second reuses it,
+    // in both runs.
+    let dx: Vec<&String> = a
+        .iter()
+        .map(|(p, _)| p)
+        .filter(|p| p.starts_with("trace_distances/"))
+        .collect();
+    assert!(
+        !dx.is_empty() && dx.iter().all(|p| p.contains("/evo_a.")),
+        "{dx:?}"
+    );
+    let record = |run: &str, stage: &str| {
+        crate::common::read_json(&t.path(run).join("manifest.json"))["stages"][stage].clone()
+    };
+    for stage in ["evo_a", "evo_b"] {
+        assert_eq!(
+            record("runs/sharded", stage)["rows"],
+            record("runs/single", stage)["rows"],
+            "{stage}"
+        );
+    }
+    assert_eq!(
+        record("runs/sharded", "evo_b")["summary"]["dx"]["reused"],
+        true
+    );
+    t.run(&["verify", "--run", "runs/sharded"]).ok();
 }
