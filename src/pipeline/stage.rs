@@ -28,7 +28,8 @@ pub trait Stage: Send + Sync {
     /// each written to its own files and recorded with [`StageContext::finish_shard`], and
     /// [`StageContext::owns`] is asked before a unit is computed. The run without a slice (the commit)
     /// finds every unit done, computes the units without a leading number and sums the records.
-    /// Default: no.
+    /// A stage may also be one unit whose shards carry other names (`evolve`: its rounds), computed
+    /// whole by the slice that owns it and replayed from its records by the commit. Default: no.
     fn shardable(&self) -> bool {
         false
     }
