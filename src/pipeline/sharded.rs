@@ -20,9 +20,11 @@
 //!   shard to reach a stage records it `running` (unpublishing an older version of it), the shard that
 //!   finds every slice of it done commits it (the runner's commit steps; a second committer finds it
 //!   `finished` and does nothing), and unshardable stages before a shardable one run whole under the
-//!   lock, once;
+//!   lock, once (resuming from the finished shards of an attempt that died, as an unsharded run does);
 //! - a stage waits until every stage before it in the run order is `finished` (polling the manifest),
-//!   so each stage sees the run the single-process run would show it;
+//!   so each stage sees the run the single-process run would show it — except sibling stages that
+//!   [run beside each other](super::Stage::runs_beside_siblings) (independent `evolve` searches): they
+//!   are computed at the same time by the slices that own them, and committed in run order;
 //! - stages after the last shardable one (SQL, exports, plots, reports) are left to `--finalize`, an
 //!   ordinary run that refuses to compute a shardable stage whose slices are missing.
 
@@ -224,6 +226,8 @@ pub(super) fn shard_stages(spec: &PipelineSpec, opts: &RunOptions, built: &Built
 struct Shard<'a> {
     session: Session<'a>,
     slice: Slice,
+    /// The stages it runs, in run order ([`shard_stages`]).
+    stages: Vec<usize>,
     /// Whether this process wrote the "waiting" note for the current stage.
     waiting_noted: std::cell::Cell<bool>,
 }
@@ -266,11 +270,17 @@ pub fn run_shard(
             on_commit: None,
         },
         slice,
+        stages: stages.clone(),
         waiting_noted: std::cell::Cell::new(false),
     };
     let mut reports = Vec::new();
     for (k, &i) in stages.iter().enumerate() {
-        shard.wait_for(i, &stages[..k])?;
+        let earlier: Vec<usize> = stages[..k]
+            .iter()
+            .copied()
+            .filter(|&j| !beside(spec, &built, j, i))
+            .collect();
+        shard.wait_for(i, &earlier)?;
         let report = if built.stages[i].shardable() {
             shard.slice_stage(i)?
         } else {
@@ -284,7 +294,36 @@ pub fn run_shard(
     })
 }
 
+/// Whether stage `i` may be computed while the earlier stage `j` is still running: both say they run
+/// beside their siblings ([`Stage::runs_beside_siblings`](super::Stage::runs_beside_siblings)), and
+/// `j` is not upstream of `i`.
+pub(super) fn beside(spec: &PipelineSpec, built: &Built, j: usize, i: usize) -> bool {
+    built.stages[i].shardable()
+        && built.stages[i].runs_beside_siblings()
+        && built.stages[j].shardable()
+        && built.stages[j].runs_beside_siblings()
+        && !spec
+            .upstream(&spec.stages[i].id)
+            .contains(&spec.stages[j].id)
+}
+
 impl Shard<'_> {
+    /// Whether every stage before stage `i` in this shard's run order is finished (stages are
+    /// committed in run order, also when siblings were computed side by side).
+    fn earlier_finished(&self, i: usize) -> Result<bool, RunError> {
+        let s = &self.session;
+        let Some(pos) = self.stages.iter().position(|&j| j == i) else {
+            return Ok(true);
+        };
+        let manifest = Manifest::load(s.run)?.unwrap_or_default();
+        Ok(self.stages[..pos].iter().all(|&j| {
+            let id = &s.spec.stages[j].id;
+            manifest.stages.get(id).is_some_and(|r| {
+                r.fingerprint == s.built.fingerprints[id] && r.status == StageStatus::Finished
+            })
+        }))
+    }
+
     /// Runs `f` holding the run folder's lock (waiting for it), with the manifest as it is now.
     fn locked<T>(
         &self,
@@ -318,18 +357,24 @@ impl Shard<'_> {
             }
             let staging = s.run.staging(id);
             let previous = manifest.stages.get(id).cloned();
-            let resuming = previous.as_ref().is_some_and(|p| {
+            let mut resuming = previous.as_ref().is_some_and(|p| {
                 p.fingerprint == planned.fingerprint
                     && planned.action == Action::Run(RunReason::Resume)
             });
             if let Some(prev) = previous
                 .as_ref()
                 .filter(|p| resuming && p.status == StageStatus::Committing)
-                && let Some(report) = s.finish_commit(manifest, &staging, id, prev)?
             {
-                return Ok(Some(report));
+                match s.finish_commit(manifest, &staging, id, prev)? {
+                    Some(report) => return Ok(Some(report)),
+                    // Its files are not all there: the stage runs again from the start.
+                    None => resuming = false,
+                }
             }
-            s.reset_staging(manifest, &staging, id, false)?;
+            // A stage whose earlier attempt died (its process held the run lock, so no other one
+            // writes its staging area) keeps its finished shards, as in an unsharded run: an
+            // `evolve` goes on from its saved rounds.
+            s.reset_staging(manifest, &staging, id, resuming)?;
             let record = s.begin(manifest, &planned, i)?;
             s.run_and_commit(manifest, record, i, staging).map(Some)
         })
@@ -398,7 +443,7 @@ impl Shard<'_> {
         let s = &self.session;
         let id = &s.spec.stages[i].id;
         let staging = s.run.staging(id);
-        if missing_slices(&staging.slices_done(fp)?).is_some() {
+        if missing_slices(&staging.slices_done(fp)?).is_some() || !self.earlier_finished(i)? {
             return Ok(None);
         }
         self.locked(|manifest| {

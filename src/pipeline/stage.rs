@@ -28,8 +28,17 @@ pub trait Stage: Send + Sync {
     /// each written to its own files and recorded with [`StageContext::finish_shard`], and
     /// [`StageContext::owns`] is asked before a unit is computed. The run without a slice (the commit)
     /// finds every unit done, computes the units without a leading number and sums the records.
-    /// Default: no.
+    /// A stage may also be one unit whose shards carry other names (`evolve`: its rounds), computed
+    /// whole by the slice that owns it and replayed from its records by the commit. Default: no.
     fn shardable(&self) -> bool {
+        false
+    }
+
+    /// Whether, in a sharded run, the stage may be computed while an earlier stage that also says so
+    /// and is not upstream of it is still running (sibling `evolve` searches): it reads nothing such
+    /// a sibling writes except a cache whose use its commit decides, and stages are still committed
+    /// in run order. Only meaningful for a [`Stage::shardable`] stage. Default: no.
+    fn runs_beside_siblings(&self) -> bool {
         false
     }
 }

@@ -1,10 +1,14 @@
 //! `benchmark`: DeepPHY's agent loop (`crate::bench`) over PHYRE, I-PHYRE or billiards tasks, for each
 //! of `seeds` seeds, writing the `benchmark` table (one row per attempt).
 //!
-//! One shard per (seed, task): a killed or failed run (an endpoint down mid-benchmark) resumes at the
-//! first unfinished task. An LLM agent's client replays the answers this run already recorded before
-//! asking the endpoint, so the calls of a task interrupted half-way are not asked again; with `llm.replay`
-//! pointing at another run it reproduces that run's table without an endpoint.
+//! One shard per (seed, task), named `KKKKK-sSSS-tTTTTT` with `K = seed × tasks + task` its unit index:
+//! a killed or failed run (an endpoint down mid-benchmark) resumes at the first unfinished task, and the
+//! stage is shardable (`annotrace run --shard i/n` computes the (seed, task) units `K ≡ i mod n`; every
+//! unit's draws and requests are keyed by (seed, task, attempt) alone, so its rows do not depend on
+//! which process plays it or on what it played before). An LLM agent's client replays the answers this
+//! run already recorded before asking the endpoint, so the calls of a task interrupted half-way are not
+//! asked again; with `llm.replay` pointing at another run it reproduces that run's table without an
+//! endpoint. Each process's client records its own `llm_calls` files (named after its session).
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -189,8 +193,17 @@ impl BenchmarkSummary {
             return format!("skipped: {why}");
         }
         let total = self.tasks * self.seeds;
+        // A resumed or sharded run's commit may have played nothing itself: no harness figure then.
+        let harness = if self.attempts_played_now == 0 {
+            String::new()
+        } else {
+            format!(
+                "; harness {:.1} ms per attempt",
+                self.harness_ms_per_attempt()
+            )
+        };
         format!(
-            "{} {}{} agent, {} feedback{}: {}/{} task runs solved ({:.1} %) over {} seed(s), {} attempts; harness {:.1} ms per attempt",
+            "{} {}{} agent, {} feedback{}: {}/{} task runs solved ({:.1} %) over {} seed(s), {} attempts{harness}",
             self.env,
             self.agent,
             if self.model.is_empty() {
@@ -209,7 +222,6 @@ impl BenchmarkSummary {
             100.0 * self.success_rate,
             self.seeds,
             self.attempts_played,
-            self.harness_ms_per_attempt(),
         )
     }
 }
@@ -500,7 +512,19 @@ impl BenchmarkStage {
     }
 }
 
+/// The unit of (seed index `seed`, task number `task` of `tasks`): `KKKKK-sSSS-tTTTTT`, whose leading
+/// number `K = seed × tasks + task` decides its slice in a sharded run.
+fn unit_name(seed: u64, task: usize, tasks: usize) -> String {
+    let k = seed * tasks as u64 + task as u64;
+    format!("{k:05}-s{seed:03}-t{task:05}")
+}
+
 impl Stage for BenchmarkStage {
+    /// Each (seed, task) is a unit of its own (see the module documentation).
+    fn shardable(&self) -> bool {
+        true
+    }
+
     fn fingerprint_extra(&self) -> Result<Value, StageError> {
         Ok(json!({
             "library": self.setup.as_ref().map(|s| s.library.fingerprint()),
@@ -508,6 +532,9 @@ impl Stage for BenchmarkStage {
             "worker": self.setup.as_ref().map(|_| crate::detect::worker_fingerprint()),
             "templates": crate::bench::agent::TEMPLATES.iter().map(|(n, t)| format!("{n}:{}", crate::digest::sha256_hex(t.as_bytes()))).collect::<Vec<_>>(),
             "endpoint": (self.agent == AgentKind::Llm).then(|| self.endpoint_configured()),
+            // The units' names (`KKKKK-sSSS-tTTTTT` since they became shardable; before, `sSSS-tTTTTT`):
+            // a stage interrupted under the old names restarts rather than resuming beside them.
+            "units": 2,
         }))
     }
 
@@ -562,7 +589,11 @@ impl Stage for BenchmarkStage {
         let (mut harness_s, mut agent_s, mut played) = (0.0, 0.0, 0u64);
         for seed in 0..self.seeds {
             for (i, task) in tasks.iter().enumerate() {
-                let shard = format!("s{seed:03}-t{i:05}");
+                let shard = unit_name(seed, i, tasks.len());
+                if !ctx.owns(&shard) {
+                    // Another process's slice (`--shard`): its record is summed at the commit.
+                    continue;
+                }
                 let record = match ctx.finished_shard(&shard)? {
                     Some(r) => r,
                     None => {
@@ -639,6 +670,27 @@ impl Stage for BenchmarkStage {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn units_spread_seeds_and_tasks_over_slices() {
+        assert_eq!(unit_name(0, 3, 20), "00003-s000-t00003");
+        assert_eq!(unit_name(2, 1, 20), "00041-s002-t00001");
+        // 2 seeds × 3 tasks over 4 slices: every unit in exactly one slice, the slices balanced.
+        let slices: Vec<crate::pipeline::Slice> = (0..4)
+            .map(|i| crate::pipeline::Slice::new(i, 4).unwrap())
+            .collect();
+        let mut per = [0; 4];
+        for seed in 0..2 {
+            for task in 0..3 {
+                let owners: Vec<usize> = (0..4)
+                    .filter(|&i| slices[i].owns(&unit_name(seed, task, 3)))
+                    .collect();
+                assert_eq!(owners.len(), 1, "seed {seed} task {task}");
+                per[owners[0]] += 1;
+            }
+        }
+        assert_eq!(per, [2, 2, 1, 1]);
+    }
 
     #[test]
     fn defaults_build_and_unknown_tasks_are_refused() {

@@ -3,6 +3,13 @@
 //! `evolution_histograms`, `evolution_convergence` and `trace_distances` (training and held-out D_x)
 //! tables and the grown library as a folder.
 //!
+//! Sharded runs (`annotrace run --shard i/n`): the stage is one unit, `NNNNN` (its position among the
+//! pipeline's `evolve` stages), computed whole by the slice that owns it — its labels cannot be split,
+//! since each label's novelty is scored against the library the labels before it grew (Algorithm 2) —
+//! while sibling `evolve` stages (none upstream of another) are computed by other slices at the same
+//! time. The commit replays the saved rounds, decides the D_x matrices (written, or reused from an
+//! earlier stage, as in the unsharded run: a slice writes none) and writes the library folder.
+//!
 //! Resumable: each round of a label's search is a shard whose record holds the round's candidates, so a
 //! killed stage replays its finished rounds and continues (an LLM search also answers the requests its
 //! stopped attempt had recorded in `llm_calls` from there); each label's tables are written by a last
@@ -358,6 +365,9 @@ pub struct EvolveStage {
     convergence_per_bin: usize,
     max_edits: u32,
     output: Option<PathBuf>,
+    /// The stage's one unit in a sharded run: `NNNNN`, its position among the pipeline's `evolve`
+    /// stages (so sibling searches fall to different slices).
+    unit: String,
 }
 
 fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildError> {
@@ -475,6 +485,14 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
         prompts: p.prompts.as_ref().map(|d| spec.project_dir.join(d)),
         project: spec.project_dir.clone(),
         output: p.output.as_ref().map(|o| spec.project_dir.join(o)),
+        unit: format!(
+            "{:05}",
+            spec.stages
+                .iter()
+                .take_while(|s| s.id != def.id)
+                .filter(|s| s.kind.name == KIND.name)
+                .count()
+        ),
         setup,
     }))
 }
@@ -694,7 +712,11 @@ impl EvolveStage {
     ) -> Result<(DistanceMatrix, String, bool), StageError> {
         let ids: Vec<String> = train.iter().map(|t| t.trace_id.clone()).collect();
         let sid = set_id_with(&ids, self.samples, self.dx);
-        let mut files: Vec<PathBuf> = ctx
+        // This stage's own matrix, computed by an earlier attempt (a resumed or sharded run) and
+        // still staged, is not a reuse: its rows are this stage's, counted as an uninterrupted run
+        // counts them.
+        let own = ctx.staging().table_files("trace_distances")?;
+        let published: Vec<PathBuf> = ctx
             .run()
             .table("trace_distances")?
             .files
@@ -702,14 +724,20 @@ impl EvolveStage {
             .filter(|f| f.env == Some(env))
             .map(|f| f.path)
             .collect();
-        files.extend(ctx.staging().table_files("trace_distances")?);
-        for f in files {
+        let staged = own.len();
+        for (k, f) in own.into_iter().chain(published).enumerate() {
             let batches = crate::store::read_file(&f)?;
             if let Some(m) = matrix_from_batches(&sid, &ids, &batches) {
-                return Ok((m, sid, true));
+                return Ok((m, sid, k >= staged));
             }
         }
         let m = DistanceMatrix::compute_with(train, self.samples, self.dx);
+        if ctx.slice().is_some() {
+            // A slice's search: the commit decides whether the matrix is this stage's to write or an
+            // earlier stage's to reuse (a sibling search may not have committed it yet), as the
+            // unsharded run would.
+            return Ok((m, sid, false));
+        }
         let b = distances_batch(&sid, &m)?;
         ctx.write_batch("trace_distances", env, shard, &b)?;
         ctx.finish_shard(shard, &json!({"set_id": sid, "pairs": m.upper.len()}))?;
@@ -864,7 +892,33 @@ impl Stage for EvolveStage {
         }))
     }
 
+    /// One unit, the whole search (see the module documentation): computed by the slice that owns
+    /// it, then replayed from its saved rounds by the commit, which writes the tables' last parts
+    /// and the library folder.
+    fn shardable(&self) -> bool {
+        true
+    }
+
+    /// Sibling searches read the same traces and write only their own tables; the D_x matrix they
+    /// may share is decided at the commit, in run order.
+    fn runs_beside_siblings(&self) -> bool {
+        true
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
+        if !ctx.owns(&self.unit) {
+            // Another slice's search (`--shard`).
+            return Ok(StageOutput::default());
+        }
+        if ctx
+            .finished_shard(&StagingCheckpoint::shard(0, 0))?
+            .is_some()
+        {
+            ctx.progress().note(
+                ctx.stage_id(),
+                "replaying the rounds an earlier attempt or slice saved",
+            );
+        }
         let env = self.setup.env;
         let mut config = self.config.clone();
         config.seed = self.seed.unwrap_or(ctx.seed());
@@ -991,6 +1045,10 @@ impl Stage for EvolveStage {
                  raise `budget`, lower `delta` or set allow_nonpositive_rho = true",
                 labels.len()
             )));
+        }
+        if ctx.slice().is_some() {
+            // The commit replays the saved rounds and writes the library folder.
+            return Ok(StageOutput::default());
         }
         let out_dir = self.write_evolved(ctx, &config, proposer.name(), &library)?;
         let wall: f64 = results.iter().map(|r| r.outcome.wall_s).sum();
