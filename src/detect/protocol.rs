@@ -95,6 +95,7 @@ fn pool_columns(key: &str, trace: &Trace) -> Option<Vec<u8>> {
     if trace.env != Env::Pooltool {
         return None;
     }
+    // The floats first: a moving ball differs there, so its strings are never compared.
     fn same(a: &PoolBall, b: &PoolBall) -> bool {
         let bits = |x: &PoolBall| {
             let mut v = [0u64; 10];
@@ -110,11 +111,11 @@ fn pool_columns(key: &str, trace: &Trace) -> Option<Vec<u8>> {
             }
             v
         };
-        a.ball_id == b.ball_id
-            && a.kind == b.kind
+        bits(a) == bits(b)
             && a.motion_state_code == b.motion_state_code
+            && a.ball_id == b.ball_id
+            && a.kind == b.kind
             && a.motion_state == b.motion_state
-            && bits(a) == bits(b)
     }
     let mut protos: Vec<(&str, &str, i64, &str)> = Vec::new();
     let mut proto: Vec<u32> = Vec::new();
@@ -123,6 +124,8 @@ fn pool_columns(key: &str, trace: &Trace) -> Option<Vec<u8>> {
     let mut radii: Vec<u8> = Vec::new();
     let mut prev: Vec<&PoolBall> = Vec::new();
     let mut row: Vec<&PoolBall> = Vec::new();
+    // Each slot's last row in `protos`.
+    let mut last: Vec<Option<usize>> = Vec::new();
     for ts in &trace.timesteps {
         row.clear();
         let all_new = prev.len() != ts.objects.len();
@@ -143,13 +146,22 @@ fn pool_columns(key: &str, trace: &Trace) -> Option<Vec<u8>> {
                 b.motion_state_code,
                 b.motion_state.as_str(),
             );
-            let k = match protos.iter().position(|p| *p == key) {
+            // The slot's previous row usually has the same (id, kind, state): try it before the
+            // table (a linear search comparing strings).
+            let k = match last.get(j).copied().flatten().filter(|&k| protos[k] == key) {
                 Some(k) => k,
-                None => {
-                    protos.push(key);
-                    protos.len() - 1
-                }
+                None => match protos.iter().position(|p| *p == key) {
+                    Some(k) => k,
+                    None => {
+                        protos.push(key);
+                        protos.len() - 1
+                    }
+                },
             };
+            if last.len() <= j {
+                last.resize(j + 1, None);
+            }
+            last[j] = Some(k);
             proto.push(u32::try_from(k).ok()?);
             for v in b
                 .position

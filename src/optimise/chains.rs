@@ -228,6 +228,10 @@ pub fn run_chains<P: Problem>(
         timings.program_errors += scored.iter().filter(|s| s.2).count() as u64;
         timings.samples += n_live;
 
+        // Freeing a step's traces (thousands of small allocations each) on every core rather
+        // than on this thread alone, between the parallel phases.
+        traces.into_par_iter().for_each(drop);
+
         let done = step + 1;
         for (i, (x, (score, verified, _))) in xs.into_iter().zip(scored).enumerate() {
             let Some(x) = x else { continue };
