@@ -207,6 +207,8 @@ fn candidate_settings() -> Vec<(&'static str, ParquetSettings, bool)> {
             default,
         ),
         ("column writer, zstd 3", column(Codec::Zstd(3))),
+        ("column writer, zstd -1 (fast)", column(Codec::Zstd(-1))),
+        ("column writer, zstd -5 (fast)", column(Codec::Zstd(-5))),
         ("column writer, lz4 (raw)", column(Codec::Lz4Raw)),
         ("column writer, snappy", column(Codec::Snappy)),
         ("column writer, uncompressed", column(Codec::None)),
@@ -295,7 +297,8 @@ fn compare_settings(run: &Path) -> anyhow::Result<()> {
                         }
                         sink.commit()?
                     } else {
-                        let mut sink = ParquetSink::create_with(&target, schema.clone(), &settings)?;
+                        let mut sink =
+                            ParquetSink::create_with(&target, schema.clone(), &settings)?;
                         for b in slices() {
                             sink.write(&b)?;
                         }
@@ -343,6 +346,8 @@ struct Measured {
     /// Items per CPU second.
     items_per_cpu_s: f64,
     frame_rows_per_s: f64,
+    /// Frame rows per CPU second (per core).
+    frame_rows_per_cpu_s: f64,
     parquet_bytes: u64,
     parquet_bytes_per_1000_traces: f64,
     frames_bytes: u64,
@@ -468,6 +473,7 @@ fn run_case(
         items_per_s: items as f64 / wall_s,
         items_per_cpu_s: items as f64 / cpu_s.max(1e-9),
         frame_rows_per_s: frame_rows as f64 / wall_s,
+        frame_rows_per_cpu_s: frame_rows as f64 / cpu_s.max(1e-9),
         parquet_bytes,
         parquet_bytes_per_1000_traces: parquet_bytes as f64 * 1000.0 / traces.max(1) as f64,
         frames_bytes,
@@ -508,9 +514,9 @@ pub fn run(args: Args) -> CliResult {
     fs::create_dir_all(&dir).map_err(|e| CliError::io(&dir, e))?;
     let mut out = Vec::new();
     println!(
-        "| case | what | threads | n | traces | frame rows | wall s | CPU s | per s (wall) | per CPU s | M frame rows/s (wall) | Parquet MB per 1,000 traces | profile |"
+        "| case | what | threads | n | traces | frame rows | wall s | CPU s | per s (wall) | per CPU s | M frame rows/s (wall) | M frame rows per CPU s | Parquet MB per 1,000 traces | profile |"
     );
-    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
     let result = (|| -> anyhow::Result<()> {
         for case in &cases {
             let n = ((case.count as f64 * args.scale).round() as u64).max(1);
@@ -521,7 +527,7 @@ pub fn run(args: Args) -> CliResult {
                 }
                 let m = run_case(&exe, case, n, t, args.seed, &run)?;
                 println!(
-                    "| {} | {} | {} | {} {} | {} | {} | {:.2} | {:.2} | {:.1} {}/s | {:.1} | {:.2} | {:.2} | {} |",
+                    "| {} | {} | {} | {} {} | {} | {} | {:.2} | {:.2} | {:.1} {}/s | {:.1} | {:.2} | {:.2} | {:.2} | {} |",
                     m.case,
                     m.what,
                     m.threads,
@@ -535,6 +541,7 @@ pub fn run(args: Args) -> CliResult {
                     m.unit,
                     m.items_per_cpu_s,
                     m.frame_rows_per_s / 1e6,
+                    m.frame_rows_per_cpu_s / 1e6,
                     m.parquet_bytes_per_1000_traces / 1e6,
                     m.profile
                 );

@@ -178,9 +178,9 @@ impl Compressor {
 /// The Parquet codec of `codec` (as [`ParquetSettings::properties`] sets it).
 fn compression(codec: Codec) -> Compression {
     match codec {
-        Codec::Zstd(level) => Compression::ZSTD(
-            parquet::basic::ZstdLevel::try_new(level).unwrap_or_default(),
-        ),
+        Codec::Zstd(level) => {
+            Compression::ZSTD(parquet::basic::ZstdLevel::try_new(level).unwrap_or_default())
+        }
         Codec::Snappy => Compression::SNAPPY,
         Codec::Lz4Raw => Compression::LZ4_RAW,
         Codec::None => Compression::UNCOMPRESSED,
@@ -263,14 +263,36 @@ fn def_levels(runs: &[(bool, u32)], out: &mut Vec<u8>) {
 }
 
 /// `min` and `max` of floats as Parquet orders them: NaN left out, a zero minimum as −0 and a
-/// zero maximum as +0.
+/// zero maximum as +0. Eight lanes of compare-and-select (a NaN never compares less or greater,
+/// so it never enters), which the compiler turns into vector min/max.
 fn float_range(values: &[f64]) -> Option<(f64, f64)> {
-    let mut it = values.iter().copied().filter(|v| !v.is_nan());
-    let first = it.next()?;
-    let (mut lo, mut hi) = (first, first);
-    for v in it {
-        lo = lo.min(v);
-        hi = hi.max(v);
+    let mut lo = [f64::INFINITY; 8];
+    let mut hi = [f64::NEG_INFINITY; 8];
+    let chunks = values.chunks_exact(8);
+    let tail = chunks.remainder();
+    for c in chunks {
+        for k in 0..8 {
+            lo[k] = if c[k] < lo[k] { c[k] } else { lo[k] };
+            hi[k] = if c[k] > hi[k] { c[k] } else { hi[k] };
+        }
+    }
+    for (k, &x) in tail.iter().enumerate() {
+        lo[k] = if x < lo[k] { x } else { lo[k] };
+        hi[k] = if x > hi[k] { x } else { hi[k] };
+    }
+    let mut lo = lo
+        .iter()
+        .fold(f64::INFINITY, |a, &b| if b < a { b } else { a });
+    let mut hi = hi
+        .iter()
+        .fold(f64::NEG_INFINITY, |a, &b| if b > a { b } else { a });
+    // Only infinities compare equal to the starting values: a lane that saw one still counts.
+    let has = |x: f64| values.iter().any(|&v| v == x);
+    if lo == f64::INFINITY && !has(f64::INFINITY) {
+        return None;
+    }
+    if hi == f64::NEG_INFINITY && !has(f64::NEG_INFINITY) {
+        return None;
     }
     if lo == 0.0 {
         lo = -0.0;
@@ -307,7 +329,10 @@ impl ColumnSink {
     pub fn supports(schema: &arrow::datatypes::Schema, settings: &ParquetSettings) -> bool {
         !settings.float_dictionary
             && !settings.float_byte_stream_split
-            && schema.fields().iter().all(|f| kind_of(f.data_type()).is_some())
+            && schema
+                .fields()
+                .iter()
+                .all(|f| kind_of(f.data_type()).is_some())
     }
 
     /// Starts a file at `target` with `schema` (see [`ColumnSink::supports`]), encoded as
@@ -351,8 +376,7 @@ impl ColumnSink {
                 }
             })
             .collect();
-        let compressor =
-            Compressor::new(settings.codec).map_err(|e| StoreError::io(&target, e))?;
+        let compressor = Compressor::new(settings.codec).map_err(|e| StoreError::io(&target, e))?;
         Ok(ColumnSink {
             writer,
             atomic,
@@ -392,10 +416,9 @@ impl ColumnSink {
             if let Some(n) = view_rows(v)
                 && n != rows
             {
-                return Err(self.schema_error(format!(
-                    "column {}: {n} values for {rows} rows",
-                    c.name
-                )));
+                return Err(
+                    self.schema_error(format!("column {}: {n} values for {rows} rows", c.name))
+                );
             }
         }
         let mut at = 0;
@@ -525,17 +548,32 @@ fn view_rows(v: &ColumnView<'_>) -> Option<usize> {
 }
 
 /// The keys of rows `lo..hi`, each clamped to `0..n`.
-fn keyed<'k>(keys: &'k Keys<'_>, n: usize, lo: usize, hi: usize) -> impl Iterator<Item = usize> + 'k {
+fn keyed<'k>(
+    keys: &'k Keys<'_>,
+    n: usize,
+    lo: usize,
+    hi: usize,
+) -> impl Iterator<Item = usize> + 'k {
     (lo..hi).map(move |i| keys.get(i, n))
 }
 
 /// Appends rows `lo..hi` of `view` to `c`.
 fn push(c: &mut Column, view: &ColumnView<'_>, lo: usize, hi: usize) -> Result<(), String> {
     let n = hi - lo;
-    let mismatch = || format!("column {}: a {:?} view for a {:?} column", c.name, view_name(view), c.kind);
+    let mismatch = || {
+        format!(
+            "column {}: a {:?} view for a {:?} column",
+            c.name,
+            view_name(view),
+            c.kind
+        )
+    };
     if let ColumnView::Null = view {
         if !c.nullable {
-            return Err(format!("column {}: nulls in a column that has none", c.name));
+            return Err(format!(
+                "column {}: nulls in a column that has none",
+                c.name
+            ));
         }
         c.defined(false, n);
         return Ok(());
@@ -609,28 +647,47 @@ fn view_name(v: &ColumnView<'_>) -> &'static str {
     }
 }
 
-/// How a chunk's present values are encoded.
+/// How a chunk's present values were encoded.
 struct Encoded {
     /// The dictionary page's PLAIN values and their count, if dictionary-encoded.
     dict: Option<(Vec<u8>, usize)>,
-    /// The data page's values section.
-    values: Vec<u8>,
     statistics: Option<Statistics>,
 }
 
-fn encode_values(c: &Column) -> Encoded {
+/// Appends `v` as PLAIN little-endian values.
+fn plain_f64(v: &[f64], out: &mut Vec<u8>) {
+    let at = out.len();
+    out.resize(at + v.len() * 8, 0);
+    for (dst, x) in out[at..].chunks_exact_mut(8).zip(v) {
+        dst.copy_from_slice(&x.to_le_bytes());
+    }
+}
+
+/// Appends the data page's values section of `c`'s present values to `values`.
+fn encode_values(c: &Column, values: &mut Vec<u8>) -> Encoded {
     let nulls = Some(c.nulls);
     let stats = c.stats;
     match &c.data {
         Data::F64(v) => {
-            let mut values = Vec::with_capacity(v.len() * 8);
-            for x in v {
-                values.extend_from_slice(&x.to_le_bytes());
-            }
+            // A column holding one value (bit for bit) is a one-entry dictionary and a single RLE
+            // run: nothing for the codec to squeeze (billiards' `z` and `vz`, for example).
+            let constant = v
+                .first()
+                .filter(|x| v.iter().all(|y| y.to_bits() == x.to_bits()));
+            let dict = match constant {
+                Some(x) if v.len() > 1 => {
+                    values.push(0);
+                    rle_run(0, v.len(), 0, values);
+                    Some((x.to_le_bytes().to_vec(), 1))
+                }
+                _ => {
+                    plain_f64(v, values);
+                    None
+                }
+            };
             let range = float_range(v);
             Encoded {
-                dict: None,
-                values,
+                dict,
                 statistics: stats.then(|| {
                     ValueStatistics::<f64>::new(
                         range.map(|r| r.0),
@@ -694,32 +751,31 @@ fn encode_values(c: &Column) -> Encoded {
                     }
                     let width = bit_width((hi - lo) as u64);
                     let keys: Vec<u32> = v.iter().map(|&x| (x - lo) as u32).collect();
-                    let mut values = vec![width];
-                    hybrid(&keys, width, &mut values);
+                    values.push(width);
+                    hybrid(&keys, width, values);
                     Encoded {
                         dict: Some((dict, entries)),
-                        values,
                         statistics,
                     }
                 }
                 _ => {
-                    let mut values = Vec::with_capacity(v.len() * if wide { 8 } else { 4 });
+                    values.reserve(v.len() * if wide { 8 } else { 4 });
                     for &x in v {
-                        plain(x, &mut values);
+                        plain(x, values);
                     }
                     Encoded {
                         dict: None,
-                        values,
                         statistics,
                     }
                 }
             }
         }
         Data::Bool(v) => {
-            let mut values = vec![0u8; v.len().div_ceil(8)];
+            let at = values.len();
+            values.resize(at + v.len().div_ceil(8), 0);
             for (i, &b) in v.iter().enumerate() {
                 if b {
-                    values[i / 8] |= 1 << (i % 8);
+                    values[at + i / 8] |= 1 << (i % 8);
                 }
             }
             let lo = v.iter().all(|&b| b);
@@ -727,7 +783,6 @@ fn encode_values(c: &Column) -> Encoded {
             let some = !v.is_empty();
             Encoded {
                 dict: None,
-                values,
                 statistics: stats.then(|| {
                     ValueStatistics::<bool>::new(
                         some.then_some(lo),
@@ -744,7 +799,6 @@ fn encode_values(c: &Column) -> Encoded {
             if idx.is_empty() {
                 return Encoded {
                     dict: None,
-                    values: Vec::new(),
                     statistics: stats.then(|| {
                         ValueStatistics::<ByteArray>::new(None, None, None, nulls, false).into()
                     }),
@@ -756,8 +810,8 @@ fn encode_values(c: &Column) -> Encoded {
                 page.extend_from_slice(s.as_bytes());
             }
             let width = bit_width(dict.len().saturating_sub(1) as u64);
-            let mut values = vec![width];
-            hybrid(idx, width, &mut values);
+            values.push(width);
+            hybrid(idx, width, values);
             let statistics = stats.then(|| {
                 let lo = dict.iter().min().map(|s| ByteArray::from(s.as_str()));
                 let hi = dict.iter().max().map(|s| ByteArray::from(s.as_str()));
@@ -765,7 +819,6 @@ fn encode_values(c: &Column) -> Encoded {
             });
             Encoded {
                 dict: Some((page, dict.len())),
-                values,
                 statistics,
             }
         }
@@ -780,12 +833,11 @@ fn encode_chunk(
     compressor: &mut Compressor,
     compression: Compression,
 ) -> parquet::errors::Result<EncodedChunk> {
-    let enc = encode_values(c);
-    let mut data = Vec::with_capacity(enc.values.len() + 16);
+    let mut data = Vec::with_capacity(rows * 8 + 64);
     if c.nullable {
         def_levels(&c.def_runs, &mut data);
     }
-    data.extend_from_slice(&enc.values);
+    let enc = encode_values(c, &mut data);
     let mut sink = TrackedWrite::new(Vec::new());
     let mut encodings = vec![Encoding::RLE];
     let mut page_stats = Vec::new();
@@ -912,7 +964,11 @@ mod tests {
             f.begin_step(s as i64, s as f64 * 0.01);
             for b in 0..n {
                 let x = (s * 7 + b * 3 + seed as usize) as f64 * 0.001;
-                let code = if b == 0 { (s / 20 % 5) as u8 } else { ((s + b) % 5) as u8 };
+                let code = if b == 0 {
+                    (s / 20 % 5) as u8
+                } else {
+                    ((s + b) % 5) as u8
+                };
                 f.ball(b, &[x, -x, 0.028575], &[x, 0.0, -0.0], &[0.0, x, 1.5], code);
             }
         }
@@ -995,7 +1051,9 @@ mod tests {
         for t in traces {
             let tables = t.tables("scene", "src").unwrap();
             frames.append(tables.frame_rows, &tables.frames).unwrap();
-            steps.append(tables.timestep_rows, &tables.timesteps).unwrap();
+            steps
+                .append(tables.timestep_rows, &tables.timesteps)
+                .unwrap();
             let b = t.clone().batches("scene", "src").unwrap();
             assert_eq!(tables.traces, b.traces);
             assert_eq!(tables.events, b.events);
@@ -1010,7 +1068,10 @@ mod tests {
             let (path2, n) = sink.commit().unwrap();
             assert_eq!((&path2, n), (path, rows));
             let got = read_file(path).unwrap();
-            assert!(got.iter().all(|b| b.schema() == schema), "same Arrow schema");
+            assert!(
+                got.iter().all(|b| b.schema() == schema),
+                "same Arrow schema"
+            );
             let got = concat_batches(&schema, &got).unwrap();
             let want = concat_batches(&schema, &want).unwrap();
             assert_eq!(got.num_rows(), want.num_rows());
@@ -1049,8 +1110,17 @@ mod tests {
 
     #[test]
     fn every_codec_and_label_statistics_read_back() {
-        let traces = vec![pool("a", &["cue", "1", "9"], 40, 0), pool("b", &["cue"], 20, 2)];
-        for codec in [Codec::Zstd(1), Codec::Zstd(3), Codec::Lz4Raw, Codec::Snappy, Codec::None] {
+        let traces = vec![
+            pool("a", &["cue", "1", "9"], 40, 0),
+            pool("b", &["cue"], 20, 2),
+        ];
+        for codec in [
+            Codec::Zstd(1),
+            Codec::Zstd(3),
+            Codec::Lz4Raw,
+            Codec::Snappy,
+            Codec::None,
+        ] {
             for label_stats in [false, true] {
                 let settings = ParquetSettings {
                     codec,
@@ -1128,6 +1198,28 @@ mod tests {
         views = tables.timesteps.clone();
         let err = sink.append(3, &views).unwrap_err();
         assert!(format!("{err}").contains("4 values for 3 rows"), "{err}");
+    }
+
+    #[test]
+    fn float_ranges_leave_nan_out_and_sign_zeros() {
+        assert_eq!(float_range(&[]), None);
+        assert_eq!(float_range(&[f64::NAN; 11]), None);
+        let v: Vec<f64> = (0..21).map(|i| f64::from(i) - 7.5).collect();
+        assert_eq!(float_range(&v), Some((-7.5, 12.5)));
+        let mut w = v.clone();
+        w[3] = f64::NAN;
+        w[20] = f64::NAN;
+        assert_eq!(float_range(&w), Some((-7.5, 11.5)));
+        let (lo, hi) = float_range(&[0.0, 0.0, -0.0]).unwrap();
+        assert!(lo == 0.0 && lo.is_sign_negative() && hi.is_sign_positive());
+        assert_eq!(
+            float_range(&[f64::INFINITY]),
+            Some((f64::INFINITY, f64::INFINITY))
+        );
+        assert_eq!(
+            float_range(&[f64::NEG_INFINITY, 1.0]),
+            Some((f64::NEG_INFINITY, 1.0))
+        );
     }
 
     #[test]

@@ -50,8 +50,8 @@ use std::time::SystemTime;
 pub use self::atomic::{
     AtomicFile, is_temp_name, swap_dir, sync_dir, write_atomic, write_dir_atomic,
 };
-pub use self::manifest::{Manifest, OutputFile, StageStatus};
 pub use self::columns::ColumnSink;
+pub use self::manifest::{Manifest, OutputFile, StageStatus};
 pub use self::parquet::{
     Codec, ParquetSettings, ParquetSink, ROW_GROUP_ROWS, Stats, read_batches, read_file,
 };

@@ -147,9 +147,7 @@ impl<'a> ColumnView<'a> {
                     keys: Keys::U32(Cow::Owned((0..a.len() as u32).collect())),
                 }
             }
-            DataType::Dictionary(k, v)
-                if **k == DataType::Int32 && **v == DataType::Utf8 =>
-            {
+            DataType::Dictionary(k, v) if **k == DataType::Int32 && **v == DataType::Utf8 => {
                 let d: &DictionaryArray<Int32Type> = array.as_dictionary();
                 let values: &StringArray = d.values().as_string_opt()?;
                 if values.null_count() != 0 {
