@@ -135,7 +135,7 @@ fn for_run_rows(counts: &[i32], lo: usize, hi: usize, mut f: impl FnMut(usize, i
 enum Compressor {
     Zstd(Box<zstd::bulk::Compressor<'static>>),
     Lz4Raw,
-    Snappy(snap::raw::Encoder),
+    Snappy(Box<snap::raw::Encoder>),
     None,
 }
 
@@ -144,7 +144,7 @@ impl Compressor {
         Ok(match codec {
             Codec::Zstd(level) => Compressor::Zstd(Box::new(zstd::bulk::Compressor::new(level)?)),
             Codec::Lz4Raw => Compressor::Lz4Raw,
-            Codec::Snappy => Compressor::Snappy(snap::raw::Encoder::new()),
+            Codec::Snappy => Compressor::Snappy(Box::new(snap::raw::Encoder::new())),
             Codec::None => Compressor::None,
         })
     }
@@ -287,7 +287,7 @@ fn float_range(values: &[f64]) -> Option<(f64, f64)> {
         .iter()
         .fold(f64::NEG_INFINITY, |a, &b| if b > a { b } else { a });
     // Only infinities compare equal to the starting values: a lane that saw one still counts.
-    let has = |x: f64| values.iter().any(|&v| v == x);
+    let has = |x: f64| values.contains(&x);
     if lo == f64::INFINITY && !has(f64::INFINITY) {
         return None;
     }
@@ -424,10 +424,12 @@ impl ColumnSink {
         let mut at = 0;
         while at < rows {
             let take = (rows - at).min(self.group_cap - self.group_rows);
-            for i in 0..self.columns.len() {
-                push(&mut self.columns[i], &views[i], at, at + take)
-                    .map_err(|m| self.schema_error(m))?;
-            }
+            let pushed = self
+                .columns
+                .iter_mut()
+                .zip(views)
+                .try_for_each(|(c, v)| push(c, v, at, at + take));
+            pushed.map_err(|m| self.schema_error(m))?;
             at += take;
             self.group_rows += take;
             self.rows += take;
