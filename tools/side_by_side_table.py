@@ -69,7 +69,7 @@ def table(work: Path, scale: str) -> str:
         met = "met" if goal_ok(one, ratio) else "**not met**"
         lines.append(
             f"| {label} ({one['items']} {unit}, {one['frame_rows'] / 1e6:.2f} M frame rows) "
-            f"| {fmt(one['items_per_s'])} {unit}/s (per CPU s: {fmt(one['items_per_cpu_s'])}) | {speed2} | {one['frame_rows_per_s'] / 1e6:.2f} M "
+            f"| {fmt(one['items_per_s'])} {unit}/s (per CPU s: {fmt(one['items_per_cpu_s'])}) | {speed2} | {one['frame_rows_per_s'] / 1e6:.2f} M (per CPU s: {one['frame_rows'] / max(one['cpu_s'], 1e-9) / 1e6:.2f} M) "
             f"| {one['parquet_bytes_per_1000_traces'] / 1e6:.1f} MB | {orig_label} {fmt(orig)} /s "
             f"| {ratio:.2f}× | {goal_text}: {met} |"
         )

@@ -15,7 +15,8 @@ use std::time::Instant;
 use anyhow::{Context, anyhow};
 use parquet::file::reader::{FileReader, SerializedFileReader};
 
-use annotrace::store::{Codec, ParquetSettings, ParquetSink, Stats};
+use annotrace::store::{Codec, ColumnSink, ParquetSettings, ParquetSink, Stats};
+use annotrace::trace::view::ColumnView;
 
 use super::{CliError, CliResult};
 
@@ -101,7 +102,7 @@ pub struct Args {
 }
 
 /// The Parquet settings `--settings` compares, the default first.
-fn candidate_settings() -> Vec<(&'static str, ParquetSettings)> {
+fn candidate_settings() -> Vec<(&'static str, ParquetSettings, bool)> {
     // The default until session 8 (2026-11-24): zstd 3, statistics on every column, 20,000-row
     // pages; every other candidate changes it in one or a few ways.
     let d = ParquetSettings {
@@ -119,7 +120,7 @@ fn candidate_settings() -> Vec<(&'static str, ParquetSettings)> {
         s.label_stats = false;
         s.page_rows = 1 << 16;
     });
-    vec![
+    let arrow: Vec<(&'static str, ParquetSettings)> = vec![
         (
             "zstd 3, no float dictionary, page statistics everywhere, 20,000-row pages (the default before session 8)",
             d,
@@ -169,7 +170,7 @@ fn candidate_settings() -> Vec<(&'static str, ParquetSettings)> {
             with(&|s| s.row_group_rows = 1 << 13),
         ),
         (
-            "zstd 1, no label statistics, 64 Ki-row pages (the default now)",
+            "zstd 1, no label statistics, 64 Ki-row pages (the default now: other tables)",
             with(&|s| {
                 *s = fast;
                 s.codec = Codec::Zstd(1);
@@ -197,9 +198,27 @@ fn candidate_settings() -> Vec<(&'static str, ParquetSettings)> {
                 s.codec = Codec::None;
             }),
         ),
-    ]
+    ];
+    let default = ParquetSettings::default();
+    let column = |codec| ParquetSettings { codec, ..default };
+    let columns: Vec<(&'static str, ParquetSettings)> = vec![
+        (
+            "column writer, zstd 1 (the default now: timesteps and frames)",
+            default,
+        ),
+        ("column writer, zstd 3", column(Codec::Zstd(3))),
+        ("column writer, zstd -1 (fast)", column(Codec::Zstd(-1))),
+        ("column writer, zstd -5 (fast)", column(Codec::Zstd(-5))),
+        ("column writer, lz4 (raw)", column(Codec::Lz4Raw)),
+        ("column writer, snappy", column(Codec::Snappy)),
+        ("column writer, uncompressed", column(Codec::None)),
+    ];
+    arrow
+        .into_iter()
+        .map(|(n, s)| (n, s, false))
+        .chain(columns.into_iter().map(|(n, s)| (n, s, true)))
+        .collect()
 }
-
 /// `--settings RUN`: every trace table file of the run re-encoded with each candidate setting.
 fn compare_settings(run: &Path) -> anyhow::Result<()> {
     let run_dir = annotrace::store::RunDir::new(run);
@@ -242,7 +261,7 @@ fn compare_settings(run: &Path) -> anyhow::Result<()> {
     println!("|---|---:|---:|---:|---:|---:|---:|---:|");
     let mut base = None;
     let result = (|| -> anyhow::Result<()> {
-        for (name, settings) in candidate_settings() {
+        for (name, settings, column_writer) in candidate_settings() {
             // Each setting twice; the faster pass counts (the machine is shared).
             let (mut secs, mut cpu) = (f64::INFINITY, f64::INFINITY);
             let (mut bytes, mut frames_bytes) = (0u64, 0u64);
@@ -252,19 +271,39 @@ fn compare_settings(run: &Path) -> anyhow::Result<()> {
                 let cpu0 = cpu_s(libc::RUSAGE_SELF);
                 for (i, (table, schema, batches, _)) in files.iter().enumerate() {
                     let target = scratch.join(format!("{i}.parquet"));
-                    let mut sink = ParquetSink::create_with(&target, schema.clone(), &settings)?;
                     // One write per trace's worth of rows, as the `simulate` stage writes them.
                     let table_rows: usize = batches.iter().map(|b| b.num_rows()).sum();
                     let chunk = (table_rows / traces.max(1) as usize).max(1);
-                    for b in batches {
-                        let mut at = 0;
-                        while at < b.num_rows() {
-                            let len = chunk.min(b.num_rows() - at);
-                            sink.write(&b.slice(at, len))?;
-                            at += len;
+                    let slices = || {
+                        batches.iter().flat_map(move |b| {
+                            (0..b.num_rows())
+                                .step_by(chunk)
+                                .map(move |at| b.slice(at, chunk.min(b.num_rows() - at)))
+                        })
+                    };
+                    // The column writer takes the tables `simulate` gives it (timesteps, frames).
+                    let (path, _) = if column_writer
+                        && matches!(*table, "timesteps" | "frames")
+                        && ColumnSink::supports(schema, &settings)
+                    {
+                        let mut sink = ColumnSink::create(&target, schema.clone(), &settings)?;
+                        for b in slices() {
+                            let views: Option<Vec<ColumnView<'_>>> =
+                                b.columns().iter().map(ColumnView::from_array).collect();
+                            let views = views.ok_or_else(|| {
+                                anyhow!("{table}: a column the column writer cannot take")
+                            })?;
+                            sink.append(b.num_rows(), &views)?;
                         }
-                    }
-                    let (path, _) = sink.commit()?;
+                        sink.commit()?
+                    } else {
+                        let mut sink =
+                            ParquetSink::create_with(&target, schema.clone(), &settings)?;
+                        for b in slices() {
+                            sink.write(&b)?;
+                        }
+                        sink.commit()?
+                    };
                     let n = fs::metadata(&path)?.len();
                     bytes += n;
                     if *table == "frames" {
@@ -307,6 +346,8 @@ struct Measured {
     /// Items per CPU second.
     items_per_cpu_s: f64,
     frame_rows_per_s: f64,
+    /// Frame rows per CPU second (per core).
+    frame_rows_per_cpu_s: f64,
     parquet_bytes: u64,
     parquet_bytes_per_1000_traces: f64,
     frames_bytes: u64,
@@ -432,6 +473,7 @@ fn run_case(
         items_per_s: items as f64 / wall_s,
         items_per_cpu_s: items as f64 / cpu_s.max(1e-9),
         frame_rows_per_s: frame_rows as f64 / wall_s,
+        frame_rows_per_cpu_s: frame_rows as f64 / cpu_s.max(1e-9),
         parquet_bytes,
         parquet_bytes_per_1000_traces: parquet_bytes as f64 * 1000.0 / traces.max(1) as f64,
         frames_bytes,
@@ -472,9 +514,9 @@ pub fn run(args: Args) -> CliResult {
     fs::create_dir_all(&dir).map_err(|e| CliError::io(&dir, e))?;
     let mut out = Vec::new();
     println!(
-        "| case | what | threads | n | traces | frame rows | wall s | CPU s | per s (wall) | per CPU s | M frame rows/s (wall) | Parquet MB per 1,000 traces | profile |"
+        "| case | what | threads | n | traces | frame rows | wall s | CPU s | per s (wall) | per CPU s | M frame rows/s (wall) | M frame rows per CPU s | Parquet MB per 1,000 traces | profile |"
     );
-    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
     let result = (|| -> anyhow::Result<()> {
         for case in &cases {
             let n = ((case.count as f64 * args.scale).round() as u64).max(1);
@@ -485,7 +527,7 @@ pub fn run(args: Args) -> CliResult {
                 }
                 let m = run_case(&exe, case, n, t, args.seed, &run)?;
                 println!(
-                    "| {} | {} | {} | {} {} | {} | {} | {:.2} | {:.2} | {:.1} {}/s | {:.1} | {:.2} | {:.2} | {} |",
+                    "| {} | {} | {} | {} {} | {} | {} | {:.2} | {:.2} | {:.1} {}/s | {:.1} | {:.2} | {:.2} | {:.2} | {} |",
                     m.case,
                     m.what,
                     m.threads,
@@ -499,6 +541,7 @@ pub fn run(args: Args) -> CliResult {
                     m.unit,
                     m.items_per_cpu_s,
                     m.frame_rows_per_s / 1e6,
+                    m.frame_rows_per_cpu_s / 1e6,
                     m.parquet_bytes_per_1000_traces / 1e6,
                     m.profile
                 );

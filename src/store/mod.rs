@@ -1,7 +1,8 @@
 //! The run directory on disk: where every table, export and the manifest of a run live.
 //!
 //! **Owns:** the layout of a run folder, the manifest format ([`manifest`]), atomic files
-//! ([`AtomicFile`]), Parquet files ([`ParquetSink`]), the staging area through which a stage publishes
+//! ([`AtomicFile`]), Parquet files ([`ParquetSink`]; [`ColumnSink`] writes the frame tables from column
+//! views without Arrow arrays), the staging area through which a stage publishes
 //! its tables all at once ([`Staging`]), which files readers see ([`RunDir::tables`]: the published
 //! files of the manifest) and verified reading ([`verify`]). **Does not:** decide what a stage computes
 //! or when it runs and commits (`pipeline/`), or query tables (`query/`).
@@ -33,6 +34,7 @@
 //! is written atomically, so none is ever partial.
 
 mod atomic;
+mod columns;
 pub mod manifest;
 mod parquet;
 #[cfg(feature = "s3")]
@@ -48,6 +50,7 @@ use std::time::SystemTime;
 pub use self::atomic::{
     AtomicFile, is_temp_name, swap_dir, sync_dir, write_atomic, write_dir_atomic,
 };
+pub use self::columns::ColumnSink;
 pub use self::manifest::{Manifest, OutputFile, StageStatus};
 pub use self::parquet::{
     Codec, ParquetSettings, ParquetSink, ROW_GROUP_ROWS, Stats, read_batches, read_file,
@@ -433,6 +436,26 @@ impl Staging {
             path = path.join(format!("env={env}"));
         }
         ParquetSink::create(path.join(shard_file_name(&self.stage_id, shard)), schema)
+    }
+
+    /// Starts a staged Parquet file for `table` written by the column writer ([`ColumnSink`]), with
+    /// the default [`ParquetSettings`].
+    pub fn column_sink(
+        &self,
+        table: &str,
+        env: Option<Env>,
+        shard: &str,
+        schema: arrow::datatypes::SchemaRef,
+    ) -> Result<ColumnSink, StoreError> {
+        let mut path = self.dir.join(table);
+        if let Some(env) = env {
+            path = path.join(format!("env={env}"));
+        }
+        ColumnSink::create(
+            path.join(shard_file_name(&self.stage_id, shard)),
+            schema,
+            &ParquetSettings::default(),
+        )
     }
 
     /// The record of a finished shard, if it finished.

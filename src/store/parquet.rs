@@ -26,7 +26,8 @@ pub const PAGE_ROWS: usize = ROW_GROUP_ROWS;
 /// The codec of a Parquet file's pages.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Codec {
-    /// zstd at a level (1–22).
+    /// zstd at a level (1–22; the column writer also takes zstd's fast levels below 1, which the
+    /// Arrow writer replaces by 1).
     Zstd(i32),
     /// Snappy.
     Snappy,

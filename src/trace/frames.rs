@@ -13,6 +13,7 @@
 //! builds them from the paper layout, so both paths give the same record batches (tests below and in
 //! each environment's `to_trace`).
 
+use std::borrow::Cow;
 use std::sync::Arc;
 
 use arrow::array::{
@@ -28,6 +29,7 @@ use super::model::{
     Body, Event, IphyreObject, JsonMap, Object, Outcome, PhyreObject, PoolBall, Timestep, Trace,
 };
 use super::schema::{FRAMES, TIMESTEPS};
+use super::view::{ColumnView, Keys};
 
 /// The rows every environment shares: timesteps, and per frame row the object it belongs to and
 /// its planar centre.
@@ -510,6 +512,176 @@ impl Frames {
             .collect()
     }
 
+    /// The number of distinct object ids among the frame rows (as the `frames` batch's
+    /// `object_id` dictionary counts them).
+    fn distinct_objects(&self) -> usize {
+        let ids = self.ids();
+        let mut used = vec![false; ids.len()];
+        for &o in &self.rows().obj {
+            if let Some(u) = used.get_mut(o as usize) {
+                *u = true;
+            }
+        }
+        let mut seen: Vec<&str> = Vec::new();
+        for (id, _) in ids.iter().zip(&used).filter(|(_, u)| **u) {
+            if !seen.contains(&id.as_str()) {
+                seen.push(id);
+            }
+        }
+        seen.len()
+    }
+
+    /// The `timesteps` rows of trace `trace_id` as column views, in the schema's order.
+    fn timestep_views<'a>(&'a self, trace_id: &'a str) -> Vec<ColumnView<'a>> {
+        let rows = self.rows();
+        vec![
+            ColumnView::StrConst(trace_id),
+            ColumnView::I64(Cow::Borrowed(&rows.step)),
+            ColumnView::F64(Cow::Borrowed(&rows.t)),
+            ColumnView::I32(Cow::Borrowed(&rows.count)),
+            ColumnView::Null,
+        ]
+    }
+
+    /// The `frames` rows of trace `trace_id` as column views, in the schema's order: the same
+    /// values as [`Frames::batches`]' columns, without building them.
+    fn frame_views<'a>(&'a self, trace_id: &'a str) -> Vec<ColumnView<'a>> {
+        use ColumnView::{F64, Null};
+        let rows = self.rows();
+        let obj = || Keys::U32(Cow::Borrowed(&rows.obj));
+        let f = |v: &'a [f64]| F64(Cow::Borrowed(v));
+        let mut cols = vec![
+            ColumnView::StrConst(trace_id),
+            ColumnView::I64Runs {
+                values: &rows.step,
+                counts: &rows.count,
+            },
+            ColumnView::F64Runs {
+                values: &rows.t,
+                counts: &rows.count,
+            },
+            ColumnView::Slots(&rows.count),
+            ColumnView::Str {
+                values: self.ids().iter().map(String::as_str).collect(),
+                keys: obj(),
+            },
+            f(&rows.x),
+            f(&rows.y),
+        ];
+        // Columns in `FRAMES` order from `z` to `spring`.
+        let env: Vec<ColumnView<'a>> = match self {
+            Frames::Pool(p) => vec![
+                f(&p.z),
+                f(&p.v[0]),
+                f(&p.v[1]),
+                f(&p.v[2]),
+                Null,
+                f(&p.w[0]),
+                f(&p.w[1]),
+                f(&p.w[2]),
+                ColumnView::StrConst("ball"),
+                ColumnView::I32(Cow::Borrowed(&p.code)),
+                ColumnView::Str {
+                    values: p.state_names.to_vec(),
+                    keys: Keys::I32(&p.code),
+                },
+                ColumnView::F64Of {
+                    values: Cow::Borrowed(&p.radius),
+                    keys: obj(),
+                },
+                Null,
+                Null,
+                Null,
+                Null,
+                Null,
+                Null,
+                Null,
+                Null,
+                Null,
+                Null,
+                Null,
+                Null,
+            ],
+            Frames::Phyre(p) => vec![
+                Null,
+                f(&p.vx),
+                f(&p.vy),
+                Null,
+                f(&p.angle),
+                Null,
+                Null,
+                f(&p.wz),
+                Null,
+                Null,
+                Null,
+                Null,
+                ColumnView::F64Of {
+                    values: Cow::Borrowed(&p.diameter),
+                    keys: obj(),
+                },
+                ColumnView::Str {
+                    values: p.shape.iter().map(String::as_str).collect(),
+                    keys: obj(),
+                },
+                ColumnView::Str {
+                    values: p.color.clone(),
+                    keys: obj(),
+                },
+                ColumnView::BoolOf {
+                    values: Cow::Borrowed(&p.user),
+                    keys: obj(),
+                },
+                Null,
+                Null,
+                Null,
+                Null,
+                Null,
+                Null,
+                Null,
+                Null,
+            ],
+            Frames::Iphyre(p) => {
+                let of = |get: fn(&IphyreBody) -> f64| ColumnView::F64Of {
+                    values: Cow::Owned(p.bodies.iter().map(get).collect()),
+                    keys: obj(),
+                };
+                let ofi = |get: fn(&IphyreBody) -> i64| ColumnView::I64Of {
+                    values: Cow::Owned(p.bodies.iter().map(get).collect()),
+                    keys: obj(),
+                };
+                vec![
+                    Null,
+                    f(&p.vx),
+                    f(&p.vy),
+                    Null,
+                    f(&p.angle),
+                    Null,
+                    Null,
+                    f(&p.wz),
+                    Null,
+                    Null,
+                    Null,
+                    of(|b| b.radius),
+                    Null,
+                    Null,
+                    Null,
+                    Null,
+                    f(&p.ends[0]),
+                    f(&p.ends[1]),
+                    f(&p.ends[2]),
+                    f(&p.ends[3]),
+                    of(|b| b.eliminable),
+                    of(|b| b.dynamic),
+                    ofi(|b| b.joint),
+                    ofi(|b| b.spring),
+                ]
+            }
+        };
+        cols.extend(env);
+        cols.push(Null);
+        cols
+    }
+
     fn take_rows(&mut self) -> Rows {
         std::mem::take(match self {
             Frames::Pool(f) => &mut f.rows,
@@ -682,6 +854,23 @@ impl Frames {
     }
 }
 
+/// A trace's rows for a columnar writer ([`TraceColumns::tables`]).
+#[derive(Debug)]
+pub struct TraceTables<'a> {
+    /// Its `traces` row.
+    pub traces: RecordBatch,
+    /// Its `events` rows.
+    pub events: RecordBatch,
+    /// Rows of `timesteps`.
+    pub timestep_rows: usize,
+    /// Its `timesteps` columns.
+    pub timesteps: Vec<ColumnView<'a>>,
+    /// Rows of `frames`.
+    pub frame_rows: usize,
+    /// Its `frames` columns.
+    pub frames: Vec<ColumnView<'a>>,
+}
+
 /// One trace with its frames in columns: what a simulator hands to the tables.
 #[derive(Clone, Debug)]
 pub struct TraceColumns {
@@ -716,6 +905,45 @@ impl TraceColumns {
             outcome: self.outcome,
             extra: self.extra,
         }
+    }
+
+    /// The trace's rows for a columnar writer: the one-row `traces` batch and the `events` batch
+    /// (as [`TraceColumns::batches`] makes them), and the `timesteps` and `frames` rows as column
+    /// views in their schemas' order (the same values as those batches, no array built).
+    pub fn tables<'a>(
+        &'a self,
+        scene_id: &str,
+        source: &str,
+    ) -> Result<TraceTables<'a>, ArrowError> {
+        let rows = self.frames.rows();
+        let t_range = match (rows.t.first(), rows.t.last()) {
+            (Some(&a), Some(&b)) => Some((a, b)),
+            _ => None,
+        };
+        let meta = TraceMeta {
+            trace_id: &self.trace_id,
+            scene_id,
+            task_id: &self.task_id,
+            events: &self.events,
+            outcome: &self.outcome,
+            extra: &self.extra,
+            source,
+        };
+        let traces = traces_batch(
+            &meta,
+            rows.step.len(),
+            self.frames.distinct_objects(),
+            rows.obj.len(),
+            t_range,
+        )?;
+        Ok(TraceTables {
+            traces,
+            events: events_batch(&self.trace_id, &self.events)?,
+            timestep_rows: rows.step.len(),
+            timesteps: self.frames.timestep_views(&self.trace_id),
+            frame_rows: rows.obj.len(),
+            frames: self.frames.frame_views(&self.trace_id),
+        })
     }
 
     /// The trace's rows of the `traces`, `timesteps`, `frames` and `events` tables: the same

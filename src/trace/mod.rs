@@ -2,7 +2,8 @@
 //!
 //! **Owns:** the types of a trace ([`Trace`], [`Timestep`], [`Object`], [`Event`], [`Outcome`]), the
 //! environments ([`Env`]), the Arrow schemas of the trace tables ([`schema`]), conversion between traces
-//! and record batches ([`batch`]), traces held in columns straight from a simulator ([`frames`]) and the
+//! and record batches ([`batch`]), traces held in columns straight from a simulator ([`frames`]), borrowed column views of them for a
+//! columnar writer ([`view`]) and the
 //! JSON import/export format ([`json`]).
 //! **Does not:** read or write files of a run directory (`store/`), run SQL (`query/`) or order stages
 //! (`pipeline/`). It imports no other annotrace module.
@@ -16,10 +17,11 @@ pub mod frames;
 pub mod json;
 mod model;
 pub mod schema;
+pub mod view;
 
 pub use batch::{TraceBatchBuilder, TraceBatches, TraceMeta, TraceRows, decode_trace};
 pub use env::{Env, UnknownEnv};
-pub use frames::{Frames, TraceColumns};
+pub use frames::{Frames, TraceColumns, TraceTables};
 pub use model::{
     Body, Event, IphyreObject, JsonMap, Object, Outcome, PhyreObject, PoolBall, Timestep, Trace,
     json_map,

@@ -1,5 +1,5 @@
 //! `annotrace bench`: one case end to end (the `simulate` child, Parquet counted from the footers, the
-//! JSON record), the Parquet settings comparison on the run it kept, and bad flags.
+//! JSON record), the Parquet settings comparison on the run it kept (both writers), and bad flags.
 
 use serde_json::Value;
 
@@ -32,6 +32,7 @@ fn a_case_is_measured_from_the_files_it_wrote_and_settings_compare_on_them() {
     assert!(m["frame_rows"].as_u64().unwrap() > 40);
     assert!(m["parquet_bytes"].as_u64().unwrap() > m["frames_bytes"].as_u64().unwrap());
     assert!(m["wall_s"].as_f64().unwrap() > 0.0 && m["cpu_s"].as_f64().unwrap() > 0.0);
+    assert!(m["frame_rows_per_cpu_s"].as_f64().unwrap() > 0.0);
     // The same frame rows as the run's own table.
     let q = t.run(&[
         "query",
@@ -49,7 +50,9 @@ fn a_case_is_measured_from_the_files_it_wrote_and_settings_compare_on_them() {
     ]);
     s.ok()
         .stdout_has("40 trace(s)")
-        .stdout_has("64 Ki-row pages (the default now)")
+        .stdout_has("64 Ki-row pages (the default now: other tables)")
+        .stdout_has("| column writer, zstd 1 (the default now: timesteps and frames) |")
+        .stdout_has("| column writer, lz4 (raw) |")
         .stdout_has("| lz4 (raw) |");
 }
 

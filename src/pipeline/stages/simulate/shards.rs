@@ -15,8 +15,9 @@ use serde_json::{Value, json};
 
 use crate::pipeline::registry::BuildError;
 use crate::pipeline::stage::{StageContext, StageError};
-use crate::store::ParquetSink;
-use crate::trace::{Env, TraceBatches, TraceColumns, schema};
+use crate::store::{ColumnSink, ParquetSink};
+use crate::trace::view::ColumnView;
+use crate::trace::{Env, TraceColumns, schema};
 
 /// The sums of a stage's shard records: each numeric field (`traces`, `successes`, …) and the rows
 /// written per table.
@@ -146,6 +147,8 @@ pub(crate) struct ShardSinks<'a, 'c> {
     /// This shard's start order in the run, for the mid-shard fault point.
     ordinal: usize,
     sinks: BTreeMap<&'static str, ParquetSink>,
+    /// The `timesteps` and `frames` files, written from column views.
+    column_sinks: BTreeMap<&'static str, ColumnSink>,
 }
 
 impl<'a, 'c> ShardSinks<'a, 'c> {
@@ -159,6 +162,7 @@ impl<'a, 'c> ShardSinks<'a, 'c> {
             source: format!("simulate:{}", ctx.stage_id()),
             ordinal,
             sinks: BTreeMap::new(),
+            column_sinks: BTreeMap::new(),
         }
     }
 
@@ -168,7 +172,8 @@ impl<'a, 'c> ShardSinks<'a, 'c> {
     }
 
     /// Appends one trace's rows to the `traces`, `timesteps`, `frames` and `events` files, straight
-    /// from its columns (no paper-layout objects are built); a trace with a non-finite state (a
+    /// from its columns (no paper-layout objects are built; `timesteps` and `frames` through the
+    /// column writer, no Arrow arrays either); a trace with a non-finite state (a
     /// simulator that blew up) is an error naming it, never NaN in a table. For the shard's first trace
     /// (`first`) the mid-shard fault point fires between the frames and the events, so a crash test
     /// finds some of the shard's files half written.
@@ -186,18 +191,40 @@ impl<'a, 'c> ShardSinks<'a, 'c> {
                 field,
             });
         }
-        let b = trace.batches(scene_id, &self.source)?;
-        self.write_batches(&b, first)
-    }
-
-    fn write_batches(&mut self, b: &TraceBatches, first: bool) -> Result<(), StageError> {
-        self.write("traces", &b.traces)?;
-        self.write("timesteps", &b.timesteps)?;
-        self.write("frames", &b.frames)?;
+        let t = trace.tables(scene_id, &self.source)?;
+        self.write("traces", &t.traces)?;
+        self.write_views("timesteps", t.timestep_rows, &t.timesteps)?;
+        self.write_views("frames", t.frame_rows, &t.frames)?;
         if first {
             self.ctx.checkpoint_mid_shard(self.ordinal)?;
         }
-        self.write("events", &b.events)
+        self.write("events", &t.events)
+    }
+
+    /// Appends `rows` rows given as column views to `table`'s file (the column writer), opening it
+    /// on first use (no rows open nothing).
+    fn write_views(
+        &mut self,
+        table: &'static str,
+        rows: usize,
+        views: &[ColumnView<'_>],
+    ) -> Result<(), StageError> {
+        if rows == 0 {
+            return Ok(());
+        }
+        if !self.column_sinks.contains_key(table) {
+            let schema = schema::table_schema(table)
+                .ok_or_else(|| StageError::Internal(format!("no schema for table {table}")))?;
+            let sink = self
+                .ctx
+                .staging()
+                .column_sink(table, Some(self.env), &self.name, schema)?;
+            self.column_sinks.insert(table, sink);
+        }
+        if let Some(sink) = self.column_sinks.get_mut(table) {
+            sink.append(rows, views)?;
+        }
+        Ok(())
     }
 
     /// Appends `batch` to `table`'s file, opening it on first use (empty batches open nothing).
@@ -228,6 +255,10 @@ impl<'a, 'c> ShardSinks<'a, 'c> {
     pub(crate) fn commit(self) -> Result<BTreeMap<String, u64>, StageError> {
         let mut rows = BTreeMap::new();
         for (table, sink) in self.sinks {
+            let (_, n) = sink.commit()?;
+            rows.insert(table.to_string(), n as u64);
+        }
+        for (table, sink) in self.column_sinks {
             let (_, n) = sink.commit()?;
             rows.insert(table.to_string(), n as u64);
         }
