@@ -25,7 +25,8 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> CliResult {
-    let run = RunDir::new(&args.run);
+    let local = super::location::local_run(&args.run)?;
+    let run = RunDir::new(local.path());
     let trace = read_trace(&run, &args.trace).map_err(CliError::of)?;
     match &args.out {
         Some(path) => {

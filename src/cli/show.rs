@@ -23,13 +23,8 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> CliResult {
-    if !args.run.is_dir() {
-        return Err(CliError::input(anyhow::anyhow!(
-            "{}: no such run folder",
-            args.run.display()
-        )));
-    }
-    let run = RunDir::new(&args.run);
+    let local = super::location::local_run(&args.run)?;
+    let run = RunDir::new(local.path());
     let trace = read_trace(&run, &args.trace).map_err(CliError::of)?;
     let annotations = read_annotations(&run, trace.env, Some(&trace.trace_id))
         .map_err(|e| CliError::of(e).context("reading annotations"))?;

@@ -22,13 +22,10 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> CliResult {
-    if !args.run.is_dir() {
-        return Err(CliError::input(anyhow::anyhow!(
-            "{}: no such run folder",
-            args.run.display()
-        )));
-    }
-    let run = RunDir::new(&args.run);
+    // A run on object storage is pulled first; the pull itself checks every object the manifest
+    // names against its recorded size and SHA-256 and fails naming the first that differs.
+    let local = super::location::local_run(&args.run)?;
+    let run = RunDir::new(local.path());
     let report = verify_run(&run)?;
     for d in &report.damaged {
         println!("damaged  {} (stage {}): {}", d.path, d.stage, d.problem);

@@ -14,11 +14,6 @@
 //! functions are `#[inline(never)]` so no caller re-instantiates them. Release builds optimise
 //! everything either way; the arithmetic is the same in both (Rust does not contract or reorder float
 //! operations at any optimisation level).
-//!
-//! box2d-rs itself is the crates.io release vendored under `vendor/box2d-rs` (annotrace's
-//! `[patch.crates-io]`) with its profiling timers disabled: `B2timer` read the clock several times per
-//! step and per time-of-impact query, 8 % of a PHYRE episode's CPU time, for profile figures nothing
-//! reads. The physics is the same code.
 
 use box2d_rs::b2_body::{B2body, B2bodyDef, BodyPtr};
 use box2d_rs::b2_fixture::B2fixtureDef;
