@@ -1,5 +1,6 @@
 //! Run locations on the command line: a local folder, or `s3://bucket/prefix` (feature `s3`), which
-//! reading commands (`query`, `tables`, `annotate`'s summary) see through a pulled local copy.
+//! reading commands (`query`, `tables`, `show`, `export`, `verify`, `annotate`'s summary) see through a
+//! pulled local copy.
 
 use std::path::{Path, PathBuf};
 

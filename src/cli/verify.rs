@@ -12,7 +12,7 @@ use annotrace::pipeline::ErrorCategory;
 use annotrace::store::RunDir;
 use annotrace::store::verify::verify_run;
 
-use super::{CliError, CliResult, exit_code};
+use super::{CliResult, exit_code};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {

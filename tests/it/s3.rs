@@ -289,6 +289,22 @@ fn sharded_processes_on_s3_one_killed_then_finalize_equal_the_local_single_run()
     assert_eq!(store.orphans().unwrap(), Vec::<String>::new());
     assert!(store.list(".staging").unwrap().is_empty());
 
+    // The reading commands that take one trace, and `verify`, work on the remote run through a pulled
+    // copy: `show` and `export` print what they print for the local single run.
+    let first = t.csv("runs/single", "SELECT trace_id FROM traces ORDER BY trace_id LIMIT 1");
+    let id = first.lines().nth(1).expect("a trace").trim().to_string();
+    for cmd in ["show", "export"] {
+        let remote = cli.run(&[cmd, "--run", url, "--trace", &id]);
+        remote.ok();
+        let single = t.path("runs/single");
+        let local = cli.run(&[cmd, "--run", single.to_str().unwrap(), "--trace", &id]);
+        local.ok();
+        assert_eq!(remote.stdout, local.stdout, "`{cmd}` of {id}");
+    }
+    cli.run(&["verify", "--run", url])
+        .ok()
+        .stdout_has("journal file(s); ok");
+
     // A one-stage command on the remote run: `annotate` adds its stage, published like the others.
     cli.run(&["annotate", "--run", url, "--workers", "2"])
         .ok()
