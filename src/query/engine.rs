@@ -197,12 +197,10 @@ mod tests {
         assert!(Engine::Local.check_built().is_ok());
         let remote: Engine = "ballista://h:1".parse().unwrap();
         for e in [remote, Engine::BallistaStandalone] {
-            match e.check_built() {
-                Ok(()) => assert!(cfg!(feature = "ballista")),
-                Err(why) => {
-                    assert!(!cfg!(feature = "ballista"));
-                    assert!(why.0.contains("--features ballista"), "{why}");
-                }
+            let built = e.check_built();
+            assert_eq!(built.is_ok(), cfg!(feature = "ballista"), "{e}");
+            if let Err(why) = built {
+                assert!(why.0.contains("--features ballista"), "{why}");
             }
         }
     }
