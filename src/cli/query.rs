@@ -3,14 +3,19 @@
 //! The SQL only reads (the library refuses `COPY`, `INSERT`, `CREATE`, `SET`…); the one way to write a
 //! result is `--out FILE`, a path the user names: outside the run, or under the run's `exports/`, never
 //! elsewhere in the run folder. Limits come from `--memory-limit`/`--timeout`, else from
-//! `ANNOTRACE_SQL_MEMORY_LIMIT`/`ANNOTRACE_SQL_TIMEOUT` (read here), else the library's defaults.
+//! `ANNOTRACE_SQL_MEMORY_LIMIT`/`ANNOTRACE_SQL_TIMEOUT` (read here), else the library's defaults; the
+//! engine from `--engine`, else `ANNOTRACE_SQL_ENGINE`, else this process (`ballista://HOST:PORT` needs
+//! a build with `--features ballista`).
 
 use std::io::Write;
 use std::path::PathBuf;
 
+use annotrace::pipeline::{Categorize, ErrorCategory};
 use annotrace::query::read_only::check_output_path;
 use annotrace::query::settings::parse_timeout;
-use annotrace::query::{Format, MemoryLimit, QuerySettings, RenderOptions, RunQuery, render};
+use annotrace::query::{
+    Engine, Format, MemoryLimit, QuerySettings, RenderOptions, RunQuery, render,
+};
 use annotrace::store::{AtomicFile, ParquetSink, RunDir};
 use anyhow::Context;
 
@@ -47,6 +52,12 @@ pub struct Args {
     /// and rows without ORDER BY come in varying order.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=1024))]
     threads: u16,
+    /// Where the query runs: `local` (this process), `ballista://HOST:PORT` (a Ballista scheduler whose
+    /// executors see the run folder at the same path) or `ballista:standalone` (an in-process Ballista
+    /// cluster). Default: ANNOTRACE_SQL_ENGINE, else local. Ballista needs a build with
+    /// `--features ballista`.
+    #[arg(long, value_name = "ENGINE")]
+    engine: Option<Engine>,
 }
 
 pub fn run(args: Args) -> CliResult {
@@ -59,6 +70,9 @@ pub fn run(args: Args) -> CliResult {
         QuerySettings::resolve(args.memory_limit, args.timeout, &|k| std::env::var(k).ok())
             .map_err(CliError::input)?;
     settings.partitions = usize::from(args.threads);
+    if let Some(engine) = args.engine {
+        settings.engine = engine;
+    }
     // Opening reads the manifest and checks every listed file: a damaged run folder is bad input (2),
     // a failing disk an I/O error (4), as the error's category says.
     let q = RunQuery::open_with(&RunDir::new(local.path()), settings)?;
@@ -66,6 +80,8 @@ pub fn run(args: Args) -> CliResult {
     let result = q.sql(&args.sql).map_err(|e| {
         if e.is_users() {
             CliError::input(e)
+        } else if e.category() == ErrorCategory::Service {
+            CliError::of(e)
         } else {
             CliError::failed(e)
         }

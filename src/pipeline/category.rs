@@ -175,6 +175,10 @@ impl Categorize for QueryError {
             | QueryError::Timeout { .. }
             | QueryError::OutputInRun { .. }
             | QueryError::BadSetting(_) => ErrorCategory::Input,
+            // A Ballista engine in a build without the feature is a configuration error; a cluster
+            // that does not answer is an unavailable service.
+            QueryError::BadEngine(_) => ErrorCategory::Input,
+            QueryError::EngineUnavailable { .. } => ErrorCategory::Service,
             QueryError::Store(e) => e.category(),
             QueryError::Runtime(_) => ErrorCategory::Internal,
         }

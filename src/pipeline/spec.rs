@@ -632,7 +632,7 @@ mod tests {
         let e = parse(&format!("[[stage]]\nid = \"a\"\n{SQL}colour = 3\n")).unwrap_err();
         assert_eq!(
             e.to_string(),
-            "pipelines/t.toml:5: unknown key `colour` in stage \"a\" (kind sql) (known: id, kind, inputs, description, query, sql, output, memory_limit, timeout_s)"
+            "pipelines/t.toml:5: unknown key `colour` in stage \"a\" (kind sql) (known: id, kind, inputs, description, query, sql, output, memory_limit, timeout_s, engine)"
         );
         let e = parse("[[stage]]\nid = \"a\"\nkind = \"anotate\"\n").unwrap_err();
         assert!(

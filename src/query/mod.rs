@@ -15,6 +15,10 @@
 //! from the manifest (`store::RunDir::tables`, sizes checked), never a listing of its folder
 //! (`published`): a query sees whole stages only, and never a foreign file.
 //!
+//! A session whose settings name a Ballista engine ([`Engine`], `ballista://HOST:PORT` or
+//! `ballista:standalone`; cargo feature `ballista`) registers the same tables on the cluster from the
+//! same published files, plans and checks each statement here, and runs it there (`query::ballista`).
+//!
 //! ```no_run
 //! use annotrace::query::RunQuery;
 //! use annotrace::store::RunDir;
@@ -23,6 +27,9 @@
 //! println!("{} rows", result.num_rows());
 //! ```
 
+#[cfg(feature = "ballista")]
+mod ballista;
+pub mod engine;
 pub mod format;
 mod published;
 pub mod read_only;
@@ -47,6 +54,7 @@ use datafusion::prelude::{SessionConfig, SessionContext};
 use crate::store::{RunDir, StoreError};
 use crate::trace::schema::{ENV_COLUMN, TRACE_TABLES, table_schema};
 
+pub use engine::{BadEngine, Engine};
 pub use format::{Format, RenderOptions, UnknownFormat, render, render_string};
 pub use settings::{BadSetting, MemoryLimit, QuerySettings};
 
@@ -110,6 +118,17 @@ pub enum QueryError {
     /// The async runtime could not start.
     #[error("could not start the query runtime: {0}")]
     Runtime(std::io::Error),
+    /// The engine named cannot be used by this build (a Ballista engine without the `ballista` feature).
+    #[error(transparent)]
+    BadEngine(#[from] BadEngine),
+    /// The SQL engine did not answer (a Ballista scheduler down or unreachable).
+    #[error("the SQL engine {engine} is unavailable: {detail}")]
+    EngineUnavailable {
+        /// The engine, as given.
+        engine: String,
+        /// What went wrong, with its causes.
+        detail: String,
+    },
 }
 
 impl From<DataFusionError> for QueryError {
@@ -132,8 +151,11 @@ impl QueryError {
                     | DataFusionError::ParquetError(_)
                     | DataFusionError::Internal(_)
             ),
-            QueryError::Store(_) | QueryError::Runtime(_) => false,
+            QueryError::Store(_)
+            | QueryError::Runtime(_)
+            | QueryError::EngineUnavailable { .. } => false,
             QueryError::NotReadOnly { .. }
+            | QueryError::BadEngine(_)
             | QueryError::MemoryLimit { .. }
             | QueryError::Timeout { .. }
             | QueryError::OutputInRun { .. }
@@ -200,6 +222,10 @@ pub struct TableSummary {
 /// [`QuerySettings`].
 pub struct RunQuery {
     ctx: SessionContext,
+    /// The same tables on a Ballista cluster, when the settings name one: statements are planned and
+    /// checked by `ctx`, then run there.
+    #[cfg(feature = "ballista")]
+    remote: Option<ballista::Remote>,
     runtime: tokio::runtime::Runtime,
     tables: Vec<(String, usize)>,
     settings: QuerySettings,
@@ -219,6 +245,7 @@ impl RunQuery {
 
     /// Registers the tables of `run`; every statement runs under `settings`.
     pub fn open_with(run: &RunDir, settings: QuerySettings) -> Result<Self, QueryError> {
+        settings.engine.check_built()?;
         let partitions = settings.partitions.max(1);
         let runtime = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(
@@ -278,8 +305,37 @@ impl RunQuery {
             tables.push((t.name.clone(), t.files.len()));
         }
         tables.sort();
+        #[cfg(feature = "ballista")]
+        let remote = if settings.engine.is_local() {
+            None
+        } else {
+            let mut remote_tables = Vec::with_capacity(tables.len());
+            for (name, _) in &tables {
+                let schema = runtime
+                    .block_on(ctx.table_provider(name.as_str()))?
+                    .schema();
+                let dir = found.iter().find(|t| &t.name == name).cloned();
+                remote_tables.push((name.clone(), schema, dir));
+            }
+            // The cluster's session gets a memory pool of its own (used by the standalone executor)
+            // and no published-files cache: its tables list their files explicitly.
+            let remote_env = RuntimeEnvBuilder::new()
+                .with_memory_pool(Arc::new(FairSpillPool::new(
+                    usize::try_from(limit).unwrap_or(usize::MAX),
+                )))
+                .with_max_temp_directory_size(limit.saturating_mul(settings::SPILL_FACTOR))
+                .build_arc()?;
+            Some(runtime.block_on(ballista::Remote::open(
+                &settings.engine,
+                partitions,
+                remote_env,
+                remote_tables,
+            ))?)
+        };
         Ok(RunQuery {
             ctx,
+            #[cfg(feature = "ballista")]
+            remote,
             runtime,
             tables,
             settings,
@@ -299,6 +355,15 @@ impl RunQuery {
         let run = async {
             let plan = self.ctx.state().create_logical_plan(sql).await?;
             read_only::check_plan(&plan)?;
+            #[cfg(feature = "ballista")]
+            if let Some(remote) = &self.remote {
+                let schema: SchemaRef = Arc::new(plan.schema().as_arrow().clone());
+                let batches = remote
+                    .collect(sql, &schema)
+                    .await
+                    .map_err(|e| QueryError::from_execution(e, limit))?;
+                return Ok(QueryResult { schema, batches });
+            }
             let df = self.ctx.execute_logical_plan(plan).await?;
             let schema: SchemaRef = Arc::new(df.schema().as_arrow().clone());
             let batches = df

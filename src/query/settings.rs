@@ -1,8 +1,10 @@
-//! How much a query may use: the memory pool, the time limit and the number of partitions.
+//! How much a query may use and where it runs: the memory pool, the time limit, the number of
+//! partitions and the engine.
 //!
 //! **Owns:** [`QuerySettings`] and its defaults, the size syntax of memory limits ([`MemoryLimit`]:
-//! `4GiB`, `512M`, `25%` of the machine's memory), reading the `ANNOTRACE_SQL_MEMORY_LIMIT` and
-//! `ANNOTRACE_SQL_TIMEOUT` variables through a lookup the caller passes ([`QuerySettings::from_lookup`]),
+//! `4GiB`, `512M`, `25%` of the machine's memory), reading the `ANNOTRACE_SQL_MEMORY_LIMIT`,
+//! `ANNOTRACE_SQL_TIMEOUT` and `ANNOTRACE_SQL_ENGINE` variables through a lookup the caller passes
+//! ([`QuerySettings::from_lookup`]),
 //! and the machine's memory ([`machine_memory`]). **Does not:** build the DataFusion session (that is
 //! [`RunQuery`](super::RunQuery)) nor enforce anything itself.
 //!
@@ -13,6 +15,8 @@
 use std::fmt;
 use std::str::FromStr;
 use std::time::Duration;
+
+use super::engine::{ENV_ENGINE, Engine};
 
 /// Environment variable for the memory limit of every query (CLI and pipeline stages).
 pub const ENV_MEMORY_LIMIT: &str = "ANNOTRACE_SQL_MEMORY_LIMIT";
@@ -180,6 +184,9 @@ pub struct QuerySettings {
     /// float aggregates (`avg`, `stddev`, `sum` of floats) and the row order of queries without
     /// `ORDER BY` reproducible. More partitions are faster on large runs but not reproducible.
     pub partitions: usize,
+    /// Where the query runs: this process (the default) or a Ballista cluster (`query::engine`). On a
+    /// cluster the memory limit is the executors' own; the time limit still applies here.
+    pub engine: Engine,
 }
 
 impl Default for QuerySettings {
@@ -188,12 +195,13 @@ impl Default for QuerySettings {
             memory_limit: MemoryLimit::default(),
             timeout: None,
             partitions: 1,
+            engine: Engine::Local,
         }
     }
 }
 
 impl QuerySettings {
-    /// The defaults, overridden by [`ENV_MEMORY_LIMIT`] and [`ENV_TIMEOUT`] as `lookup` returns them
+    /// The defaults, overridden by [`ENV_MEMORY_LIMIT`], [`ENV_TIMEOUT`] and [`ENV_ENGINE`] as `lookup` returns them
     /// (`|k| std::env::var(k).ok()` in the program; a map in tests). Empty values count as unset.
     pub fn from_lookup(lookup: &dyn Fn(&str) -> Option<String>) -> Result<Self, BadSetting> {
         let mut s = QuerySettings::default();
@@ -208,6 +216,12 @@ impl QuerySettings {
                 name: ENV_TIMEOUT.into(),
                 message,
             })?);
+        }
+        if let Some(v) = lookup(ENV_ENGINE).filter(|v| !v.trim().is_empty()) {
+            s.engine = v.parse().map_err(|e: super::BadEngine| BadSetting {
+                name: ENV_ENGINE.into(),
+                message: e.to_string(),
+            })?;
         }
         Ok(s)
     }
@@ -281,6 +295,11 @@ mod tests {
         assert_eq!(e.name, ENV_MEMORY_LIMIT);
         let e = QuerySettings::from_lookup(&env(&[(ENV_TIMEOUT, "-3")])).unwrap_err();
         assert_eq!(e.name, ENV_TIMEOUT);
+        let s =
+            QuerySettings::from_lookup(&env(&[(ENV_ENGINE, "ballista://sched:50051")])).unwrap();
+        assert_eq!(s.engine.to_string(), "ballista://sched:50051");
+        let e = QuerySettings::from_lookup(&env(&[(ENV_ENGINE, "spark://x")])).unwrap_err();
+        assert_eq!(e.name, ENV_ENGINE);
         // Explicit limits win over the variables.
         let s = QuerySettings::resolve(
             Some(MemoryLimit::Bytes(1 << 20)),

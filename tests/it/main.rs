@@ -4,6 +4,7 @@ mod common;
 
 mod annotate;
 mod anywhere;
+mod ballista;
 mod bench;
 mod benchmark;
 mod ensemble;

@@ -7,7 +7,8 @@
 //!
 //! The query only reads (`COPY`, `INSERT`, `CREATE`… are refused) and runs on one partition, so the same
 //! run gives the same table bytes; `memory_limit` and `timeout_s` bound it (`StageLimits`, shared with
-//! `export`).
+//! `export`). `engine` runs it on a Ballista cluster instead of in-process (feature `ballista`; without
+//! the parameter, `ANNOTRACE_SQL_ENGINE` decides for the whole run, for `export` stages too).
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
@@ -19,7 +20,7 @@ use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
 use crate::query::settings::timeout_from_secs;
-use crate::query::{MemoryLimit, QueryError, QuerySettings, RunQuery};
+use crate::query::{BadEngine, Engine, MemoryLimit, QueryError, QuerySettings, RunQuery};
 use crate::trace::schema::TRACE_TABLES;
 
 /// The `sql` stage kind.
@@ -55,6 +56,12 @@ pub struct SqlParams {
     /// ANNOTRACE_SQL_TIMEOUT, else no limit).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub timeout_s: Option<f64>,
+    /// Where the query runs: "local", "ballista://HOST:PORT" (a Ballista cluster whose executors see the
+    /// run folder at the same path) or "ballista:standalone" (default: ANNOTRACE_SQL_ENGINE, else local).
+    /// Ballista needs a build with `--features ballista`; the result table is the same, though rows of a
+    /// query without ORDER BY may come in another order.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub engine: Option<String>,
 }
 
 /// The limits an `sql` or `export` stage's parameters set for its query; what they leave out comes from
@@ -63,6 +70,7 @@ pub struct SqlParams {
 pub(crate) struct StageLimits {
     memory_limit: Option<MemoryLimit>,
     timeout: Option<std::time::Duration>,
+    engine: Option<Engine>,
 }
 
 impl StageLimits {
@@ -81,16 +89,33 @@ impl StageLimits {
                 .map(timeout_from_secs)
                 .transpose()
                 .map_err(|e| BuildError::param("timeout_s", e))?,
+            engine: None,
         })
+    }
+
+    /// The same limits, with the query run on `engine` (the `engine` parameter: parsed, and refused
+    /// when this build cannot reach it).
+    pub(crate) fn with_engine(mut self, engine: Option<&str>) -> Result<Self, BuildError> {
+        if let Some(e) = engine {
+            let engine: Engine = e
+                .parse()
+                .map_err(|e: BadEngine| BuildError::param("engine", e.to_string()))?;
+            engine
+                .check_built()
+                .map_err(|e| BuildError::param("engine", e.to_string()))?;
+            self.engine = Some(engine);
+        }
+        Ok(self)
     }
 
     /// The settings to open the run with: these limits over the variables, on one partition.
     pub(crate) fn settings(&self) -> Result<QuerySettings, QueryError> {
-        Ok(QuerySettings::resolve(
-            self.memory_limit,
-            self.timeout,
-            &|k| std::env::var(k).ok(),
-        )?)
+        let mut settings =
+            QuerySettings::resolve(self.memory_limit, self.timeout, &|k| std::env::var(k).ok())?;
+        if let Some(engine) = &self.engine {
+            settings.engine = engine.clone();
+        }
+        Ok(settings)
     }
 }
 
@@ -125,7 +150,8 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
             format!("{output:?} is a reserved table name"),
         ));
     }
-    let limits = StageLimits::from_params(p.memory_limit.as_deref(), p.timeout_s)?;
+    let limits = StageLimits::from_params(p.memory_limit.as_deref(), p.timeout_s)?
+        .with_engine(p.engine.as_deref())?;
     Ok(Box::new(SqlStage {
         source,
         output,
