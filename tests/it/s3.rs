@@ -291,7 +291,10 @@ fn sharded_processes_on_s3_one_killed_then_finalize_equal_the_local_single_run()
 
     // The reading commands that take one trace, and `verify`, work on the remote run through a pulled
     // copy: `show` and `export` print what they print for the local single run.
-    let first = t.csv("runs/single", "SELECT trace_id FROM traces ORDER BY trace_id LIMIT 1");
+    let first = t.csv(
+        "runs/single",
+        "SELECT trace_id FROM traces ORDER BY trace_id LIMIT 1",
+    );
     let id = first.lines().nth(1).expect("a trace").trim().to_string();
     for cmd in ["show", "export"] {
         let remote = cli.run(&[cmd, "--run", url, "--trace", &id]);
