@@ -147,6 +147,20 @@ fn bind<'e>(
     Ok(Bound { slots, extra })
 }
 
+/// The optional `threshold_strength` argument of `NEAR` and `NEARBY_AT` (`what`): above 0, default 0.1.
+fn threshold_strength(f: &str, what: &str, arg: Option<&Expr>) -> Result<f64, RewardError> {
+    let Some(x) = arg else { return Ok(0.1) };
+    let v = number(f, "threshold_strength", x)?;
+    if v <= 0.0 {
+        return Err(err(
+            ErrorCategory::ArgumentType,
+            x.pos,
+            format!("{what}: `threshold_strength` must be > 0, found {v}"),
+        ));
+    }
+    Ok(v)
+}
+
 fn number(fname: &str, what: &str, e: &Expr) -> Result<f64, RewardError> {
     match e.kind {
         ExprKind::Num(n) => Ok(n),
@@ -358,20 +372,7 @@ impl Checker<'_> {
     /// `NEAR(a, b, threshold_strength)`: two objects, the threshold above 0 (default 0.1).
     fn near(&self, f: &str, pos: Pos, args: &[Arg]) -> Result<NodeKind, RewardError> {
         let b = bind(f, pos, args, &["a", "b", "threshold_strength"], 2, false)?;
-        let threshold = match b.get(2) {
-            Some(x) => {
-                let v = number(f, "threshold_strength", x)?;
-                if v <= 0.0 {
-                    return Err(err(
-                        ErrorCategory::ArgumentType,
-                        x.pos,
-                        format!("NEAR: `threshold_strength` must be > 0, found {v}"),
-                    ));
-                }
-                v
-            }
-            None => 0.1,
-        };
+        let threshold = threshold_strength(f, "NEAR", b.get(2))?;
         Ok(NodeKind::Near {
             a: self.obj(f, b.slots[0].expect("required"))?,
             b: self.obj(f, b.slots[1].expect("required"))?,
@@ -401,20 +402,7 @@ impl Checker<'_> {
                 format!("NEARBY_AT: `t` is normalised time in [0, 1], found {t}"),
             ));
         }
-        let threshold = match b.get(4) {
-            Some(x) => {
-                let v = number(f, "threshold_strength", x)?;
-                if v <= 0.0 {
-                    return Err(err(
-                        ErrorCategory::ArgumentType,
-                        x.pos,
-                        format!("NEARBY_AT: `threshold_strength` must be > 0, found {v}"),
-                    ));
-                }
-                v
-            }
-            None => 0.1,
-        };
+        let threshold = threshold_strength(f, "NEARBY_AT", b.get(4))?;
         Ok(NodeKind::NearbyAt {
             obj: self.obj(f, b.slots[0].expect("required"))?,
             x,
