@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
-use super::report::{MAX_DIFFERING, browse, chromium, differing_share, test_result};
+use super::report::{MAX_DIFFERING, browse, browse_test_sequence, chromium, differing_share};
 use crate::common::{TestRun, repo};
 
 /// A run with 4 billiards traces summarised in two conditions, and its survey under `site/`.
@@ -112,8 +112,7 @@ fn participants_rate_animations_and_their_csv_becomes_the_ratings_table() {
             .unwrap()
             .display()
     );
-    let dom = browse(&bin, &url, &["--dump-dom"], &t.path("profile-dom"));
-    let r = test_result(&dom);
+    let r = browse_test_sequence(&bin, &url, &t.path("profile-dom"));
     // The page's shuffle is the library's, item for item.
     let seed: u64 = d["seed"].as_str().unwrap().parse().unwrap();
     let conditions: Vec<String> = d["conditions"]
