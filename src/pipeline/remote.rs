@@ -548,22 +548,7 @@ impl Remote<'_> {
                 .load_manifest()?
                 .map(|(m, _, _)| m)
                 .unwrap_or_default();
-            let mut pending = Vec::new();
-            for &e in earlier {
-                let input = self.id(e);
-                let fp = &self.built().fingerprints[input];
-                match manifest.stages.get(input) {
-                    Some(r) if &r.fingerprint == fp && r.status == StageStatus::Finished => {}
-                    Some(r) if &r.fingerprint == fp && r.status == StageStatus::Failed => {
-                        return Err(RunError::InputFailed {
-                            id: def.id.clone(),
-                            input: input.to_string(),
-                            error: r.error.clone().unwrap_or_default(),
-                        });
-                    }
-                    _ => pending.push(e),
-                }
-            }
+            let pending = s.unfinished(&manifest, i, earlier)?;
             if pending.is_empty() {
                 return Ok(());
             }

@@ -805,6 +805,33 @@ impl Session<'_> {
         }
     }
 
+    /// Which of the stages `earlier` (indices) a sharded stage `i` still waits for in `manifest`:
+    /// those not finished under their current fingerprint; an error when one of them failed.
+    pub(super) fn unfinished(
+        &self,
+        manifest: &Manifest,
+        i: usize,
+        earlier: &[usize],
+    ) -> Result<Vec<usize>, RunError> {
+        let mut pending = Vec::new();
+        for &e in earlier {
+            let input = &self.spec.stages[e].id;
+            let fp = &self.built.fingerprints[input];
+            match manifest.stages.get(input) {
+                Some(r) if &r.fingerprint == fp && r.status == StageStatus::Finished => {}
+                Some(r) if &r.fingerprint == fp && r.status == StageStatus::Failed => {
+                    return Err(RunError::InputFailed {
+                        id: self.spec.stages[i].id.clone(),
+                        input: input.clone(),
+                        error: r.error.clone().unwrap_or_default(),
+                    });
+                }
+                _ => pending.push(e),
+            }
+        }
+        Ok(pending)
+    }
+
     /// The report of a stage found finished in the manifest (`record`), announced as cached.
     pub(super) fn cached(&self, id: &str, record: &StageRecord) -> StageReport {
         self.progress.stage_cached(id);

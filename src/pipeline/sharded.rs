@@ -491,36 +491,16 @@ impl Shard<'_> {
         self.waiting_noted.set(false);
         loop {
             let manifest = Manifest::load(s.run)?.unwrap_or_default();
-            let mut pending = Vec::new();
-            for input in earlier.iter().map(|&e| &s.spec.stages[e].id) {
-                let fp = &s.built.fingerprints[input];
-                match manifest.stages.get(input) {
-                    Some(r) if &r.fingerprint == fp && r.status == StageStatus::Finished => {}
-                    Some(r) if &r.fingerprint == fp && r.status == StageStatus::Failed => {
-                        return Err(RunError::InputFailed {
-                            id: def.id.clone(),
-                            input: input.clone(),
-                            error: r.error.clone().unwrap_or_default(),
-                        });
-                    }
-                    _ => pending.push(input.clone()),
-                }
-            }
+            let pending = s.unfinished(&manifest, i, earlier)?;
             if pending.is_empty() {
                 return Ok(());
             }
             let mut progressed = false;
-            for input in &pending {
-                let j = s
-                    .spec
-                    .stages
-                    .iter()
-                    .position(|d| &d.id == input)
-                    .expect("inputs are stages");
+            for &j in &pending {
                 if !s.built.stages[j].shardable() {
                     continue;
                 }
-                let fp = &s.built.fingerprints[input];
+                let fp = &s.built.fingerprints[&s.spec.stages[j].id];
                 progressed |= self.take_over(j, fp)?;
                 progressed |= self.try_commit(j, fp)?.is_some();
             }
@@ -531,7 +511,11 @@ impl Shard<'_> {
                         &format!(
                             "shard {}: waiting for stage(s) {} (other shards' slices)",
                             self.slice,
-                            pending.join(", ")
+                            pending
+                                .iter()
+                                .map(|&j| s.spec.stages[j].id.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
                         ),
                     );
                 }
