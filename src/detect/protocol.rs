@@ -70,11 +70,19 @@ fn shell_of(trace: &Trace) -> Trace {
     }
 }
 
-/// The request that loads `trace` under `key`: by columns for a pooltool trace whose objects carry no
-/// unknown fields (floats travel as raw little-endian doubles, 5-8× cheaper for the worker than parsing
-/// them from JSON), else the paper's JSON.
-pub(crate) fn load_request(key: &str, trace: &Trace) -> (u8, Vec<u8>) {
-    match pool_columns(key, trace) {
+/// Runs of fewer detectors than this get a pooltool trace with its steps' objects built when first
+/// read; larger runs get it built whole at load. The whole built-in library (12 detectors) reads
+/// about two thirds of a trace's ball states (`ball slowing` walks every rolling stretch), and
+/// building those a step at a time costs more than building all of them in one pass; a reward
+/// program's 1–4 detectors read far fewer (`docs/performance.md`, "Lazy step objects").
+pub(crate) const LAZY_BELOW: usize = 6;
+
+/// The request that loads `trace` under `key` for a run of `detectors` detectors: by columns for a
+/// pooltool trace whose objects carry no unknown fields (floats travel as raw little-endian doubles,
+/// 5-8× cheaper for the worker than parsing them from JSON; objects built lazily when `detectors` is
+/// under [`LAZY_BELOW`]), else the paper's JSON.
+pub(crate) fn load_request(key: &str, trace: &Trace, detectors: usize) -> (u8, Vec<u8>) {
+    match pool_columns(key, trace, detectors < LAZY_BELOW) {
         Some(body) => (LOAD_POOL, body),
         None => (LOAD_TRACE, load_body(key, trace)),
     }
@@ -89,11 +97,14 @@ pub(crate) fn load_request(key: &str, trace: &Trace) -> (u8, Vec<u8>) {
 ///
 /// The header holds the trace without timesteps; each step's index; a table of the distinct (ball id,
 /// kind, state code, state); the counts of states (`states`) and of `u32` words in the rows block
-/// (`words`); each step's extra fields, when any step has some. The block holds, in order:
+/// (`words`); each step's extra fields, when any step has some; `lazy`: whether the worker builds a
+/// step's objects only when code first reads them. The block holds, in order:
 /// - every step's `t` (f64);
-/// - each state's position, velocity and angular velocity (three 3-vectors of f64), then each state's
-///   radius (f64);
+/// - each state's position, velocity and angular velocity (three 3-vectors of f64), then each
+///   state's radius (f64);
 /// - each state's row in the (id, kind, state) table (u32);
+/// - each step's first new state, and after the last step the number of states (u32): the states new
+///   in a run of steps are one contiguous range, which the worker builds together;
 /// - each step's *start* (u32): where its row begins in the rows block;
 /// - the rows (u32): a row is the object count `n` followed by the state of each of the `n` slots. A
 ///   step whose objects all repeat the previous step's shares that step's row (the same start), so the
@@ -101,7 +112,7 @@ pub(crate) fn load_request(key: &str, trace: &Trace) -> (u8, Vec<u8>) {
 ///   share a row one tuple, as it always has (`load_pool_columns` in worker.py).
 ///
 /// All numbers are little-endian.
-fn pool_columns(key: &str, trace: &Trace) -> Option<Vec<u8>> {
+fn pool_columns(key: &str, trace: &Trace, lazy: bool) -> Option<Vec<u8>> {
     use crate::trace::{Body, Env, PoolBall};
     if trace.env != Env::Pooltool {
         return None;
@@ -131,6 +142,7 @@ fn pool_columns(key: &str, trace: &Trace) -> Option<Vec<u8>> {
     let mut protos: Vec<(&str, &str, i64, &str)> = Vec::new();
     let mut proto: Vec<u32> = Vec::new();
     let mut starts: Vec<u32> = Vec::with_capacity(trace.timesteps.len());
+    let mut firsts: Vec<u32> = Vec::with_capacity(trace.timesteps.len() + 1);
     let mut rows: Vec<u32> = Vec::new();
     // Each slot's current state.
     let mut current: Vec<u32> = Vec::new();
@@ -142,6 +154,7 @@ fn pool_columns(key: &str, trace: &Trace) -> Option<Vec<u8>> {
     let mut last: Vec<Option<usize>> = Vec::new();
     for ts in &trace.timesteps {
         row.clear();
+        firsts.push(u32::try_from(proto.len()).ok()?);
         let all_new = prev.len() != ts.objects.len();
         if all_new {
             current.clear();
@@ -220,13 +233,15 @@ fn pool_columns(key: &str, trace: &Trace) -> Option<Vec<u8>> {
         "protos": protos,
         "states": proto.len(),
         "words": rows.len(),
+        "lazy": lazy,
         "step_extra": step_extra,
     });
     header.push(b',');
     let rest = serde_json::to_vec(&rest).ok()?;
     header.extend_from_slice(&rest[1..]);
     let steps = trace.timesteps.len();
-    let words = proto.len() + starts.len() + rows.len();
+    firsts.push(u32::try_from(proto.len()).ok()?);
+    let words = proto.len() + firsts.len() + starts.len() + rows.len();
     let mut body =
         Vec::with_capacity(4 + header.len() + 8 * steps + vecs.len() + radii.len() + 4 * words);
     body.extend_from_slice(&u32::try_from(header.len()).ok()?.to_le_bytes());
@@ -236,7 +251,7 @@ fn pool_columns(key: &str, trace: &Trace) -> Option<Vec<u8>> {
     }
     body.extend_from_slice(&vecs);
     body.extend_from_slice(&radii);
-    for w in proto.iter().chain(&starts).chain(&rows) {
+    for w in proto.iter().chain(&firsts).chain(&starts).chain(&rows) {
         body.extend_from_slice(&w.to_le_bytes());
     }
     Some(body)
@@ -546,7 +561,7 @@ mod tests {
             &crate::envs::pool::TraceOptions { dt: 0.05 },
         )
         .unwrap();
-        let (kind, body) = load_request("k", &trace);
+        let (kind, body) = load_request("k", &trace, 1);
         assert_eq!(kind, LOAD_POOL);
         let mut frame = vec![kind];
         frame.extend(body);
@@ -564,6 +579,7 @@ objs = steps[k]["objects"]
 r["built"] = [i for i, s in enumerate(steps) if type(s) is not LazyStep]
 r["class"] = type(steps[k]) is FrozenDict and not hasattr(steps[k], "_lazy")
 r["states"] = sum(b is not None for b in builder.balls)
+r["all_states"] = len(builder.balls)
 r["objects"] = len(objs)
 _OUT.write(json.dumps(r).encode())
 "#,
@@ -575,10 +591,9 @@ _OUT.write(json.dumps(r).encode())
         assert_eq!(got["built"], serde_json::json!([m / 2]));
         assert_eq!(got["class"], true, "a built step is a plain FrozenDict");
         assert_eq!(got["objects"], trace.timesteps[m / 2].objects.len());
-        assert_eq!(
-            got["states"], got["objects"],
-            "only that step's ball dicts exist"
-        );
+        // Only the ball dicts of that step's block of steps (and the older states its balls hold).
+        let (states, all) = (got["states"].as_u64(), got["all_states"].as_u64());
+        assert!(states >= got["objects"].as_u64() && states < all, "{got}");
     }
 
     #[test]

@@ -38,6 +38,7 @@ sys.path[:] = [p for p in sys.path if p]
 
 import array
 import ast
+import bisect
 import builtins as _builtins
 import fcntl
 import gc
@@ -489,9 +490,11 @@ class LazyStep(FrozenDict):
                 other._realise()
             return dict.__or__(self, other)
 
-        def __ror__(self, other):
+        def __ror__(self, other):  # dict.__ror__ as CPython has it (PyPy 3.9's dict has none)
             self._realise()
-            return dict.__ror__(self, other)
+            if not isinstance(other, dict):
+                return NotImplemented
+            return dict.__or__(other, self)
 
 
 LazyStep.__name__ = LazyStep.__qualname__ = "FrozenDict"
@@ -510,43 +513,71 @@ _GC_FREEZE = getattr(gc, "freeze", None)
 
 
 _U32 = "I" if array.array("I").itemsize == 4 else "L"
-_VEC9 = struct.Struct("<9d")
-_F64 = struct.Struct("<d")
-
-
+_VEC3 = struct.Struct("<3d")
 class _PoolStates:
     """One pooltool trace's ball states and step rows as `pool_columns` (protocol.rs) sends them.
-    Builds a step's objects when asked, on their own (no step before it needs building): each ball
-    state's read-only dict once, so a ball unchanged between steps is the same dict in both (as in
-    the eager build), and each row's tuple once, so steps that share a row share the tuple. Holds the
-    load frame; never reachable from detector code."""
+    When a step's objects are first read, builds the states new in that step (one contiguous range,
+    in one pass), those new in the steps where its other balls (which have not moved since) took
+    their state, and its tuple. Each state's read-only dict is built once, so a ball unchanged
+    between steps is the same dict in both, and steps that share a row share the tuple, as in the
+    eager build, whichever step is read first. Holds the load frame; never reachable from detector
+    code. Also builds a whole trace in one pass (`_rows(0, n)`) when it is not loaded lazily."""
 
-    __slots__ = ("frame", "vec_at", "rad_at", "protos", "proto", "starts", "rows", "balls", "tuples")
+    __slots__ = ("frame", "at", "radii", "protos", "proto", "firsts", "starts", "rows", "balls",
+                 "built", "tuples")
 
     def objects(self, s):
-        start = self.starts[s]
-        objs = self.tuples.get(start)
+        objs = self.tuples.get(self.starts[s])
         if objs is None:
-            rows = self.rows
-            objs = self.tuples[start] = tuple(map(self.ball, rows[start + 1:start + 1 + rows[start]]))
+            self._rows(s, s + 1)
+            objs = self.tuples[self.starts[s]]
         return objs
 
-    def ball(self, q):
-        b = self.balls[q]
-        if b is None:
-            bid, kind, code, state = self.protos[self.proto[q]]
-            v = _VEC9.unpack_from(self.frame, self.vec_at + 72 * q)
-            b = self.balls[q] = FrozenDict({
-                "kind": kind, "ball_id": bid, "position": v[0:3], "velocity": v[3:6],
-                "angular_velocity": v[6:9], "motion_state_code": code, "motion_state": state,
-                "radius": _F64.unpack_from(self.frame, self.rad_at + 8 * q)[0]})
-        return b
+    def _states(self, s0, s1):
+        """The states new in steps s0..s1 (none of them built yet)."""
+        self.built[s0:s1] = b"\x01" * (s1 - s0)
+        qa, qb = self.firsts[s0], self.firsts[s1]
+        if qa == qb:
+            return
+        vecs = _VEC3.iter_unpack(self.frame[self.at + 72 * qa:self.at + 72 * qb])
+        fd = FrozenDict
+        self.balls[qa:qb] = [
+            fd(kind=kind, ball_id=bid, position=p, velocity=v, angular_velocity=w,
+               motion_state_code=code, motion_state=state, radius=r)
+            for (bid, kind, code, state), p, v, w, r
+            in zip(map(self.protos.__getitem__, self.proto[qa:qb]), vecs, vecs, vecs,
+                   self.radii[qa:qb])]
+
+    def _rows(self, s0, s1):
+        """The object tuples of steps s0..s1."""
+        built = self.built
+        if not any(built[s0:s1]):
+            self._states(s0, s1)
+        else:
+            for s in range(s0, s1):
+                if not built[s]:
+                    self._states(s, s + 1)
+        balls, rows, tuples, starts = self.balls, self.rows, self.tuples, self.starts
+        # States new before s0 are those that balls which did not move hold; every one a row of
+        # these steps holds is in the first row (a slot that changes takes a state new in them).
+        qa = self.firsts[s0]
+        o = starts[s0]
+        for q in rows[o + 1:o + 1 + rows[o]]:
+            if q < qa and balls[q] is None:
+                t = bisect.bisect_right(self.firsts, q) - 1  # the step where state q is new
+                self._states(t, t + 1)
+        get = balls.__getitem__
+        for o in set(starts[s0:s1]):
+            if o not in tuples:
+                tuples[o] = tuple(map(get, rows[o + 1:o + 1 + rows[o]]))
 
 
 def load_pool_columns(frame):
     """Rebuilds a pooltool trace dict, identical to the JSON path's, from its columns (protocol.rs
-    `pool_columns` describes the layout). The steps are LazyStep dicts holding `index` and `t` (and
-    any extra fields): a step's `objects` are built when code first reads them (`_PoolStates`)."""
+    `pool_columns` describes the layout). With `lazy` in the header (the Rust side sends it for
+    runs of a few detectors) the steps are LazyStep dicts holding `index` and `t` (and any extra
+    fields), whose `objects` are built when code first reads them (`_PoolStates`); else every step is
+    built now."""
     (hlen,) = _PACK.unpack(frame[1:5])
     head = json.loads(frame[5:5 + hlen], object_hook=_freeze)
     indices, n_new, n_words = head["index"], head["states"], head["words"]
@@ -557,37 +588,49 @@ def load_pool_columns(frame):
     times.frombytes(view[at:at + 8 * n_steps])
     at += 8 * n_steps
     b = _PoolStates()
-    b.frame = frame
-    b.vec_at = at
-    b.rad_at = at + 72 * n_new
-    at += 80 * n_new
-    ints = array.array(_U32)
-    ints.frombytes(view[at:at + 4 * (n_new + n_steps + n_words)])
+    b.frame = view
+    b.at = at
+    at += 72 * n_new
+    b.radii = array.array("d")
+    b.radii.frombytes(view[at:at + 8 * n_new])
+    at += 8 * n_new
+    ints = array.array(_U32)  # proto, firsts, starts, rows
+    ints.frombytes(view[at:at + 4 * (n_new + (n_steps + 1) + n_steps + n_words)])
     if sys.byteorder != "little":
         times.byteswap()
+        b.radii.byteswap()
         ints.byteswap()
     b.proto = ints[:n_new]
-    b.starts = ints[n_new:n_new + n_steps]
-    b.rows = ints[n_new + n_steps:]
+    b.firsts = ints[n_new:n_new + n_steps + 1]
+    b.starts = ints[n_new + n_steps + 1:n_new + 2 * n_steps + 1]
+    b.rows = ints[n_new + 2 * n_steps + 1:]
     b.protos = head["protos"]
     b.balls = [None] * n_new
+    b.built = bytearray(n_steps)
     b.tuples = {}
-    ls = LazyStep
-    steps = []
-    append = steps.append
-    extras = head.get("step_extra")
-    if extras:
-        for s, (ix, t, extra) in enumerate(zip(indices, times.tolist(), extras)):
-            step = ls(index=ix, t=t)
-            step._lazy = (b, s)
+    extras = head.get("step_extra") or ()
+    if not head.get("lazy"):
+        # Built whole (a run of many detectors reads most of the states: built in one pass, they
+        # cost less than one step at a time).
+        if n_steps:
+            b._rows(0, n_steps)
+        tuples, starts, fd = b.tuples, b.starts, FrozenDict
+        steps = [fd(index=ix, t=t, objects=tuples[starts[s]])
+                 for s, (ix, t) in enumerate(zip(indices, times.tolist()))]
+        for step, extra in zip(steps, extras):
             if extra:
                 _dict_update(step, extra)
-            append(step)
     else:
+        ls = LazyStep
+        steps = []
+        append = steps.append
         for s, (ix, t) in enumerate(zip(indices, times.tolist())):
             step = ls(index=ix, t=t)
             step._lazy = (b, s)
             append(step)
+        for step, extra in zip(steps, extras):
+            if extra:
+                _dict_update(step, extra)
     shell = head["trace"]
     return head["id"], FrozenDict((key, tuple(steps) if key == "timesteps" else v) for key, v in shell.items())
 

@@ -241,12 +241,28 @@ fn traces() -> Vec<Trace> {
     out
 }
 
-/// Each trace's `value` from one detector run alone on fresh workers.
+/// Each trace's `value` from one detector run alone on fresh workers (steps built when read).
 fn values(d: &Detector, traces: &[Trace]) -> Vec<Value> {
-    let batch = pool().run(std::slice::from_ref(d), traces);
-    batch
-        .results
+    values_among(d, 0, traces)
+}
+
+/// Each trace's `value` from a detector run on fresh workers first among `others` more detectors
+/// that read nothing; from `LAZY_BELOW` (6) detectors on, traces arrive built whole.
+fn values_among(d: &Detector, others: usize, traces: &[Trace]) -> Vec<Value> {
+    let mut batch: Vec<Detector> = vec![d.clone()];
+    for i in 0..others {
+        batch.push(Detector::new(
+            Env::Pooltool,
+            "other",
+            &format!("def find_pattern(trace):\n    return []  # {i}\n"),
+            "test",
+        ));
+    }
+    let n = batch.len();
+    let run = pool().run(&batch, traces);
+    run.results
         .iter()
+        .step_by(n)
         .zip(traces)
         .map(|(r, t)| {
             assert_eq!(r.status, CandidateStatus::Ok, "{} on {}: {r:?}", d.label, t.trace_id);
@@ -265,8 +281,11 @@ fn every_read_of_a_fresh_step_answers_as_the_built_step() {
         &det("paths", &format!("{PATHS_DETECTOR}\nEAGER = dict\n")),
         &traces,
     );
-    for ((l, e), t) in lazy.iter().zip(&eager).zip(&traces) {
+    // And traces built whole at load, for a run of many detectors.
+    let whole = values_among(&det("paths", PATHS_DETECTOR), 5, &traces);
+    for (((l, e), w), t) in lazy.iter().zip(&eager).zip(&whole).zip(&traces) {
         assert!(l == e, "trace {}: lazy and eager reads differ", t.trace_id);
+        assert!(l == w, "trace {}: lazy and whole reads differ", t.trace_id);
     }
     // The trace read whole at the end is the paper's dict, key order and all: the objects after
     // `t`, extra step fields after the objects (as the JSON path and Rust write them).
@@ -318,6 +337,7 @@ fn an_unchanged_ball_is_the_same_dict_in_consecutive_steps_whatever_was_read_fir
         &traces,
     );
     assert_eq!(got, eager);
+    assert_eq!(got, values_among(&det("sharing", SHARING_DETECTOR), 5, &traces));
     for (g, t) in got.iter().zip(&traces) {
         let want: Vec<Value> = t
             .timesteps
