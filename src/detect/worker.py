@@ -15,9 +15,9 @@
 #   b"T" {"id", "trace", "steps"}   load a trace (the paper's dict, its timesteps apart, an object repeated
 #                                   from the step before as 0), cached read-only        -> {"ok": true, "build": s}
 #   b"P" <u32 n><header JSON, n bytes><LE block>  load a pooltool trace sent by columns (the same
-#                                   dict, built from columns: floats travel as raw doubles; each step's
-#                                   `objects` built only when code first reads them, see LazyStep)
-#                                                                                       -> {"ok": true, "build": s}
+#                                   dict, built from columns: floats travel as raw doubles; with
+#                                   "lazy" in the header each step's `objects` are built only when
+#                                   code first reads them, see LazyStep)             -> {"ok": true, "build": s}
 #   b"E" {"ids": [...]}             evict traces                                        -> no reply
 #   b"C" {"id", "code"}             check and compile a detector                        -> {"ok": true} | error
 #   b"R" {"detectors", "trace", "flush"}  run each detector in turn -> one reply per detector: patterns | error

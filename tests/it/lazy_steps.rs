@@ -215,7 +215,8 @@ fn traces() -> Vec<Trace> {
     extra.trace_id = "extra".into();
     for (k, ts) in extra.timesteps.iter_mut().enumerate() {
         if k % 3 == 1 {
-            ts.extra.insert("note".into(), serde_json::json!({"k": [k, "x"]}));
+            ts.extra
+                .insert("note".into(), serde_json::json!({"k": [k, "x"]}));
             ts.extra.insert("z".into(), serde_json::json!(k));
         }
     }
@@ -265,7 +266,13 @@ fn values_among(d: &Detector, others: usize, traces: &[Trace]) -> Vec<Value> {
         .step_by(n)
         .zip(traces)
         .map(|(r, t)| {
-            assert_eq!(r.status, CandidateStatus::Ok, "{} on {}: {r:?}", d.label, t.trace_id);
+            assert_eq!(
+                r.status,
+                CandidateStatus::Ok,
+                "{} on {}: {r:?}",
+                d.label,
+                t.trace_id
+            );
             r.patterns[0].parameters["value"].clone()
         })
         .collect()
@@ -274,7 +281,10 @@ fn values_among(d: &Detector, others: usize, traces: &[Trace]) -> Vec<Value> {
 #[test]
 fn every_read_of_a_fresh_step_answers_as_the_built_step() {
     let traces = traces();
-    assert!(traces[0].timesteps.len() > 2 * 40, "enough steps for every path");
+    assert!(
+        traces[0].timesteps.len() > 2 * 40,
+        "enough steps for every path"
+    );
     let lazy = values(&det("paths", PATHS_DETECTOR), &traces);
     // The same code naming `dict` itself gets every step built before its call: the eager build.
     let eager = values(
@@ -307,9 +317,19 @@ fn every_read_of_a_fresh_step_answers_as_the_built_step() {
     }
     // Mutation is refused with the message it always had, fresh or built.
     let first = serde_json::to_string(&lazy[0][0]).unwrap();
-    assert!(first.contains(r#"["TypeError","the trace is read-only; copy it first (dict(x), list(x))"]"#));
-    assert!(first.contains(r#"["TypeError","unsupported operand type(s) for +: 'FrozenDict' and 'int'"]"#));
-    assert!(first.contains(r#"["TypeError","'<' not supported between instances of 'FrozenDict' and 'FrozenDict'"]"#));
+    assert!(
+        first.contains(
+            r#"["TypeError","the trace is read-only; copy it first (dict(x), list(x))"]"#
+        )
+    );
+    assert!(
+        first.contains(
+            r#"["TypeError","unsupported operand type(s) for +: 'FrozenDict' and 'int'"]"#
+        )
+    );
+    assert!(first.contains(
+        r#"["TypeError","'<' not supported between instances of 'FrozenDict' and 'FrozenDict'"]"#
+    ));
     assert!(first.contains(r#"["TypeError","unhashable type: 'FrozenDict'"]"#));
     assert!(first.contains(r#"["KeyError","'nope'"]"#));
 }
@@ -337,7 +357,10 @@ fn an_unchanged_ball_is_the_same_dict_in_consecutive_steps_whatever_was_read_fir
         &traces,
     );
     assert_eq!(got, eager);
-    assert_eq!(got, values_among(&det("sharing", SHARING_DETECTOR), 5, &traces));
+    assert_eq!(
+        got,
+        values_among(&det("sharing", SHARING_DETECTOR), 5, &traces)
+    );
     for (g, t) in got.iter().zip(&traces) {
         let want: Vec<Value> = t
             .timesteps
@@ -356,11 +379,17 @@ fn an_unchanged_ball_is_the_same_dict_in_consecutive_steps_whatever_was_read_fir
             .as_array()
             .unwrap()
             .iter()
-            .filter(|p| p[1].as_array().is_some_and(|s| s.contains(&Value::Bool(true))))
+            .filter(|p| {
+                p[1].as_array()
+                    .is_some_and(|s| s.contains(&Value::Bool(true)))
+            })
             .count();
         assert!(shared_slots > 0, "some balls repeat in {}", t.trace_id);
     }
-    assert!(repeats(&got[0]) >= 2, "the resting steps share their objects");
+    assert!(
+        repeats(&got[0]) >= 2,
+        "the resting steps share their objects"
+    );
 }
 
 fn repeats(v: &Value) -> usize {
