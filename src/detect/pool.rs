@@ -383,7 +383,7 @@ impl WorkerPool {
         stats: &mut RunStats,
     ) -> Result<(), DetectorError> {
         let worker = self.ensure_worker(slot, stats)?;
-        if let Err(e) = self.load(worker, job.key, job.trace, stats) {
+        if let Err(e) = self.load(worker, job.key, job.trace, job.detectors.len(), stats) {
             *slot = None;
             return Err(e);
         }
@@ -559,6 +559,7 @@ impl WorkerPool {
         worker: &mut Worker,
         key: &str,
         trace: &Trace,
+        detectors: usize,
         stats: &mut RunStats,
     ) -> Result<(), DetectorError> {
         if worker.traces.iter().any(|k| k == key) {
@@ -567,7 +568,7 @@ impl WorkerPool {
             return Ok(());
         }
         let c0 = Instant::now();
-        let (kind, body) = protocol::load_request(key, trace);
+        let (kind, body) = protocol::load_request(key, trace, detectors);
         stats.convert_s += c0.elapsed().as_secs_f64();
         let l0 = Instant::now();
         let wait = self

@@ -70,11 +70,19 @@ fn shell_of(trace: &Trace) -> Trace {
     }
 }
 
-/// The request that loads `trace` under `key`: by columns for a pooltool trace whose objects carry no
-/// unknown fields (floats travel as raw little-endian doubles, 5-8× cheaper for the worker than parsing
-/// them from JSON), else the paper's JSON.
-pub(crate) fn load_request(key: &str, trace: &Trace) -> (u8, Vec<u8>) {
-    match pool_columns(key, trace) {
+/// Runs of fewer detectors than this get a pooltool trace with its steps' objects built when first
+/// read; larger runs get it built whole at load. The whole built-in library (12 detectors) reads
+/// about two thirds of a trace's ball states (`ball slowing` walks every rolling stretch), and
+/// building those a step at a time costs more than building all of them in one pass; a reward
+/// program's 1–4 detectors read far fewer (`docs/performance.md`, "Lazy step objects").
+pub(crate) const LAZY_BELOW: usize = 6;
+
+/// The request that loads `trace` under `key` for a run of `detectors` detectors: by columns for a
+/// pooltool trace whose objects carry no unknown fields (floats travel as raw little-endian doubles,
+/// 5-8× cheaper for the worker than parsing them from JSON; objects built lazily when `detectors` is
+/// under [`LAZY_BELOW`]), else the paper's JSON.
+pub(crate) fn load_request(key: &str, trace: &Trace, detectors: usize) -> (u8, Vec<u8>) {
+    match pool_columns(key, trace, detectors < LAZY_BELOW) {
         Some(body) => (LOAD_POOL, body),
         None => (LOAD_TRACE, load_body(key, trace)),
     }
@@ -85,12 +93,26 @@ pub(crate) fn load_request(key: &str, trace: &Trace) -> (u8, Vec<u8>) {
 /// Most balls sit still most of the time (about 70 % of the object rows of a random 9-ball shot repeat
 /// the row before), and the trace the worker builds is read-only, so a ball whose state is bit-for-bit
 /// the previous step's (same slot, id, kind, state and ten floats) is not sent again: the worker reuses
-/// that step's dict. The header holds the trace without timesteps; each step's index, object count and
-/// the slots whose objects are new (`null` when all are, as in the first step); a table of the distinct
-/// (ball id, kind, state code, state) and each new object's row in it. The block holds every step's
-/// `t`, then position, velocity and angular velocity of each new object (three 3-vectors), then their
-/// radii.
-fn pool_columns(key: &str, trace: &Trace) -> Option<Vec<u8>> {
+/// that step's dict. Every new object gets the next number (its *state*, counted from 0 in step order).
+///
+/// The header holds the trace without timesteps; each step's index; a table of the distinct (ball id,
+/// kind, state code, state); the counts of states (`states`) and of `u32` words in the rows block
+/// (`words`); each step's extra fields, when any step has some; `lazy`: whether the worker builds a
+/// step's objects only when code first reads them. The block holds, in order:
+/// - every step's `t` (f64);
+/// - each state's position, velocity and angular velocity (three 3-vectors of f64), then each
+///   state's radius (f64);
+/// - each state's row in the (id, kind, state) table (u32);
+/// - each step's first new state, and after the last step the number of states (u32): the states new
+///   in a run of steps are one contiguous range, which the worker builds together;
+/// - each step's *start* (u32): where its row begins in the rows block;
+/// - the rows (u32): a row is the object count `n` followed by the state of each of the `n` slots. A
+///   step whose objects all repeat the previous step's shares that step's row (the same start), so the
+///   worker can build any step's objects on its own, without the steps before it, and give steps that
+///   share a row one tuple, as it always has (`load_pool_columns` in worker.py).
+///
+/// All numbers are little-endian.
+fn pool_columns(key: &str, trace: &Trace, lazy: bool) -> Option<Vec<u8>> {
     use crate::trace::{Body, Env, PoolBall};
     if trace.env != Env::Pooltool {
         return None;
@@ -119,7 +141,11 @@ fn pool_columns(key: &str, trace: &Trace) -> Option<Vec<u8>> {
     }
     let mut protos: Vec<(&str, &str, i64, &str)> = Vec::new();
     let mut proto: Vec<u32> = Vec::new();
-    let mut changed: Vec<Option<Vec<u32>>> = Vec::with_capacity(trace.timesteps.len());
+    let mut starts: Vec<u32> = Vec::with_capacity(trace.timesteps.len());
+    let mut firsts: Vec<u32> = Vec::with_capacity(trace.timesteps.len() + 1);
+    let mut rows: Vec<u32> = Vec::new();
+    // Each slot's current state.
+    let mut current: Vec<u32> = Vec::new();
     let mut vecs: Vec<u8> = Vec::new();
     let mut radii: Vec<u8> = Vec::new();
     let mut prev: Vec<&PoolBall> = Vec::new();
@@ -128,8 +154,13 @@ fn pool_columns(key: &str, trace: &Trace) -> Option<Vec<u8>> {
     let mut last: Vec<Option<usize>> = Vec::new();
     for ts in &trace.timesteps {
         row.clear();
+        firsts.push(u32::try_from(proto.len()).ok()?);
         let all_new = prev.len() != ts.objects.len();
-        let mut slots = Vec::new();
+        if all_new {
+            current.clear();
+            current.resize(ts.objects.len(), 0);
+        }
+        let mut changed = false;
         for (j, o) in ts.objects.iter().enumerate() {
             let Body::Pool(b) = &o.body else { return None };
             if !o.extra.is_empty() {
@@ -139,7 +170,8 @@ fn pool_columns(key: &str, trace: &Trace) -> Option<Vec<u8>> {
             if !all_new && same(prev[j], b) {
                 continue;
             }
-            slots.push(u32::try_from(j).ok()?);
+            changed = true;
+            current[j] = u32::try_from(proto.len()).ok()?;
             let key = (
                 b.ball_id.as_str(),
                 b.kind.as_str(),
@@ -173,7 +205,16 @@ fn pool_columns(key: &str, trace: &Trace) -> Option<Vec<u8>> {
             }
             radii.extend_from_slice(&b.radius.to_le_bytes());
         }
-        changed.push((!all_new).then_some(slots));
+        // A new row when any slot changed (or the count did, or this is the first step), else the
+        // previous step's.
+        if all_new || changed || starts.is_empty() {
+            let start = u32::try_from(rows.len()).ok()?;
+            rows.push(u32::try_from(current.len()).ok()?);
+            rows.extend_from_slice(&current);
+            starts.push(start);
+        } else {
+            starts.push(*starts.last().expect("not the first step"));
+        }
         std::mem::swap(&mut prev, &mut row);
     }
     let step_extra: Option<Vec<&crate::trace::JsonMap>> = trace
@@ -189,17 +230,20 @@ fn pool_columns(key: &str, trace: &Trace) -> Option<Vec<u8>> {
     crate::trace::json::write_trace(&mut header, &shell, false).ok()?;
     let rest = serde_json::json!({
         "index": trace.timesteps.iter().map(|t| t.index).collect::<Vec<_>>(),
-        "n": trace.timesteps.iter().map(|t| t.objects.len()).collect::<Vec<_>>(),
-        "changed": changed,
         "protos": protos,
-        "proto": proto,
+        "states": proto.len(),
+        "words": rows.len(),
+        "lazy": lazy,
         "step_extra": step_extra,
     });
     header.push(b',');
     let rest = serde_json::to_vec(&rest).ok()?;
     header.extend_from_slice(&rest[1..]);
     let steps = trace.timesteps.len();
-    let mut body = Vec::with_capacity(4 + header.len() + 8 * steps + vecs.len() + radii.len());
+    firsts.push(u32::try_from(proto.len()).ok()?);
+    let words = proto.len() + firsts.len() + starts.len() + rows.len();
+    let mut body =
+        Vec::with_capacity(4 + header.len() + 8 * steps + vecs.len() + radii.len() + 4 * words);
     body.extend_from_slice(&u32::try_from(header.len()).ok()?.to_le_bytes());
     body.extend_from_slice(&header);
     for ts in &trace.timesteps {
@@ -207,6 +251,9 @@ fn pool_columns(key: &str, trace: &Trace) -> Option<Vec<u8>> {
     }
     body.extend_from_slice(&vecs);
     body.extend_from_slice(&radii);
+    for w in proto.iter().chain(&firsts).chain(&starts).chain(&rows) {
+        body.extend_from_slice(&w.to_le_bytes());
+    }
     Some(body)
 }
 
@@ -480,6 +527,117 @@ mod tests {
             DetectorError::Memory { limit_bytes: 7 }
         );
         assert!(parse_reply(b"{", 0).is_err());
+    }
+
+    /// What the worker does with a `P` frame, seen from inside: `load_pool_columns` called directly
+    /// (the worker's code without its last line, `main()`, so it neither locks down nor serves).
+    fn in_worker(frame: &[u8], check: &str) -> serde_json::Value {
+        use std::process::{Command, Stdio};
+        let code = super::super::worker::WORKER_PY
+            .trim_end()
+            .strip_suffix("main()")
+            .expect("worker.py ends by calling main()");
+        let script =
+            format!("{code}\nFRAME = b''.join(iter(lambda: _IN.read(1 << 20), b''))\n{check}\n");
+        let mut child = Command::new("python3")
+            .args(["-s", "-S", "-B", "-c", &script])
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .spawn()
+            .expect("python3 runs");
+        child.stdin.take().unwrap().write_all(frame).unwrap();
+        let out = child.wait_with_output().unwrap();
+        assert!(out.status.success(), "{out:?}");
+        serde_json::from_slice(&out.stdout).unwrap()
+    }
+
+    #[test]
+    fn a_pool_trace_loads_with_no_step_objects_built_and_builds_each_step_alone() {
+        let config = crate::envs::pool::PoolConfig::default_7ft();
+        let trace = crate::envs::pool::dataset_trace(
+            &config,
+            1,
+            0,
+            &crate::envs::pool::TraceOptions { dt: 0.05 },
+        )
+        .unwrap();
+        let (kind, body) = load_request("k", &trace, 1);
+        assert_eq!(kind, LOAD_POOL);
+        let mut frame = vec![kind];
+        frame.extend(body);
+        let got = in_worker(
+            &frame,
+            r#"
+key, trace = load_pool_columns(FRAME)
+steps = trace["timesteps"]
+r = {"steps": len(steps), "lazy": sum(type(s) is LazyStep for s in steps)}
+k = len(steps) // 2
+steps[k]["t"], steps[k].get("index"), len(steps[k]), "objects" in steps[k], steps[k].get("zz")
+r["after_other_reads"] = type(steps[k]).__name__ + "/" + str(type(steps[k]) is LazyStep)
+builder = steps[k]._lazy[0]
+objs = steps[k]["objects"]
+r["built"] = [i for i, s in enumerate(steps) if type(s) is not LazyStep]
+r["class"] = type(steps[k]) is FrozenDict and not hasattr(steps[k], "_lazy")
+r["states"] = sum(b is not None for b in builder.balls)
+r["all_states"] = len(builder.balls)
+r["objects"] = len(objs)
+_OUT.write(json.dumps(r).encode())
+"#,
+        );
+        let m = trace.timesteps.len();
+        assert_eq!(got["steps"], m);
+        assert_eq!(got["lazy"], m, "no step is built by loading");
+        assert_eq!(got["after_other_reads"], "FrozenDict/True");
+        assert_eq!(got["built"], serde_json::json!([m / 2]));
+        assert_eq!(got["class"], true, "a built step is a plain FrozenDict");
+        assert_eq!(got["objects"], trace.timesteps[m / 2].objects.len());
+        // Only the ball dicts of that step's block of steps (and the older states its balls hold).
+        let (states, all) = (got["states"].as_u64(), got["all_states"].as_u64());
+        assert!(states >= got["objects"].as_u64() && states < all, "{got}");
+    }
+
+    #[test]
+    fn only_code_that_can_hold_the_dict_type_gets_every_step_built() {
+        let flagged = [
+            "dict.get(s, 'objects')",
+            "g = dict",
+            "f([dict])",
+            "isinstance = f\nisinstance(s, dict)",
+            "def f(isinstance):\n    return isinstance(s, dict)",
+            "f(isinstance=g)\nisinstance(s, dict)",
+            "for isinstance in x:\n    pass\nisinstance(s, dict)",
+            "match s:\n    case isinstance:\n        isinstance(s, dict)",
+            "match s:\n    case dict():\n        pass",
+            "isinstance(s, *[dict])",
+            "isinstance(s, [dict])",
+            "dict = 1",
+        ];
+        let not_flagged = [
+            "dict(s)",
+            "dict(**s, a=1)",
+            "isinstance(s, dict)",
+            "isinstance(s, (list, dict))",
+            "issubclass(c, dict)",
+            "s.dict",
+            "'dict.get(s)'",
+            "\"isinstance = 1\"\nisinstance(s, dict)",
+            "lambda dict: dict(s)",
+        ];
+        let cases: Vec<&str> = flagged.iter().chain(&not_flagged).copied().collect();
+        let got = in_worker(
+            b"",
+            &format!(
+                "_OUT.write(json.dumps([reads_dict_unbound(ast.parse(c)) for c in {}]).encode())",
+                serde_json::to_string(&cases).unwrap()
+            ),
+        );
+        let want = flagged
+            .iter()
+            .map(|_| true)
+            .chain(not_flagged.iter().map(|_| false));
+        for ((c, g), w) in cases.iter().zip(got.as_array().unwrap()).zip(want) {
+            assert_eq!(g, &serde_json::Value::Bool(w), "{c}");
+        }
     }
 
     #[test]

@@ -14,8 +14,10 @@
 # message type and the rest JSON. One reply per request, in order.
 #   b"T" {"id", "trace", "steps"}   load a trace (the paper's dict, its timesteps apart, an object repeated
 #                                   from the step before as 0), cached read-only        -> {"ok": true, "build": s}
-#   b"P" <u32 n><header JSON, n bytes><f64 LE block>  load a pooltool trace sent by columns (the same
-#                                   dict, built from columns: floats travel as raw doubles) -> {"ok": true, "build": s}
+#   b"P" <u32 n><header JSON, n bytes><LE block>  load a pooltool trace sent by columns (the same
+#                                   dict, built from columns: floats travel as raw doubles; with
+#                                   "lazy" in the header each step's `objects` are built only when
+#                                   code first reads them, see LazyStep)             -> {"ok": true, "build": s}
 #   b"E" {"ids": [...]}             evict traces                                        -> no reply
 #   b"C" {"id", "code"}             check and compile a detector                        -> {"ok": true} | error
 #   b"R" {"detectors", "trace", "flush"}  run each detector in turn -> one reply per detector: patterns | error
@@ -36,6 +38,7 @@ sys.path[:] = [p for p in sys.path if p]
 
 import array
 import ast
+import bisect
 import builtins as _builtins
 import fcntl
 import gc
@@ -311,6 +314,39 @@ def check_source(tree):
     return has_find_pattern
 
 
+_TYPE_TESTS = ("isinstance", "issubclass")
+
+
+def reads_dict_unbound(tree):
+    """Whether the code may hold the type `dict` itself, and so call its methods unbound on a step
+    (`dict.get(step, "objects")`, `dict.keys(step)`): those read a dict's storage directly and would
+    not see a LazyStep's objects. The name `dict` is the only way to the type (`type`, `__class__`,
+    `getattr` and `vars` are refused), so this is true unless every use of the name is a call
+    (`dict(x)`) or the class argument of `isinstance` / `issubclass` (alone or in a tuple) while
+    neither of those names is bound anywhere in the code. Conservative: any other mention counts."""
+    rebound = False
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Constant):
+            continue
+        for field, value in ast.iter_fields(node):
+            if field == "id" and isinstance(node, ast.Name) and isinstance(node.ctx, ast.Load):
+                continue
+            for v in value if isinstance(value, list) else (value,):
+                if isinstance(v, str) and v in _TYPE_TESTS:
+                    rebound = True
+    allowed = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name):
+            if node.func.id == "dict":
+                allowed.add(id(node.func))
+            elif node.func.id in _TYPE_TESTS and not rebound and len(node.args) == 2:
+                cls = node.args[1]
+                for c in cls.elts if isinstance(cls, ast.Tuple) else (cls,):
+                    if isinstance(c, ast.Name) and c.id == "dict":
+                        allowed.add(id(c))
+    return any(isinstance(n, ast.Name) and n.id == "dict" and id(n) not in allowed for n in ast.walk(tree))
+
+
 def _print(*args, sep=" ", end="\n", **_kw):
     _SINK.write(sep.join(str(a) for a in args) + end)
 
@@ -335,12 +371,133 @@ class FrozenDict(dict):
     """A trace dict detectors can read but not change (so one detector cannot corrupt the cached trace
     for the next); `.copy()` and `dict(x)` give ordinary dicts."""
 
-    __slots__ = ()
+    # Set only while a LazyStep's objects are not built (its builder and step position); every other
+    # FrozenDict leaves it empty. The same layout in both classes lets a LazyStep become a FrozenDict.
+    __slots__ = ("_lazy",)
 
     def _read_only(self, *a, **k):
         raise TypeError("the trace is read-only; copy it first (dict(x), list(x))")
 
     __setitem__ = __delitem__ = pop = popitem = clear = update = setdefault = __ior__ = _read_only
+
+
+_dict_get = dict.get
+_dict_len = dict.__len__
+_dict_contains = dict.__contains__
+_dict_set = dict.__setitem__
+_dict_del = dict.__delitem__
+_dict_update = dict.update
+
+
+class LazyStep(FrozenDict):
+    """A pooltool timestep whose `objects` are built when code first reads them (the built-in detectors
+    read the objects of under half the steps; a reward program's few detectors, far fewer).
+
+    Until then the dict holds `index`, `t` and the step's extra fields, and the methods below answer
+    as the full step would: a subscript of "objects" (through `__missing__`), `get("objects")` and
+    every method that shows all keys or values build the objects first, insert them where the eager
+    build puts them (after `t`), and turn the instance into a plain FrozenDict, so from then on every
+    read runs at C speed and the step is exactly the eager build's. `len` and `in` answer without
+    building. Reads of present keys (`step["t"]`) never enter Python code. What this class cannot
+    intercept, dict's methods called unbound on the step (`dict.get(step, "objects")`), cannot be
+    reached by a detector that does not name the type `dict` (see `reads_dict_unbound`), and one
+    that does gets every step built before its call. Its name in error messages is "FrozenDict", as
+    for the eager build."""
+
+    __slots__ = ()
+
+    def _realise(self):
+        builder, s = self._lazy
+        objs = builder.objects(s)
+        if _dict_len(self) == 2:
+            _dict_set(self, "objects", objs)
+        else:  # extra step fields come after `objects`, as in the eager build
+            rest = list(dict.items(self))[2:]
+            for key, _v in rest:
+                _dict_del(self, key)
+            _dict_set(self, "objects", objs)
+            for key, v in rest:
+                _dict_set(self, key, v)
+        del self._lazy
+        self.__class__ = FrozenDict
+        return objs
+
+    def __missing__(self, key):
+        if key == "objects":
+            return self._realise()
+        raise KeyError(key)
+
+    def get(self, key, default=None, /):
+        if key == "objects":
+            return self._realise()
+        return _dict_get(self, key, default)
+
+    def __contains__(self, key):
+        return key == "objects" or _dict_contains(self, key)
+
+    def __len__(self):
+        return _dict_len(self) + 1
+
+    def keys(self, *a, **k):
+        self._realise()
+        return dict.keys(self, *a, **k)
+
+    def values(self, *a, **k):
+        self._realise()
+        return dict.values(self, *a, **k)
+
+    def items(self, *a, **k):
+        self._realise()
+        return dict.items(self, *a, **k)
+
+    def copy(self, *a, **k):
+        self._realise()
+        return dict.copy(self, *a, **k)
+
+    @classmethod
+    def fromkeys(cls, *a, **k):
+        return FrozenDict.fromkeys(*a, **k)
+
+    def __iter__(self):
+        self._realise()
+        return dict.__iter__(self)
+
+    def __reversed__(self):
+        self._realise()
+        return dict.__reversed__(self)
+
+    def __repr__(self):
+        self._realise()
+        return dict.__repr__(self)
+
+    # dict's comparison reads both operands' storage: build the other operand's objects too.
+    def __eq__(self, other):
+        self._realise()
+        if type(other) is LazyStep:
+            other._realise()
+        return dict.__eq__(self, other)
+
+    def __ne__(self, other):
+        self._realise()
+        if type(other) is LazyStep:
+            other._realise()
+        return dict.__ne__(self, other)
+
+    if hasattr(dict, "__or__"):  # Python 3.9+
+        def __or__(self, other):
+            self._realise()
+            if type(other) is LazyStep:
+                other._realise()
+            return dict.__or__(self, other)
+
+        def __ror__(self, other):  # dict.__ror__ as CPython has it (PyPy 3.9's dict has none)
+            self._realise()
+            if not isinstance(other, dict):
+                return NotImplemented
+            return dict.__or__(other, self)
+
+
+LazyStep.__name__ = LazyStep.__qualname__ = "FrozenDict"
 
 
 def _freeze(d):
@@ -355,56 +512,134 @@ DETECTORS = {}
 _GC_FREEZE = getattr(gc, "freeze", None)
 
 
+_U32 = "I" if array.array("I").itemsize == 4 else "L"
+_VEC3 = struct.Struct("<3d")
+class _PoolStates:
+    """One pooltool trace's ball states and step rows as `pool_columns` (protocol.rs) sends them.
+    When a step's objects are first read, builds the states new in that step (one contiguous range,
+    in one pass), those new in the steps where its other balls (which have not moved since) took
+    their state, and its tuple. Each state's read-only dict is built once, so a ball unchanged
+    between steps is the same dict in both, and steps that share a row share the tuple, as in the
+    eager build, whichever step is read first. Holds the load frame; never reachable from detector
+    code. Also builds a whole trace in one pass (`_rows(0, n)`) when it is not loaded lazily."""
+
+    __slots__ = ("frame", "at", "radii", "protos", "proto", "firsts", "starts", "rows", "balls",
+                 "built", "tuples")
+
+    def objects(self, s):
+        objs = self.tuples.get(self.starts[s])
+        if objs is None:
+            self._rows(s, s + 1)
+            objs = self.tuples[self.starts[s]]
+        return objs
+
+    def _states(self, s0, s1):
+        """The states new in steps s0..s1 (none of them built yet)."""
+        self.built[s0:s1] = b"\x01" * (s1 - s0)
+        qa, qb = self.firsts[s0], self.firsts[s1]
+        if qa == qb:
+            return
+        vecs = _VEC3.iter_unpack(self.frame[self.at + 72 * qa:self.at + 72 * qb])
+        fd = FrozenDict
+        self.balls[qa:qb] = [
+            fd(kind=kind, ball_id=bid, position=p, velocity=v, angular_velocity=w,
+               motion_state_code=code, motion_state=state, radius=r)
+            for (bid, kind, code, state), p, v, w, r
+            in zip(map(self.protos.__getitem__, self.proto[qa:qb]), vecs, vecs, vecs,
+                   self.radii[qa:qb])]
+
+    def _rows(self, s0, s1):
+        """The object tuples of steps s0..s1."""
+        built = self.built
+        if not any(built[s0:s1]):
+            self._states(s0, s1)
+        else:
+            for s in range(s0, s1):
+                if not built[s]:
+                    self._states(s, s + 1)
+        balls, rows, tuples, starts = self.balls, self.rows, self.tuples, self.starts
+        # States new before s0 are those that balls which did not move hold; every one a row of
+        # these steps holds is in the first row (a slot that changes takes a state new in them).
+        qa = self.firsts[s0]
+        o = starts[s0]
+        for q in rows[o + 1:o + 1 + rows[o]]:
+            if q < qa and balls[q] is None:
+                t = bisect.bisect_right(self.firsts, q) - 1  # the step where state q is new
+                self._states(t, t + 1)
+        get = balls.__getitem__
+        for o in set(starts[s0:s1]):
+            if o not in tuples:
+                tuples[o] = tuple(map(get, rows[o + 1:o + 1 + rows[o]]))
+
+
 def load_pool_columns(frame):
     """Rebuilds a pooltool trace dict, identical to the JSON path's, from its columns (protocol.rs
-    `pool_columns` describes the layout). Only the objects that changed since the previous step are
-    built, all at once; a step reuses the previous step's (read-only) dicts in the other slots. The
-    3-vectors come out of the block as tuples in C (`struct.iter_unpack`)."""
+    `pool_columns` describes the layout). With `lazy` in the header (the Rust side sends it for
+    runs of a few detectors) the steps are LazyStep dicts holding `index` and `t` (and any extra
+    fields), whose `objects` are built when code first reads them (`_PoolStates`); else every step is
+    built now."""
     (hlen,) = _PACK.unpack(frame[1:5])
     head = json.loads(frame[5:5 + hlen], object_hook=_freeze)
-    counts, indices, changed, proto = head["n"], head["index"], head["changed"], head["proto"]
-    n_steps, n_new = len(counts), len(proto)
+    indices, n_new, n_words = head["index"], head["states"], head["words"]
+    n_steps = len(indices)
     view = memoryview(frame)
     at = 5 + hlen
     times = array.array("d")
     times.frombytes(view[at:at + 8 * n_steps])
     at += 8 * n_steps
-    vecs = struct.iter_unpack("<3d", view[at:at + 72 * n_new])
+    b = _PoolStates()
+    b.frame = view
+    b.at = at
     at += 72 * n_new
-    radii = array.array("d")
-    radii.frombytes(view[at:at + 8 * n_new])
+    b.radii = array.array("d")
+    b.radii.frombytes(view[at:at + 8 * n_new])
+    at += 8 * n_new
+    ints = array.array(_U32)  # proto, firsts, starts, rows
+    ints.frombytes(view[at:at + 4 * (n_new + (n_steps + 1) + n_steps + n_words)])
     if sys.byteorder != "little":
         times.byteswap()
-        radii.byteswap()
-    fd = FrozenDict
-    new = [fd({"kind": kind, "ball_id": bid, "position": p, "velocity": v, "angular_velocity": w,
-               "motion_state_code": code, "motion_state": state, "radius": r})
-           for (bid, kind, code, state), p, v, w, r
-           in zip(map(head["protos"].__getitem__, proto), vecs, vecs, vecs, radii.tolist())]
-    extras = head.get("step_extra")
-    steps = []
-    prev = ()
-    q = 0
-    for s, (n, ix, t, slots) in enumerate(zip(counts, indices, times.tolist(), changed)):
-        if slots is None:
-            objs = tuple(new[q:q + n])
-            q += n
-        elif slots:
-            row = list(prev)
-            for j in slots:
-                row[j] = new[q]
-                q += 1
-            objs = tuple(row)
-        else:
-            objs = prev
-        d = {"index": ix, "t": t, "objects": objs}
-        if extras and extras[s]:
-            for key, v in extras[s].items():
-                d[key] = v
-        steps.append(fd(d))
-        prev = objs
+        b.radii.byteswap()
+        ints.byteswap()
+    b.proto = ints[:n_new]
+    b.firsts = ints[n_new:n_new + n_steps + 1]
+    b.starts = ints[n_new + n_steps + 1:n_new + 2 * n_steps + 1]
+    b.rows = ints[n_new + 2 * n_steps + 1:]
+    b.protos = head["protos"]
+    b.balls = [None] * n_new
+    b.built = bytearray(n_steps)
+    b.tuples = {}
+    extras = head.get("step_extra") or ()
+    if not head.get("lazy"):
+        # Built whole (a run of many detectors reads most of the states: built in one pass, they
+        # cost less than one step at a time).
+        if n_steps:
+            b._rows(0, n_steps)
+        tuples, starts, fd = b.tuples, b.starts, FrozenDict
+        steps = [fd(index=ix, t=t, objects=tuples[starts[s]])
+                 for s, (ix, t) in enumerate(zip(indices, times.tolist()))]
+        for step, extra in zip(steps, extras):
+            if extra:
+                _dict_update(step, extra)
+    else:
+        ls = LazyStep
+        steps = []
+        append = steps.append
+        for s, (ix, t) in enumerate(zip(indices, times.tolist())):
+            step = ls(index=ix, t=t)
+            step._lazy = (b, s)
+            append(step)
+        for step, extra in zip(steps, extras):
+            if extra:
+                _dict_update(step, extra)
     shell = head["trace"]
-    return head["id"], fd((key, tuple(steps) if key == "timesteps" else v) for key, v in shell.items())
+    return head["id"], FrozenDict((key, tuple(steps) if key == "timesteps" else v) for key, v in shell.items())
+
+
+def realise_all(trace):
+    """Builds the objects of every step of a trace that are not built yet."""
+    for step in _dict_get(trace, "timesteps", ()):
+        if type(step) is LazyStep:
+            step._realise()
 
 
 def load_steps(frame):
@@ -504,7 +739,9 @@ def compile_detector(msg):
     fn = ns.get("find_pattern")
     if not callable(fn):
         return _error("no_find_pattern", "the code defines no function `find_pattern(trace)`")
-    DETECTORS[msg["id"]] = fn
+    # Without the Python layer the code can reach anything: it gets every step built, as when it
+    # may call dict's methods unbound.
+    DETECTORS[msg["id"]] = (fn, not PYTHON_GUARD or reads_dict_unbound(tree))
     return {"ok": True}
 
 
@@ -517,10 +754,13 @@ def _not_json(o):
 
 
 def run_detector(detector_id, trace_key):
-    fn = DETECTORS.get(detector_id)
+    detector = DETECTORS.get(detector_id)
     trace = TRACES.get(trace_key)
-    if fn is None or trace is None:
+    if detector is None or trace is None:
         return None, _error("internal", "detector or trace not loaded")
+    fn, unbound = detector
+    if unbound:
+        realise_all(trace)  # before the timer: the eager build's cost is the load's, not the call's
     _SINK.take()
     w0 = time.perf_counter()
     c0 = time.process_time()

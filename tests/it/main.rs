@@ -13,6 +13,7 @@ mod exit_codes;
 mod export;
 mod import;
 mod iphyre;
+mod lazy_steps;
 mod libraries;
 mod llm;
 mod llm_time;
