@@ -17,6 +17,7 @@ pub mod frames;
 pub mod json;
 mod model;
 pub mod schema;
+mod short_str;
 pub mod view;
 
 pub use batch::{TraceBatchBuilder, TraceBatches, TraceMeta, TraceRows, decode_trace};
@@ -26,3 +27,4 @@ pub use model::{
     Body, Event, IphyreObject, JsonMap, Object, Outcome, PhyreObject, PoolBall, Timestep, Trace,
     json_map,
 };
+pub use short_str::ShortStr;
