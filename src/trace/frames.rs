@@ -205,6 +205,48 @@ impl PoolFrames {
     }
 }
 
+impl PoolFrames {
+    /// The paper-layout objects of frame rows `range` (one timestep): what [`Frames::body`] gives
+    /// row by row, with the columns sliced once (the per-sample trace of an optimisation chain is
+    /// built here, one object per ball per step).
+    fn objects(&self, range: std::ops::Range<usize>, s: &PoolStrings) -> Vec<Object> {
+        let rows = &self.rows;
+        let obj = &rows.obj[range.clone()];
+        let n = obj.len();
+        let (x, y, z) = (
+            &rows.x[range.clone()],
+            &rows.y[range.clone()],
+            &self.z[range.clone()],
+        );
+        let [vx, vy, vz] = self.v.each_ref().map(|c| &c[range.clone()]);
+        let [wx, wy, wz] = self.w.each_ref().map(|c| &c[range.clone()]);
+        let code = &self.code[range.clone()];
+        let mut out = Vec::with_capacity(n);
+        for k in 0..n {
+            let o = obj[k] as usize;
+            let c = code[k];
+            out.push(Object {
+                body: Body::Pool(PoolBall {
+                    kind: s.kind.clone(),
+                    ball_id: s.ids[o].clone(),
+                    position: [x[k], y[k], z[k]],
+                    velocity: [vx[k], vy[k], vz[k]],
+                    angular_velocity: [wx[k], wy[k], wz[k]],
+                    motion_state_code: i64::from(c),
+                    motion_state: usize::try_from(c)
+                        .ok()
+                        .and_then(|c| s.states.get(c))
+                        .cloned()
+                        .unwrap_or_default(),
+                    radius: self.radius[o],
+                }),
+                extra: JsonMap::new(),
+            });
+        }
+        out
+    }
+}
+
 /// PHYRE bodies: `object_index, shape, color, diameter, x, y, angle, vx, vy, angular_velocity,
 /// is_user_input`.
 #[derive(Clone, Debug)]
@@ -517,12 +559,16 @@ impl Frames {
             .zip(&rows.t)
             .zip(&rows.count)
             .map(|((&index, &t), &count)| {
-                let objects = (next..next + count as usize)
-                    .map(|i| Object {
-                        body: self.body(i, &pool),
-                        extra: JsonMap::new(),
-                    })
-                    .collect();
+                let range = next..next + count as usize;
+                let objects = match self {
+                    Frames::Pool(f) => f.objects(range, &pool),
+                    _ => range
+                        .map(|i| Object {
+                            body: self.body(i, &pool),
+                            extra: JsonMap::new(),
+                        })
+                        .collect(),
+                };
                 next += count as usize;
                 Timestep {
                     index,
