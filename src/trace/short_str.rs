@@ -279,7 +279,15 @@ mod tests {
 
     #[test]
     fn short_strings_stay_inline_and_long_ones_round_trip() {
-        for s in ["", "cue", "15", "ball", "stationary", "é9ü", "exactly-23-bytes-long!!"] {
+        for s in [
+            "",
+            "cue",
+            "15",
+            "ball",
+            "stationary",
+            "é9ü",
+            "exactly-23-bytes-long!!",
+        ] {
             let x = ShortStr::from(s);
             assert!(x.is_inline(), "{s:?}");
             assert_eq!(x.as_str(), s);
@@ -317,7 +325,10 @@ mod tests {
         assert!(ShortStr::from("1") < ShortStr::from("15"));
         assert_eq!(hash_of(&x), hash_of("cue"));
         assert_eq!(format!("{x} {x:?}"), "cue \"cue\"");
-        assert_eq!(format!("{:?}", ShortStr::from("a\"b")), format!("{:?}", "a\"b"));
+        assert_eq!(
+            format!("{:?}", ShortStr::from("a\"b")),
+            format!("{:?}", "a\"b")
+        );
         assert_eq!(ShortStr::default(), "");
         assert!(x.eq_ignore_ascii_case("CUE"));
     }
