@@ -312,8 +312,14 @@ mod tests {
     #[test]
     fn compares_hashes_and_prints_as_its_text() {
         let x = ShortStr::from("cue");
-        assert!(x == "cue" && "cue" == x && x == *"cue" && x == "cue".to_string());
-        assert!(x != "9" && "9".to_string() != x);
+        let (text, owned, other) = ("cue", String::from("cue"), String::from("9"));
+        assert!(x == text);
+        assert!(text == x);
+        assert!(x == *text);
+        assert!(x == owned);
+        assert!(owned == x);
+        assert!(x != "9");
+        assert!(other != x);
         // Equal texts compare equal however they were made; a prefix or a longer text does not.
         let long = "x".repeat(30);
         assert_eq!(ShortStr::from(long.clone()), ShortStr::from(long.as_str()));
@@ -322,7 +328,8 @@ mod tests {
         assert_ne!(ShortStr::from("cu"), x);
         assert_ne!(ShortStr::from("cue\0"), x);
         assert_ne!(ShortStr::from(""), ShortStr::from("\0"));
-        assert!(ShortStr::from("1") < ShortStr::from("15"));
+        let (one, fifteen) = (ShortStr::from("1"), ShortStr::from("15"));
+        assert!(one < fifteen);
         assert_eq!(hash_of(&x), hash_of("cue"));
         assert_eq!(format!("{x} {x:?}"), "cue \"cue\"");
         assert_eq!(
