@@ -1,7 +1,7 @@
 //! The trace model and its two representations: the paper's JSON layout and the Arrow tables.
 //!
 //! **Owns:** the types of a trace ([`Trace`], [`Timestep`], [`Object`], [`Event`], [`Outcome`]), the
-//! environments ([`Env`]), the Arrow schemas of the trace tables ([`schema`]), conversion between traces
+//! environments ([`Env`]), the inline strings of its per-ball fields ([`ShortStr`]), the Arrow schemas of the trace tables ([`schema`]), conversion between traces
 //! and record batches ([`batch`]), traces held in columns straight from a simulator ([`frames`]), borrowed column views of them for a
 //! columnar writer ([`view`]) and the
 //! JSON import/export format ([`json`]).
