@@ -64,7 +64,11 @@ fn object(env: Env, k: usize, s: usize) -> Object {
     let body = match env {
         Env::Pooltool => Body::Pool(PoolBall {
             kind: "ball".into(),
-            ball_id: if k == 0 { "cue".into() } else { k.to_string() },
+            ball_id: if k == 0 {
+                "cue".into()
+            } else {
+                k.to_string().into()
+            },
             position: [x, y, 0.028575],
             velocity: [1.0, 0.0, 0.0],
             angular_velocity: [0.0, 35.0, 0.0],

@@ -118,7 +118,7 @@ fn pool_table_png(scene: &TaskScene, sims: &Simulators, size: u32) -> Result<Vec
         .map(|b| Object {
             body: Body::Pool(PoolBall {
                 kind: "ball".into(),
-                ball_id: b.id.clone(),
+                ball_id: b.id.as_str().into(),
                 position: [b.x, b.y, r],
                 velocity: [0.0; 3],
                 angular_velocity: [0.0; 3],

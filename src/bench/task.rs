@@ -305,7 +305,7 @@ pub fn evolved_table(sims: &Simulators, before: &Scene, trace: &Trace) -> Scene 
             cue_down = false;
         }
         balls.push(SceneBall {
-            id: b.ball_id.clone(),
+            id: b.ball_id.to_string(),
             x: b.position[0].clamp(r, w - r),
             y: b.position[1].clamp(r, l - r),
         });

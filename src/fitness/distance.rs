@@ -409,7 +409,7 @@ mod tests {
         for ts in &mut b.timesteps {
             for o in &mut ts.objects {
                 if let crate::trace::Body::Pool(p) = &mut o.body {
-                    p.ball_id = format!("other-{}", p.ball_id);
+                    p.ball_id = format!("other-{}", p.ball_id).into();
                 }
             }
         }

@@ -281,7 +281,7 @@ fn pool_scene(trace: &Trace, config: &PoolConfig) -> Result<Scene, String> {
     let (ids, mut poses) = collect(
         trace,
         |b| match b {
-            Body::Pool(b) => Ok(b.ball_id.clone()),
+            Body::Pool(b) => Ok(b.ball_id.to_string()),
             other => Err(wrong_env(other, Env::Pooltool)),
         },
         |i, b| {

@@ -140,7 +140,7 @@ impl<'a> FrameRow<'a> {
     fn of(body: &'a Body) -> Self {
         match body {
             Body::Pool(b) => FrameRow {
-                object_id: b.ball_id.clone(),
+                object_id: b.ball_id.to_string(),
                 x: b.position[0],
                 y: b.position[1],
                 z: Some(b.position[2]),
@@ -914,8 +914,8 @@ impl<'a> FrameCols<'a> {
     fn pool_ball(&self, i: usize) -> Result<PoolBall, DecodeError> {
         let msc = self.msc;
         Ok(PoolBall {
-            kind: self.need_s(&self.kind, "kind", i)?,
-            ball_id: self.oid.value(i).to_string(),
+            kind: self.need_s(&self.kind, "kind", i)?.into(),
+            ball_id: self.oid.value(i).into(),
             position: [
                 self.x.value(i),
                 self.y.value(i),
@@ -933,7 +933,7 @@ impl<'a> FrameCols<'a> {
             ],
             motion_state_code: opt(msc, i, |i| msc.value(i) as i64)
                 .ok_or_else(|| self.null("motion_state_code", i))?,
-            motion_state: self.need_s(&self.ms, "motion_state", i)?,
+            motion_state: self.need_s(&self.ms, "motion_state", i)?.into(),
             radius: self.need_f(self.radius, "radius", i)?,
         })
     }

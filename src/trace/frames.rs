@@ -29,6 +29,7 @@ use super::model::{
     Body, Event, IphyreObject, JsonMap, Object, Outcome, PhyreObject, PoolBall, Timestep, Trace,
 };
 use super::schema::{FRAMES, TIMESTEPS};
+use super::short_str::ShortStr;
 use super::view::{ColumnView, Keys};
 
 /// The rows every environment shares: timesteps, and per frame row the object it belongs to and
@@ -128,6 +129,29 @@ fn per_row<T: Copy>(rows: &Rows, of_object: &[T]) -> Vec<T> {
     rows.obj.iter().map(|&o| of_object[o as usize]).collect()
 }
 
+/// A billiards trace's strings as the paper layout holds them, made once per trace: each ball's
+/// `PoolBall` then copies them (inline, no allocation) instead of building three `String`s.
+#[derive(Default)]
+struct PoolStrings {
+    kind: ShortStr,
+    ids: Vec<ShortStr>,
+    states: Vec<ShortStr>,
+}
+
+impl PoolStrings {
+    /// The strings of `frames` (none for the other environments).
+    fn of(frames: &Frames) -> Self {
+        match frames {
+            Frames::Pool(f) => PoolStrings {
+                kind: ShortStr::from("ball"),
+                ids: f.ids.iter().map(ShortStr::from).collect(),
+                states: f.state_names.iter().map(|&s| ShortStr::from(s)).collect(),
+            },
+            Frames::Phyre(_) | Frames::Iphyre(_) => PoolStrings::default(),
+        }
+    }
+}
+
 /// Billiard balls, pooltool's layout: every column of a `PoolBall`.
 #[derive(Clone, Debug)]
 pub struct PoolFrames {
@@ -179,13 +203,47 @@ impl PoolFrames {
         }
         self.code.push(i32::from(code));
     }
+}
 
-    fn state_name(&self, code: i32) -> &'static str {
-        usize::try_from(code)
-            .ok()
-            .and_then(|c| self.state_names.get(c))
-            .copied()
-            .unwrap_or("")
+impl PoolFrames {
+    /// The paper-layout objects of frame rows `range` (one timestep): what [`Frames::body`] gives
+    /// row by row, with the columns sliced once (the per-sample trace of an optimisation chain is
+    /// built here, one object per ball per step).
+    fn objects(&self, range: std::ops::Range<usize>, s: &PoolStrings) -> Vec<Object> {
+        let rows = &self.rows;
+        let obj = &rows.obj[range.clone()];
+        let n = obj.len();
+        let (x, y, z) = (
+            &rows.x[range.clone()],
+            &rows.y[range.clone()],
+            &self.z[range.clone()],
+        );
+        let [vx, vy, vz] = self.v.each_ref().map(|c| &c[range.clone()]);
+        let [wx, wy, wz] = self.w.each_ref().map(|c| &c[range.clone()]);
+        let code = &self.code[range.clone()];
+        let mut out = Vec::with_capacity(n);
+        for k in 0..n {
+            let o = obj[k] as usize;
+            let c = code[k];
+            out.push(Object {
+                body: Body::Pool(PoolBall {
+                    kind: s.kind.clone(),
+                    ball_id: s.ids[o].clone(),
+                    position: [x[k], y[k], z[k]],
+                    velocity: [vx[k], vy[k], vz[k]],
+                    angular_velocity: [wx[k], wy[k], wz[k]],
+                    motion_state_code: i64::from(c),
+                    motion_state: usize::try_from(c)
+                        .ok()
+                        .and_then(|c| s.states.get(c))
+                        .cloned()
+                        .unwrap_or_default(),
+                    radius: self.radius[o],
+                }),
+                extra: JsonMap::new(),
+            });
+        }
+        out
     }
 }
 
@@ -436,19 +494,24 @@ impl Frames {
             .find_map(|(i, (s, k))| bad(i).map(|field| (rows.step[s], k as usize, field)))
     }
 
-    /// The body of frame row `i`, in the paper's layout.
-    fn body(&self, i: usize) -> Body {
+    /// The body of frame row `i`, in the paper's layout. `pool` holds a billiards trace's strings,
+    /// made once per trace ([`PoolStrings`]).
+    fn body(&self, i: usize, pool: &PoolStrings) -> Body {
         let rows = self.rows();
         let o = rows.obj[i] as usize;
         match self {
             Frames::Pool(f) => Body::Pool(PoolBall {
-                kind: "ball".to_string(),
-                ball_id: f.ids[o].clone(),
+                kind: pool.kind.clone(),
+                ball_id: pool.ids[o].clone(),
                 position: [rows.x[i], rows.y[i], f.z[i]],
                 velocity: [f.v[0][i], f.v[1][i], f.v[2][i]],
                 angular_velocity: [f.w[0][i], f.w[1][i], f.w[2][i]],
                 motion_state_code: i64::from(f.code[i]),
-                motion_state: f.state_name(f.code[i]).to_string(),
+                motion_state: usize::try_from(f.code[i])
+                    .ok()
+                    .and_then(|c| pool.states.get(c))
+                    .cloned()
+                    .unwrap_or_default(),
                 radius: f.radius[o],
             }),
             Frames::Phyre(f) => Body::Phyre(PhyreObject {
@@ -489,18 +552,23 @@ impl Frames {
     /// The paper-layout timesteps.
     pub fn timesteps(&self) -> Vec<Timestep> {
         let rows = self.rows();
+        let pool = PoolStrings::of(self);
         let mut next = 0usize;
         rows.step
             .iter()
             .zip(&rows.t)
             .zip(&rows.count)
             .map(|((&index, &t), &count)| {
-                let objects = (next..next + count as usize)
-                    .map(|i| Object {
-                        body: self.body(i),
-                        extra: JsonMap::new(),
-                    })
-                    .collect();
+                let range = next..next + count as usize;
+                let objects = match self {
+                    Frames::Pool(f) => f.objects(range, &pool),
+                    _ => range
+                        .map(|i| Object {
+                            body: self.body(i, &pool),
+                            extra: JsonMap::new(),
+                        })
+                        .collect(),
+                };
                 next += count as usize;
                 Timestep {
                     index,

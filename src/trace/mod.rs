@@ -1,7 +1,7 @@
 //! The trace model and its two representations: the paper's JSON layout and the Arrow tables.
 //!
 //! **Owns:** the types of a trace ([`Trace`], [`Timestep`], [`Object`], [`Event`], [`Outcome`]), the
-//! environments ([`Env`]), the Arrow schemas of the trace tables ([`schema`]), conversion between traces
+//! environments ([`Env`]), the inline strings of its per-ball fields ([`ShortStr`]), the Arrow schemas of the trace tables ([`schema`]), conversion between traces
 //! and record batches ([`batch`]), traces held in columns straight from a simulator ([`frames`]), borrowed column views of them for a
 //! columnar writer ([`view`]) and the
 //! JSON import/export format ([`json`]).
@@ -17,6 +17,7 @@ pub mod frames;
 pub mod json;
 mod model;
 pub mod schema;
+mod short_str;
 pub mod view;
 
 pub use batch::{TraceBatchBuilder, TraceBatches, TraceMeta, TraceRows, decode_trace};
@@ -26,3 +27,4 @@ pub use model::{
     Body, Event, IphyreObject, JsonMap, Object, Outcome, PhyreObject, PoolBall, Timestep, Trace,
     json_map,
 };
+pub use short_str::ShortStr;

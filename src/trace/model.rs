@@ -6,7 +6,7 @@
 
 use serde_json::{Map, Value};
 
-use super::Env;
+use super::{Env, ShortStr};
 
 /// A JSON object that keeps its keys in input order.
 pub type JsonMap = Map<String, Value>;
@@ -73,12 +73,15 @@ pub enum Body {
 }
 
 /// A billiard ball (SI units, table frame: x across, y along the table, z up).
+///
+/// Its three strings are [`ShortStr`]s: a shot's trace has one `PoolBall` per ball per timestep,
+/// and short ids, kinds and motion states then cost no heap allocation.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PoolBall {
     /// Object kind, `"ball"` for balls.
-    pub kind: String,
+    pub kind: ShortStr,
     /// Ball id: `"cue"`, `"1"` … `"15"`.
-    pub ball_id: String,
+    pub ball_id: ShortStr,
     /// Centre position (m).
     pub position: [f64; 3],
     /// Centre velocity (m/s).
@@ -88,7 +91,7 @@ pub struct PoolBall {
     /// pooltool's motion-state integer: 0 stationary, 1 spinning, 2 sliding, 3 rolling, 4 pocketed.
     pub motion_state_code: i64,
     /// The motion state's name (`stationary`, `spinning`, `sliding`, `rolling`, `pocketed`).
-    pub motion_state: String,
+    pub motion_state: ShortStr,
     /// Ball radius (m).
     pub radius: f64,
 }
@@ -224,7 +227,7 @@ impl Body {
     /// The object's id as a string: a ball id, or the decimal object index.
     pub fn object_id(&self) -> String {
         match self {
-            Body::Pool(b) => b.ball_id.clone(),
+            Body::Pool(b) => b.ball_id.to_string(),
             Body::Phyre(o) => o.object_index.to_string(),
             Body::Iphyre(o) => o.index.to_string(),
         }

@@ -392,7 +392,7 @@ mod tests {
                     .map(|(b, s)| Object {
                         body: Body::Pool(PoolBall {
                             kind: "ball".into(),
-                            ball_id: sim.ball_ids[b].clone(),
+                            ball_id: sim.ball_ids[b].as_str().into(),
                             position: s.r,
                             velocity: s.v,
                             angular_velocity: s.w,

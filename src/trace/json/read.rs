@@ -915,13 +915,13 @@ fn parse_object(v: &Value, path: &str, env: Env) -> Result<Object, Fault> {
     let (body, known) = match env {
         Env::Pooltool => {
             let ball = PoolBall {
-                kind: f.str("kind")?,
-                ball_id: f.str("ball_id")?,
+                kind: f.str("kind")?.into(),
+                ball_id: f.str("ball_id")?.into(),
                 position: f.vec3("position")?,
                 velocity: f.vec3("velocity")?,
                 angular_velocity: f.vec3("angular_velocity")?,
                 motion_state_code: f.i64("motion_state_code")?,
-                motion_state: f.str("motion_state")?,
+                motion_state: f.str("motion_state")?.into(),
                 radius: f.f64("radius")?,
             };
             (Body::Pool(ball), POOL_KEYS)
