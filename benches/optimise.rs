@@ -23,14 +23,6 @@ use annotrace::reward::goals::GoalSet;
 use annotrace::reward::verify::Rule;
 use annotrace::reward::{compile, labels_used};
 
-fn add(t: &mut Timings, s: &Timings) {
-    t.samples += s.samples;
-    t.dense_samples += s.dense_samples;
-    t.simulate_s += s.simulate_s;
-    t.annotate_s += s.annotate_s;
-    t.score_s += s.score_s;
-}
-
 fn main() {
     let steps: usize = std::env::var("OPT_BENCH_STEPS")
         .ok()
@@ -100,7 +92,7 @@ fn main() {
         .expect("chains");
         let w = t0.elapsed().as_secs_f64();
         wall += w;
-        add(&mut total, &tm);
+        total.add(&tm);
         let last = rows
             .iter()
             .filter(|r| r.budget == steps)
@@ -151,7 +143,7 @@ fn main() {
                     |_| {},
                 )
                 .expect("chain");
-                add(&mut tm, &s);
+                tm.add(&s);
             }
         } else {
             let (_, s) = run_chains(
@@ -162,7 +154,7 @@ fn main() {
                 |_| {},
             )
             .expect("chains");
-            add(&mut tm, &s);
+            tm.add(&s);
         }
         println!(
             "batching: {} trace(s) per worker call: annotate {:.2} ms per dense sample",

@@ -19,7 +19,8 @@ pub mod scenes;
 
 pub use anneal::{Annealer, Dim, Schedule};
 pub use chains::{
-    Chain, CheckpointRow, GoalTask, RewardKind, Settings, Timings, invalid_action, run_chains,
+    Chain, CheckpointRow, DENSE_LANES, GoalTask, RewardKind, Settings, Timings, invalid_action,
+    run_chains, run_chains_in_lanes,
 };
 pub use problem::{IphyreProblem, PhyreProblem, PoolProblem, Problem, ShotBounds};
 pub use scenes::{Layout, scenes};
