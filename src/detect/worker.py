@@ -500,11 +500,39 @@ class LazyStep(FrozenDict):
 LazyStep.__name__ = LazyStep.__qualname__ = "FrozenDict"
 
 
+def _tuples(v):
+    """A JSON list as a tuple, and every list inside it through lists (dicts inside were frozen by the
+    JSON hook already), so no list of a cached trace can be appended to or changed in place."""
+    if list in map(type, v):
+        return tuple([_tuples(x) if type(x) is list else x for x in v])
+    return tuple(v)
+
+
 def _freeze(d):
     for k, v in d.items():
         if type(v) is list:
-            dict.__setitem__(d, k, tuple(v))
+            dict.__setitem__(d, k, _tuples(v))
     return FrozenDict(d)
+
+
+def _private_copy(v, memo):
+    """A copy of a cached trace's read-only dicts and the tuples holding them, for a detector that may
+    call dict's methods unbound (`dict.update(step, ...)` writes past FrozenDict's refusals): what it
+    changes is its own copy, never the trace the next detector reads. Shared values stay shared in the
+    copy (`memo`, by id), so a ball dict repeated in consecutive steps is still one object; strings,
+    numbers and tuples of them are immutable and are not copied."""
+    t = type(v)
+    if t is FrozenDict or t is tuple:
+        c = memo.get(id(v))
+        if c is None:
+            if t is tuple:
+                items = [_private_copy(x, memo) for x in v]
+                c = v if all(a is b for a, b in zip(items, v)) else tuple(items)
+            else:
+                c = FrozenDict([(k, _private_copy(x, memo)) for k, x in dict.items(v)])
+            memo[id(v)] = c
+        return c
+    return v
 
 
 TRACES = {}
@@ -760,7 +788,11 @@ def run_detector(detector_id, trace_key):
         return None, _error("internal", "detector or trace not loaded")
     fn, unbound = detector
     if unbound:
-        realise_all(trace)  # before the timer: the eager build's cost is the load's, not the call's
+        # Before the timer: the eager build's cost is the load's, not the call's. Such a detector may
+        # hold the type `dict` and call its methods unbound, which FrozenDict cannot refuse: it reads
+        # (and may change) a private copy.
+        realise_all(trace)
+        trace = _private_copy(trace, {})
     _SINK.take()
     w0 = time.perf_counter()
     c0 = time.process_time()

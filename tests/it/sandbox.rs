@@ -336,6 +336,53 @@ fn introspection_escapes_are_refused() {
     );
 }
 
+/// `dict`'s methods called unbound write past FrozenDict's refusals; a detector that can reach the
+/// type reads a private copy, so the detector after it still sees the trace as it was loaded.
+#[test]
+fn unbound_dict_methods_change_only_the_callers_copy() {
+    for code in [
+        "dict.update(trace, {'timesteps': ()})\nreturn [{'bad': 1}] if trace['timesteps'] else []",
+        "dict.clear(trace['timesteps'][0])",
+        "d = dict\nd.pop(trace, 'timesteps')\nd.setdefault(trace, 'timesteps', ())",
+        "for s in trace['timesteps']:\n    dict.update(s, {'index': -5})",
+    ] {
+        let s = contain(&wrap(code), true);
+        assert!(s.iter().all(|s| *s == CandidateStatus::Ok), "{code}: {s:?}");
+    }
+}
+
+/// Lists nested in lists of a trace arrive as tuples too: nothing a detector holds can be changed in
+/// place for the next one.
+#[test]
+fn nested_lists_of_a_trace_are_read_only() {
+    let mut ts = traces();
+    for t in &mut ts {
+        t.extra
+            .insert("nested".into(), serde_json::json!([[1, 2], [[3]]]));
+    }
+    let hostile = det(&wrap("trace['nested'][0].append(9)"));
+    let check = det(r#"
+def find_pattern(trace):
+    n = trace["nested"]
+    if n != ((1, 2), ((3,),)):
+        return [{"label": "probe", "start_timestep": 0, "end_timestep": 0, "parameters": {"seen": repr(n)}}]
+    return []
+"#);
+    let pool = WorkerPool::new(limits(true)).expect("workers start");
+    let batch = pool.run(&[hostile, check], &ts);
+    for r in &batch.results {
+        if r.detector == 0 {
+            assert!(
+                matches!(&r.status, CandidateStatus::Failed(DetectorError::Runtime { message, .. }) if message.contains("AttributeError")),
+                "{r:?}"
+            );
+        } else {
+            assert_eq!(r.status, CandidateStatus::Ok, "{r:?}");
+            assert!(r.patterns.is_empty(), "{:?}", r.patterns);
+        }
+    }
+}
+
 #[test]
 fn environment_variables_hold_no_secrets() {
     assert!(
