@@ -23,6 +23,14 @@ use annotrace::reward::goals::GoalSet;
 use annotrace::reward::verify::Rule;
 use annotrace::reward::{compile, labels_used};
 
+fn add(t: &mut Timings, s: &Timings) {
+    t.samples += s.samples;
+    t.dense_samples += s.dense_samples;
+    t.simulate_s += s.simulate_s;
+    t.annotate_s += s.annotate_s;
+    t.score_s += s.score_s;
+}
+
 fn main() {
     let steps: usize = std::env::var("OPT_BENCH_STEPS")
         .ok()
@@ -92,7 +100,7 @@ fn main() {
         .expect("chains");
         let w = t0.elapsed().as_secs_f64();
         wall += w;
-        total.add(&tm);
+        add(&mut total, &tm);
         let last = rows
             .iter()
             .filter(|r| r.budget == steps)
@@ -143,7 +151,7 @@ fn main() {
                     |_| {},
                 )
                 .expect("chain");
-                tm.add(&s);
+                add(&mut tm, &s);
             }
         } else {
             let (_, s) = run_chains(
@@ -154,7 +162,7 @@ fn main() {
                 |_| {},
             )
             .expect("chains");
-            tm.add(&s);
+            add(&mut tm, &s);
         }
         println!(
             "batching: {} trace(s) per worker call: annotate {:.2} ms per dense sample",

@@ -1,9 +1,7 @@
 //! A batch of annealing chains (goal × scene × seed × reward type × budget) advanced in lockstep over
 //! any [`Problem`]: each step simulates every live chain's proposal in parallel, annotates the dense
 //! chains' traces in one call to the detector runtime per goal (only the detectors the goal's program
-//! uses), scores them, and verifies every sample with the goal's hand-written rule. Dense chains run
-//! in two such lanes side by side ([`run_chains_in_lanes`]), so the detector workers and the
-//! simulation threads both have work while the other lane is in the other phase.
+//! uses), scores them, and verifies every sample with the goal's hand-written rule.
 //!
 //! Each chain has its own budget (its schedule cools over exactly that many samples) and stops when it
 //! is spent. Its best-so-far sample is recorded when it ends and, with `checkpoint`, every `checkpoint`
@@ -148,21 +146,6 @@ pub struct Timings {
     pub invalid_actions: u64,
 }
 
-impl Timings {
-    /// Adds `other`'s counts and seconds to these.
-    pub fn add(&mut self, other: &Timings) {
-        self.samples += other.samples;
-        self.dense_samples += other.dense_samples;
-        self.simulate_s += other.simulate_s;
-        self.annotate_s += other.annotate_s;
-        self.score_s += other.score_s;
-        self.failed_simulations += other.failed_simulations;
-        self.failed_calls += other.failed_calls;
-        self.program_errors += other.program_errors;
-        self.invalid_actions += other.invalid_actions;
-    }
-}
-
 /// Whether the environment refused the action of `trace` (PHYRE's `INVALID_INPUT`): the trace holds
 /// the scene without the user's ball, so no reward program or rule is asked about it.
 pub fn invalid_action(trace: &Trace) -> bool {
@@ -177,45 +160,11 @@ struct State {
 
 /// Runs every chain for its budget; `on_step` is called after each step with the number of steps
 /// done (the largest budget in all). Needs `pool` when any chain is dense.
-///
-/// With dense chains the chains are advanced in two lanes ([`run_chains_in_lanes`] with
-/// [`DENSE_LANES`]), so that one lane simulates and scores while the other's traces are in the
-/// detector workers; without them in one.
 pub fn run_chains<P: Problem>(
     settings: &Settings<P>,
     goals: &[GoalTask],
     chains: &[Chain<P::Scene>],
     pool: Option<&WorkerPool>,
-    on_step: impl FnMut(usize),
-) -> Result<(Vec<CheckpointRow>, Timings), OptimiseError> {
-    let dense = chains.iter().any(|c| c.kind == RewardKind::Dense);
-    let lanes = if dense && pool.is_some() {
-        DENSE_LANES
-    } else {
-        1
-    };
-    run_chains_in_lanes(settings, goals, chains, pool, lanes, on_step)
-}
-
-/// How many lanes [`run_chains`] advances dense chains in: two, so that the detector workers (busy
-/// with one lane's traces) and the simulation and scoring threads (busy with the other's) both have
-/// work on two cores.
-pub const DENSE_LANES: usize = 2;
-
-/// [`run_chains`] with the chains split into `lanes` lanes (at least 1), each advanced in lockstep on
-/// its own thread, independently of the others: lane `l` holds every `lanes`-th dense chain and
-/// every `lanes`-th sparse chain, so the lanes carry the same mix. The lanes share `pool` (a worker
-/// serves one lane's batch at a time) and rayon's threads. A chain's samples depend only on its own
-/// seed and scores, and its traces keep their names (`opt-<chain>-<step>`), so the rows are the same
-/// whatever the number of lanes; they are returned in the order one lane gives (by step, then by
-/// chain). The timings are summed over the lanes, so with several lanes the phases' seconds overlap
-/// and add up to more than the wall time.
-pub fn run_chains_in_lanes<P: Problem>(
-    settings: &Settings<P>,
-    goals: &[GoalTask],
-    chains: &[Chain<P::Scene>],
-    pool: Option<&WorkerPool>,
-    lanes: usize,
     mut on_step: impl FnMut(usize),
 ) -> Result<(Vec<CheckpointRow>, Timings), OptimiseError> {
     if chains.iter().any(|c| c.goal >= goals.len()) {
@@ -228,75 +177,7 @@ pub fn run_chains_in_lanes<P: Problem>(
             "dense chains need a detector worker pool",
         ));
     }
-    let lanes = lanes.clamp(1, chains.len().max(1));
-    let mut members: Vec<Vec<usize>> = vec![Vec::new(); lanes];
-    let (mut dense, mut sparse) = (0usize, 0usize);
-    for (i, c) in chains.iter().enumerate() {
-        let k = match c.kind {
-            RewardKind::Dense => &mut dense,
-            RewardKind::Sparse => &mut sparse,
-        };
-        members[*k % lanes].push(i);
-        *k += 1;
-    }
-    let steps = chains.iter().map(|c| c.budget).max().unwrap_or(0);
-    let mut rows: Vec<(usize, usize, CheckpointRow)> = Vec::new();
-    let mut timings = Timings::default();
-    if lanes == 1 {
-        let (r, t) = run_lane(settings, goals, chains, &members[0], pool, &mut on_step);
-        return Ok((r.into_iter().map(|(_, _, row)| row).collect(), t));
-    }
-    // Each lane reports its finished steps; the caller hears of step k once every lane is past it.
-    let (tx, rx) = std::sync::mpsc::channel::<(usize, usize)>();
-    std::thread::scope(|s| {
-        let handles: Vec<_> = members
-            .iter()
-            .enumerate()
-            .map(|(l, m)| {
-                let tx = tx.clone();
-                s.spawn(move || {
-                    let out = run_lane(settings, goals, chains, m, pool, &mut |done| {
-                        let _ = tx.send((l, done));
-                    });
-                    let _ = tx.send((l, steps));
-                    out
-                })
-            })
-            .collect();
-        drop(tx);
-        let mut done = vec![0usize; lanes];
-        let mut told = 0;
-        for (l, d) in rx {
-            done[l] = done[l].max(d);
-            let all = done.iter().copied().min().unwrap_or(steps);
-            while told < all {
-                told += 1;
-                on_step(told);
-            }
-        }
-        for h in handles {
-            let (r, t) = h.join().unwrap_or_else(|p| std::panic::resume_unwind(p));
-            rows.extend(r);
-            timings.add(&t);
-        }
-    });
-    rows.sort_by_key(|&(done, i, _)| (done, i));
-    Ok((rows.into_iter().map(|(_, _, row)| row).collect(), timings))
-}
-
-/// Advances the chains `members` (indices into `chains`, ascending) for their budgets, in lockstep;
-/// returns their rows as (samples done, chain index, row) and the lane's timings. `on_step` hears the
-/// steps done, up to the lane's largest budget.
-fn run_lane<P: Problem>(
-    settings: &Settings<P>,
-    goals: &[GoalTask],
-    all: &[Chain<P::Scene>],
-    members: &[usize],
-    pool: Option<&WorkerPool>,
-    on_step: &mut dyn FnMut(usize),
-) -> (Vec<(usize, usize, CheckpointRow)>, Timings) {
     let problem = &settings.problem;
-    let chains: Vec<&Chain<P::Scene>> = members.iter().map(|&i| &all[i]).collect();
     let mut states: Vec<State> = chains
         .iter()
         .map(|c| State {
@@ -323,7 +204,7 @@ fn run_lane<P: Problem>(
             .map(|(s, &l)| l.then(|| s.annealer.propose()))
             .collect();
         let t0 = Instant::now();
-        let mut traces = simulate_all(problem, &chains, members, &xs, step);
+        let mut traces = simulate_all(problem, chains, &xs, step);
         timings.simulate_s += t0.elapsed().as_secs_f64();
         let n_live = live.iter().filter(|&&l| l).count() as u64;
         timings.failed_simulations += n_live - traces.iter().flatten().count() as u64;
@@ -336,13 +217,13 @@ fn run_lane<P: Problem>(
         // Annotate the dense chains' traces, one pool call per goal.
         let t1 = Instant::now();
         let anns = match pool {
-            Some(pool) => annotate_dense(pool, goals, &chains, &mut traces, &mut timings),
+            Some(pool) => annotate_dense(pool, goals, chains, &mut traces, &mut timings),
             None => vec![Vec::new(); chains.len()],
         };
         timings.annotate_s += t1.elapsed().as_secs_f64();
 
         let t2 = Instant::now();
-        let scored = score_all(goals, &chains, &traces, &anns);
+        let scored = score_all(goals, chains, &traces, &anns);
         timings.score_s += t2.elapsed().as_secs_f64();
         timings.program_errors += scored.iter().filter(|s| s.2).count() as u64;
         timings.samples += n_live;
@@ -352,9 +233,9 @@ fn run_lane<P: Problem>(
         traces.into_par_iter().for_each(drop);
 
         let done = step + 1;
-        for (j, (x, (score, verified, _))) in xs.into_iter().zip(scored).enumerate() {
+        for (i, (x, (score, verified, _))) in xs.into_iter().zip(scored).enumerate() {
             let Some(x) = x else { continue };
-            let st = &mut states[j];
+            let st = &mut states[i];
             st.annealer.observe(x.clone(), score);
             if st
                 .annealer
@@ -365,29 +246,28 @@ fn run_lane<P: Problem>(
                 st.best_x = x;
             }
             let at_checkpoint = settings.checkpoint.is_some_and(|k| done % k.max(1) == 0);
-            if done == chains[j].budget || at_checkpoint {
-                rows.push((done, members[j], row(problem, goals, chains[j], st, done)));
+            if done == chains[i].budget || at_checkpoint {
+                rows.push(row(problem, goals, &chains[i], st, done));
             }
         }
         on_step(done);
     }
-    (rows, timings)
+    Ok((rows, timings))
 }
 
 /// Step `step`'s point of every live chain, simulated in parallel (`None` where the chain is done or
-/// the simulation failed); the trace of chain `ids[j]` is named `opt-<ids[j]>-<step>`.
+/// the simulation failed); trace `i` is named `opt-<i>-<step>`.
 fn simulate_all<P: Problem>(
     problem: &P,
-    chains: &[&Chain<P::Scene>],
-    ids: &[usize],
+    chains: &[Chain<P::Scene>],
     xs: &[Option<Vec<f64>>],
     step: usize,
 ) -> Vec<Option<Trace>> {
     chains
         .par_iter()
         .zip(xs.par_iter())
-        .zip(ids.par_iter())
-        .map(|((c, x), i)| {
+        .enumerate()
+        .map(|(i, (c, x))| {
             let mut t = problem.simulate(&c.scene, x.as_deref()?).ok()?;
             t.trace_id = format!("opt-{i}-{step}");
             Some(t)
@@ -401,7 +281,7 @@ fn simulate_all<P: Problem>(
 fn annotate_dense<S>(
     pool: &WorkerPool,
     goals: &[GoalTask],
-    chains: &[&Chain<S>],
+    chains: &[Chain<S>],
     traces: &mut [Option<Trace>],
     timings: &mut Timings,
 ) -> Vec<Vec<Annotation>> {
@@ -443,7 +323,7 @@ fn annotate_dense<S>(
 /// an invalid action (`invalid_action`) scores 0 and does not verify.
 fn score_all<S: Sync>(
     goals: &[GoalTask],
-    chains: &[&Chain<S>],
+    chains: &[Chain<S>],
     traces: &[Option<Trace>],
     anns: &[Vec<Annotation>],
 ) -> Vec<(f64, bool, bool)> {

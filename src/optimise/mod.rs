@@ -19,8 +19,7 @@ pub mod scenes;
 
 pub use anneal::{Annealer, Dim, Schedule};
 pub use chains::{
-    Chain, CheckpointRow, DENSE_LANES, GoalTask, RewardKind, Settings, Timings, invalid_action,
-    run_chains, run_chains_in_lanes,
+    Chain, CheckpointRow, GoalTask, RewardKind, Settings, Timings, invalid_action, run_chains,
 };
 pub use problem::{IphyreProblem, PhyreProblem, PoolProblem, Problem, ShotBounds};
 pub use scenes::{Layout, scenes};

@@ -6,7 +6,6 @@ use annotrace::envs::Environment;
 use annotrace::envs::pool::PoolEnv;
 use annotrace::optimise::{
     Chain, GoalTask, PoolProblem, RewardKind, Schedule, Settings, ShotBounds, run_chains,
-    run_chains_in_lanes,
 };
 use annotrace::reward::annotate::detectors_for;
 use annotrace::reward::verify::Rule;
@@ -97,69 +96,6 @@ fn annealing_improves_a_dense_reward_and_is_seeded() {
     )
     .unwrap();
     assert_eq!(rows, again);
-}
-
-/// Lanes change when a chain's samples are taken, not what they are: the rows of dense and sparse
-/// chains of unequal budgets are the same (values and order) in 1, 2 and 3 lanes, and the caller
-/// hears of every step once, in order.
-#[test]
-fn lanes_leave_the_rows_alone() {
-    let lib = Library::load(&repo().join("data/libraries/pooltool")).unwrap();
-    let schema = Schema::from_library(&lib);
-    let program = compile(
-        r#"AND(NEARBY_AT("cue", 0.3, 1.6, 1.0, threshold_strength=0.03), PATTERN("cushion rebound", ball="cue"))"#,
-        &schema,
-    )
-    .unwrap();
-    let task = GoalTask {
-        id: "toy".into(),
-        detectors: detectors_for(&lib, &labels_used(&program)),
-        program,
-        rule: Rule::parse(r#"CUSHION("cue")"#).unwrap(),
-    };
-    let scenes = PoolEnv::default().scenes(2, 5).unwrap();
-    let mut chains = Vec::new();
-    for (k, scene) in scenes.iter().enumerate() {
-        for seed in [21, 22] {
-            for kind in [RewardKind::Dense, RewardKind::Sparse] {
-                chains.push(Chain {
-                    goal: 0,
-                    scene: scene.clone(),
-                    seed,
-                    kind,
-                    budget: if k == 0 { 12 } else { 20 },
-                });
-            }
-        }
-    }
-    let pool = WorkerPool::new(SandboxLimits {
-        workers: 2,
-        ..SandboxLimits::default()
-    })
-    .unwrap();
-    let s = settings();
-    let mut first = None;
-    for lanes in [1, 2, 3] {
-        let mut heard = Vec::new();
-        let (rows, timings) = run_chains_in_lanes(
-            &s,
-            std::slice::from_ref(&task),
-            &chains,
-            Some(&pool),
-            lanes,
-            |k| heard.push(k),
-        )
-        .unwrap();
-        assert_eq!(heard, (1..=20).collect::<Vec<_>>(), "{lanes} lanes");
-        assert_eq!(timings.samples, 4 * 12 + 4 * 20, "{lanes} lanes");
-        assert_eq!(timings.dense_samples, 2 * 12 + 2 * 20, "{lanes} lanes");
-        match &first {
-            None => first = Some(rows),
-            Some(f) => assert_eq!(&rows, f, "{lanes} lanes"),
-        }
-    }
-    // Checkpoints every 10 samples and each chain's end: 12 → 10, 12; 20 → 10, 20.
-    assert_eq!(first.unwrap().len(), 8 * 2);
 }
 
 #[test]
