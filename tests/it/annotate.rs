@@ -273,17 +273,8 @@ fn detectors_see_the_paper_dict_whichever_way_the_trace_travels() {
     let mut stepped = traces_base_clone(&odd);
     stepped.trace_id = "stepped".into();
     // PHYRE and I-PHYRE traces travel as JSON with repeated objects (static bodies) sent once.
-    let example = |file: &str, env: annotrace::trace::Env| {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("data/examples")
-            .join(file);
-        let text = std::fs::read_to_string(&path).unwrap();
-        annotrace::trace::json::read_str(file, &text, env)
-            .remove(0)
-            .unwrap()
-    };
-    let phyre = example("phyre_drop.json", annotrace::trace::Env::Phyre);
-    let iphyre = example("iphyre_support.json", annotrace::trace::Env::Iphyre);
+    let phyre = crate::common::example_trace(annotrace::trace::Env::Phyre);
+    let iphyre = crate::common::example_trace(annotrace::trace::Env::Iphyre);
     let traces = [plain, odd, stepped, phyre, iphyre];
     let batch = pool.run(&[echo], &traces);
     for (r, t) in batch.results.iter().zip(&traces) {

@@ -4,8 +4,6 @@
 //! in any order of first reads; unchanged balls are the same dict in consecutive steps exactly when
 //! their state repeats; and code that can reach `dict`'s methods unbound sees every step built.
 
-use std::path::Path;
-
 use annotrace::detect::{CandidateStatus, Detector, SandboxLimits, WorkerPool};
 use annotrace::envs::pool::{PoolConfig, TraceOptions, dataset_trace};
 use annotrace::trace::{Env, Trace};
@@ -228,17 +226,8 @@ fn traces() -> Vec<Trace> {
         ts.objects.pop();
     }
     out.push(fewer);
-    let example = |file: &str, env: Env| {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("data/examples")
-            .join(file);
-        let text = std::fs::read_to_string(&path).unwrap();
-        annotrace::trace::json::read_str(file, &text, env)
-            .remove(0)
-            .unwrap()
-    };
-    out.push(example("phyre_drop.json", Env::Phyre));
-    out.push(example("iphyre_support.json", Env::Iphyre));
+    out.push(crate::common::example_trace(Env::Phyre));
+    out.push(crate::common::example_trace(Env::Iphyre));
     out
 }
 

@@ -180,6 +180,15 @@ pub fn example(env: Env) -> PathBuf {
     repo().join("data/examples").join(name)
 }
 
+/// The example trace of an environment (`example`), read.
+pub fn example_trace(env: Env) -> Trace {
+    let path = example(env);
+    let text = std::fs::read_to_string(&path).unwrap();
+    json::read_str(&path.display().to_string(), &text, env)
+        .remove(0)
+        .unwrap()
+}
+
 /// Reads a JSON file.
 pub fn read_json(p: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
