@@ -1,7 +1,8 @@
 //! A batch of annealing chains (goal × scene × seed × reward type × budget) advanced in lockstep over
 //! any [`Problem`]: each step simulates every live chain's proposal in parallel, annotates the dense
 //! chains' traces in one call to the detector runtime per goal (only the detectors the goal's program
-//! uses), scores them, and verifies every sample with the goal's hand-written rule.
+//! uses), scores them, and verifies every sample with the goal's hand-written rule. A sparse chain's
+//! billiards sample is checked on its columns ([`Simulated`]): its `Trace` is never built.
 //!
 //! Each chain has its own budget (its schedule cools over exactly that many samples) and stops when it
 //! is spent. Its best-so-far sample is recorded when it ends and, with `checkpoint`, every `checkpoint`
@@ -16,7 +17,7 @@ use serde_json::Value;
 
 use super::OptimiseError;
 use super::anneal::{Annealer, Schedule};
-use super::problem::Problem;
+use super::problem::{Problem, Simulated};
 use crate::detect::{Annotation, Detector, WorkerPool};
 use crate::reward::annotate::annotate;
 use crate::reward::verify::Rule;
@@ -149,7 +150,11 @@ pub struct Timings {
 /// Whether the environment refused the action of `trace` (PHYRE's `INVALID_INPUT`): the trace holds
 /// the scene without the user's ball, so no reward program or rule is asked about it.
 pub fn invalid_action(trace: &Trace) -> bool {
-    trace.outcome.terminal_status == "INVALID_INPUT"
+    refused(&trace.outcome)
+}
+
+fn refused(outcome: &crate::trace::Outcome) -> bool {
+    outcome.terminal_status == "INVALID_INPUT"
 }
 
 struct State {
@@ -211,7 +216,7 @@ pub fn run_chains<P: Problem>(
         timings.invalid_actions += traces
             .iter()
             .flatten()
-            .filter(|t| invalid_action(t))
+            .filter(|t| refused(t.outcome()))
             .count() as u64;
 
         // Annotate the dense chains' traces, one pool call per goal.
@@ -256,21 +261,26 @@ pub fn run_chains<P: Problem>(
 }
 
 /// Step `step`'s point of every live chain, simulated in parallel (`None` where the chain is done or
-/// the simulation failed); trace `i` is named `opt-<i>-<step>`.
+/// the simulation failed); trace `i` is named `opt-<i>-<step>`. A dense chain's sample is a
+/// [`Trace`] (for the detectors); a sparse chain's stays as the problem hands it over (billiards:
+/// columns, which its rule reads without the trace being built).
 fn simulate_all<P: Problem>(
     problem: &P,
     chains: &[Chain<P::Scene>],
     xs: &[Option<Vec<f64>>],
     step: usize,
-) -> Vec<Option<Trace>> {
+) -> Vec<Option<Simulated>> {
     chains
         .par_iter()
         .zip(xs.par_iter())
         .enumerate()
         .map(|(i, (c, x))| {
-            let mut t = problem.simulate(&c.scene, x.as_deref()?).ok()?;
-            t.trace_id = format!("opt-{i}-{step}");
-            Some(t)
+            let mut s = problem.sample(&c.scene, x.as_deref()?).ok()?;
+            s.set_trace_id(format!("opt-{i}-{step}"));
+            Some(match c.kind {
+                RewardKind::Dense => Simulated::Trace(s.into_trace()),
+                RewardKind::Sparse => s,
+            })
         })
         .collect()
 }
@@ -282,7 +292,7 @@ fn annotate_dense<S>(
     pool: &WorkerPool,
     goals: &[GoalTask],
     chains: &[Chain<S>],
-    traces: &mut [Option<Trace>],
+    traces: &mut [Option<Simulated>],
     timings: &mut Timings,
 ) -> Vec<Vec<Annotation>> {
     let mut anns: Vec<Vec<Annotation>> = vec![Vec::new(); chains.len()];
@@ -291,13 +301,17 @@ fn annotate_dense<S>(
             .filter(|&i| {
                 chains[i].goal == g
                     && chains[i].kind == RewardKind::Dense
-                    && traces[i].as_ref().is_some_and(|t| !invalid_action(t))
+                    && traces[i].as_ref().is_some_and(|t| !refused(t.outcome()))
             })
             .collect();
         if idx.is_empty() {
             continue;
         }
-        let batch: Vec<Trace> = idx.iter().filter_map(|&i| traces[i].take()).collect();
+        // Dense samples are traces already (`simulate_all`): no copy.
+        let batch: Vec<Trace> = idx
+            .iter()
+            .filter_map(|&i| traces[i].take().map(Simulated::into_trace))
+            .collect();
         let (found, failed) = annotate(pool, &goal.detectors, &batch);
         timings.failed_calls += failed as u64;
         timings.dense_samples += idx.len() as u64;
@@ -312,7 +326,7 @@ fn annotate_dense<S>(
             }
         }
         for (t, &i) in batch.into_iter().zip(&idx) {
-            traces[i] = Some(t);
+            traces[i] = Some(Simulated::Trace(t));
         }
     }
     anns
@@ -324,24 +338,33 @@ fn annotate_dense<S>(
 fn score_all<S: Sync>(
     goals: &[GoalTask],
     chains: &[Chain<S>],
-    traces: &[Option<Trace>],
+    traces: &[Option<Simulated>],
     anns: &[Vec<Annotation>],
 ) -> Vec<(f64, bool, bool)> {
     chains
         .par_iter()
         .enumerate()
         .map(|(i, c)| {
-            let Some(trace) = &traces[i] else {
+            let Some(sample) = &traces[i] else {
                 return (0.0, false, false);
             };
-            if invalid_action(trace) {
+            if refused(sample.outcome()) {
                 return (0.0, false, false);
             }
             let goal = &goals[c.goal];
-            let verified = goal.rule.holds(trace).unwrap_or(false);
+            let verified = sample.holds(&goal.rule).unwrap_or(false);
             match c.kind {
                 RewardKind::Sparse => (if verified { 1.0 } else { 0.0 }, verified, false),
                 RewardKind::Dense => {
+                    // Dense samples are traces (`simulate_all`); columns would be built here.
+                    let built;
+                    let trace = match sample {
+                        Simulated::Trace(t) => t,
+                        Simulated::Columns(cols) => {
+                            built = cols.clone().into_trace();
+                            &built
+                        }
+                    };
                     let at = AnnotatedTrace::new(trace, &anns[i]);
                     match evaluate(&goal.program, &at) {
                         Ok(e) => (e.score, verified, false),

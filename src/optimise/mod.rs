@@ -21,7 +21,7 @@ pub use anneal::{Annealer, Dim, Schedule};
 pub use chains::{
     Chain, CheckpointRow, GoalTask, RewardKind, Settings, Timings, invalid_action, run_chains,
 };
-pub use problem::{IphyreProblem, PhyreProblem, PoolProblem, Problem, ShotBounds};
+pub use problem::{IphyreProblem, PhyreProblem, PoolProblem, Problem, ShotBounds, Simulated};
 pub use scenes::{Layout, scenes};
 
 /// Why the optimisation experiment could not run.

@@ -5,6 +5,9 @@
 //! the action as JSON for the `optimisation` table, describes the scene in words for reward synthesis
 //! and renders a rollout as a frame strip.
 //!
+//! A sample reaches the chains as [`Simulated`]: billiards hands over its trace's columns, so a
+//! sample only its rule checks never has its `Trace` built.
+//!
 //! **Owns:** the search boxes and point → action maps. **Does not:** simulate (it calls `envs`), score
 //! or anneal (`chains`, `anneal`).
 
@@ -17,7 +20,9 @@ use crate::envs::iphyre::{Game, IphyreEnv};
 use crate::envs::phyre::{BallAction, PhyreEnv, Task};
 use crate::envs::pool::{PoolEnv, Scene, Shot};
 use crate::envs::{EnvError, Environment};
-use crate::trace::{Env, Trace};
+use crate::reward::RewardError;
+use crate::reward::verify::Rule;
+use crate::trace::{Env, Outcome, Trace, TraceColumns};
 
 /// An environment's action space as a box of continuous parameters.
 pub trait Problem: Sync {
@@ -33,6 +38,13 @@ pub trait Problem: Sync {
     /// Simulates point `x` of the box from `scene`.
     fn simulate(&self, scene: &Self::Scene, x: &[f64]) -> Result<Trace, EnvError>;
 
+    /// Simulates point `x` as an annealing sample: by default [`Problem::simulate`]'s trace; an
+    /// environment whose rules read its columns (billiards) hands those over, and the trace is built
+    /// only for samples the detectors annotate.
+    fn sample(&self, scene: &Self::Scene, x: &[f64]) -> Result<Simulated, EnvError> {
+        self.simulate(scene, x).map(Simulated::Trace)
+    }
+
     /// The scene's id in the `optimisation` table.
     fn scene_id(&self, scene: &Self::Scene) -> String;
 
@@ -44,6 +56,52 @@ pub trait Problem: Sync {
 
     /// The rollout `trace` as a strip of `k` frames (PNG).
     fn strip(&self, scene: &Self::Scene, trace: &Trace, k: usize) -> Result<Vec<u8>, EnvError>;
+}
+
+/// One simulated sample of a chain: its paper-layout trace, or (billiards) the trace's columns.
+// Unboxed: a sample is moved a few times per step, and boxing the columns would cost an
+// allocation per sample.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone)]
+pub enum Simulated {
+    /// The trace.
+    Trace(Trace),
+    /// The trace in columns; [`Simulated::into_trace`] builds the trace.
+    Columns(TraceColumns),
+}
+
+impl Simulated {
+    /// Names the sample's trace.
+    pub fn set_trace_id(&mut self, id: String) {
+        match self {
+            Simulated::Trace(t) => t.trace_id = id,
+            Simulated::Columns(c) => c.trace_id = id,
+        }
+    }
+
+    /// How the episode ended.
+    pub fn outcome(&self) -> &Outcome {
+        match self {
+            Simulated::Trace(t) => &t.outcome,
+            Simulated::Columns(c) => &c.outcome,
+        }
+    }
+
+    /// The paper-layout trace (built from the columns when it is not one yet).
+    pub fn into_trace(self) -> Trace {
+        match self {
+            Simulated::Trace(t) => t,
+            Simulated::Columns(c) => c.into_trace(),
+        }
+    }
+
+    /// Whether `rule` holds on the sample (read from the columns when it is held in columns).
+    pub fn holds(&self, rule: &Rule) -> Result<bool, RewardError> {
+        match self {
+            Simulated::Trace(t) => rule.holds(t),
+            Simulated::Columns(c) => rule.holds_on_columns(c),
+        }
+    }
 }
 
 /// `k` evenly spaced times over the trace (first and last timestep included).
@@ -171,6 +229,12 @@ impl Problem for PoolProblem {
 
     fn simulate(&self, scene: &Scene, x: &[f64]) -> Result<Trace, EnvError> {
         self.env.simulate(scene, &self.bounds.shot(x))
+    }
+
+    fn sample(&self, scene: &Scene, x: &[f64]) -> Result<Simulated, EnvError> {
+        self.env
+            .simulate_columns(scene, &self.bounds.shot(x))
+            .map(Simulated::Columns)
     }
 
     fn scene_id(&self, scene: &Scene) -> String {

@@ -8,7 +8,7 @@ use serde_json::{Map, Value};
 
 use super::error::{ErrorCategory, Pos, RewardError};
 use crate::detect::{Annotation, normalise_label};
-use crate::trace::{Body, Env, Trace};
+use crate::trace::{Body, Env, Event, Trace};
 
 /// One occurrence of a pattern or built-in event.
 #[derive(Debug, Clone, PartialEq)]
@@ -427,8 +427,12 @@ fn pool_ball_of(color: &str, shape: &str) -> Vec<&'static str> {
 
 /// The cue ball's id (from the `shot_prepared` event; `cue` when absent).
 pub fn cue_ball(trace: &Trace) -> String {
-    trace
-        .events
+    cue_ball_in(&trace.events)
+}
+
+/// The cue ball named by the `shot_prepared` event of `events` (`"cue"` without one).
+pub fn cue_ball_in(events: &[Event]) -> String {
+    events
         .iter()
         .find(|e| e.kind == "shot_prepared")
         .and_then(|e| {

@@ -25,9 +25,11 @@
 use serde_json::Value;
 
 use super::error::{ErrorCategory, Pos, RewardError};
-use super::facts::cue_ball;
+use super::facts::cue_ball_in;
 use super::parser::{Arg, Expr, ExprKind, parse};
-use crate::trace::{Body, Env, Trace};
+use crate::trace::{
+    BallView, Body, Env, Event, Frames, Outcome, PoolSteps, Timestep, Trace, TraceColumns,
+};
 
 /// A parsed verification rule.
 #[derive(Debug, Clone, PartialEq)]
@@ -80,6 +82,27 @@ impl Rule {
     pub fn holds(&self, trace: &Trace) -> Result<bool, RewardError> {
         let v = Verifier::new(trace);
         v.cond(&self.root)
+    }
+
+    /// Whether the rule holds on the trace held by `cols`: read from the columns for billiards (no
+    /// `Trace` built, the same verdict as [`Rule::holds`] on `cols.into_trace()`); the other
+    /// environments' rules read a copy of the trace.
+    pub fn holds_on_columns(&self, cols: &TraceColumns) -> Result<bool, RewardError> {
+        match &cols.frames {
+            Frames::Pool(frames) => {
+                let v = Verifier {
+                    env: Env::Pooltool,
+                    events: &cols.events,
+                    outcome: &cols.outcome,
+                    steps: PoolSteps::of_frames(frames),
+                    timesteps: &[],
+                    cue: cue_ball_in(&cols.events),
+                    roles: Default::default(),
+                };
+                v.cond(&self.root)
+            }
+            Frames::Phyre(_) | Frames::Iphyre(_) => self.holds(&cols.clone().into_trace()),
+        }
     }
 }
 
@@ -138,8 +161,15 @@ fn check(e: &Expr) -> Result<(), RewardError> {
 /// An event instance: time and (for SEQ) its identity.
 type Hit = (f64, usize);
 
+/// What a rule reads of one trace.
 struct Verifier<'a> {
-    trace: &'a Trace,
+    env: Env,
+    events: &'a [Event],
+    outcome: &'a Outcome,
+    /// Billiard-ball states by step.
+    steps: PoolSteps<'a>,
+    /// The paper-layout steps (PHYRE / I-PHYRE bodies; empty when read from billiards columns).
+    timesteps: &'a [Timestep],
     cue: String,
     roles: std::collections::HashMap<String, Vec<String>>,
 }
@@ -191,9 +221,9 @@ fn is(id: &str, want: &str) -> bool {
 /// kind (PHYRE: `red`, `green`, `blue`, `purple`, `gray`, `black`, `ball`, `bar`, `jar`, …, `user` for
 /// the placed ball, `dynamic`/`static`; I-PHYRE: `ball`/`red`, `eliminable`/`gray`,
 /// `dynamic`/`blue`, `fixed`/`black`, `block`).
-fn roles(trace: &Trace) -> std::collections::HashMap<String, Vec<String>> {
+fn roles(timesteps: &[Timestep]) -> std::collections::HashMap<String, Vec<String>> {
     let mut out = std::collections::HashMap::new();
-    let Some(first) = trace.timesteps.first() else {
+    let Some(first) = timesteps.first() else {
         return out;
     };
     for o in &first.objects {
@@ -239,9 +269,13 @@ fn roles(trace: &Trace) -> std::collections::HashMap<String, Vec<String>> {
 impl<'a> Verifier<'a> {
     fn new(trace: &'a Trace) -> Self {
         Verifier {
-            trace,
-            cue: cue_ball(trace),
-            roles: roles(trace),
+            env: trace.env,
+            events: &trace.events,
+            outcome: &trace.outcome,
+            steps: PoolSteps::of_trace(trace),
+            timesteps: &trace.timesteps,
+            cue: cue_ball_in(&trace.events),
+            roles: roles(&trace.timesteps),
         }
     }
 
@@ -262,11 +296,11 @@ impl<'a> Verifier<'a> {
     }
 
     fn require_env(&self, e: &Expr, name: &str, pool: bool) -> Result<(), RewardError> {
-        if (self.trace.env == Env::Pooltool) != pool {
+        if (self.env == Env::Pooltool) != pool {
             return Err(err(
                 ErrorCategory::Runtime,
                 e.pos,
-                format!("{name} does not apply to {} traces", self.trace.env),
+                format!("{name} does not apply to {} traces", self.env),
             ));
         }
         Ok(())
@@ -274,8 +308,7 @@ impl<'a> Verifier<'a> {
 
     /// Events of `kind` (several kinds allowed) as (index, time, agents).
     fn events(&self, kinds: &[&str]) -> Vec<(usize, f64, Vec<String>, Option<&Value>)> {
-        self.trace
-            .events
+        self.events
             .iter()
             .enumerate()
             .filter(|(_, e)| kinds.contains(&e.kind.as_str()))
@@ -284,21 +317,12 @@ impl<'a> Verifier<'a> {
     }
 
     /// The state of ball `id` at the last timestep at or before `t`.
-    fn ball_at(&self, id: &str, t: f64) -> Option<&crate::trace::PoolBall> {
-        let i = self
-            .trace
-            .timesteps
-            .partition_point(|s| s.t <= t)
-            .saturating_sub(1);
-        self.trace
-            .timesteps
-            .get(i)?
-            .objects
-            .iter()
-            .find_map(|o| match &o.body {
-                Body::Pool(b) if b.ball_id == id => Some(b),
-                _ => None,
-            })
+    fn ball_at(&self, id: &str, t: f64) -> Option<BallView<'a>> {
+        let i = self.steps.count_until(t).saturating_sub(1);
+        if i >= self.steps.len() {
+            return None;
+        }
+        self.steps.ball(i, id)
     }
 
     /// `HIT(a, b, state=, min_cut=, max_speed=)`: ball–ball events between `a` and `b` (either
@@ -381,7 +405,6 @@ impl<'a> Verifier<'a> {
     /// `SUCCESS`: the `success` event, else the end of a successful trace.
     fn success_hits(&self) -> Vec<Hit> {
         let t = self
-            .trace
             .events
             .iter()
             .enumerate()
@@ -389,11 +412,9 @@ impl<'a> Verifier<'a> {
             .and_then(|(i, ev)| Some((ev.t?, i)));
         match t {
             Some(h) => vec![h],
-            None if self.trace.outcome.success => {
-                vec![(
-                    self.trace.timesteps.last().map(|s| s.t).unwrap_or(0.0),
-                    usize::MAX,
-                )]
+            None if self.outcome.success => {
+                let n = self.steps.len();
+                vec![(if n > 0 { self.steps.t(n - 1) } else { 0.0 }, usize::MAX)]
             }
             None => Vec::new(),
         }
@@ -462,8 +483,7 @@ impl<'a> Verifier<'a> {
             "TRANSITION" => {
                 self.require_env(e, &name, true)?;
                 let (b, to) = (arg(0)?, arg(1)?);
-                self.trace
-                    .events
+                self.events
                     .iter()
                     .enumerate()
                     .filter(|(_, ev)| ev.kind.starts_with("physics_"))
@@ -586,7 +606,7 @@ impl<'a> Verifier<'a> {
         let mut first: std::collections::HashMap<String, f64> = Default::default();
         let mut out: Vec<Hit> = Vec::new();
         let mut done: std::collections::HashSet<String> = Default::default();
-        for (k, step) in self.trace.timesteps.iter().enumerate() {
+        for (k, step) in self.timesteps.iter().enumerate() {
             for o in &step.objects {
                 let Some((id, a, period)) = orientation(&o.body) else {
                     continue;
@@ -613,7 +633,7 @@ impl<'a> Verifier<'a> {
         let mut first: std::collections::HashMap<String, f64> = Default::default();
         let mut done: std::collections::HashSet<String> = Default::default();
         let mut out: Vec<Hit> = Vec::new();
-        for (k, step) in self.trace.timesteps.iter().enumerate() {
+        for (k, step) in self.timesteps.iter().enumerate() {
             let blocks: Vec<&crate::trace::IphyreObject> = step
                 .objects
                 .iter()
@@ -651,19 +671,15 @@ impl<'a> Verifier<'a> {
     /// velocity and the line of centres, with positions extrapolated from the last timestep.
     fn cut_angle(&self, x: &str, y: &str, t: f64) -> Option<f64> {
         let (bx, by) = (self.ball_at(x, t)?, self.ball_at(y, t)?);
-        let i = self
-            .trace
-            .timesteps
-            .partition_point(|s| s.t <= t)
-            .saturating_sub(1);
-        let dt = t - self.trace.timesteps.get(i)?.t;
-        let p = |b: &crate::trace::PoolBall| {
+        let i = self.steps.count_until(t).saturating_sub(1);
+        let dt = t - self.steps.t(i);
+        let p = |b: &BallView| {
             [
                 b.position[0] + b.velocity[0] * dt,
                 b.position[1] + b.velocity[1] * dt,
             ]
         };
-        let (px, py) = (p(bx), p(by));
+        let (px, py) = (p(&bx), p(&by));
         let n = [py[0] - px[0], py[1] - px[1]];
         let v = [
             bx.velocity[0] - by.velocity[0],
@@ -681,7 +697,6 @@ impl<'a> Verifier<'a> {
     /// another ball comes within 4 radii (without a contact in between, as no event splits it).
     fn curves(&self, b: &str) -> Vec<Hit> {
         let mut times: Vec<f64> = self
-            .trace
             .events
             .iter()
             .filter(|e| e.kind.starts_with("physics_"))
@@ -689,33 +704,28 @@ impl<'a> Verifier<'a> {
             .filter_map(|e| e.t)
             .collect();
         times.sort_by(f64::total_cmp);
-        let steps = &self.trace.timesteps;
+        let steps = &self.steps;
         let mut out = Vec::new();
         for w in times.windows(2) {
             let (t0, t1) = (w[0], w[1]);
             let inside: Vec<usize> = (0..steps.len())
-                .filter(|&k| steps[k].t > t0 + 1e-9 && steps[k].t < t1 - 1e-9)
+                .filter(|&k| steps.t(k) > t0 + 1e-9 && steps.t(k) < t1 - 1e-9)
                 .collect();
             if inside.len() < 2 {
                 continue;
             }
-            let state = |k: usize| {
-                steps[k].objects.iter().find_map(|o| match &o.body {
-                    Body::Pool(p) if p.ball_id == b => Some(p),
-                    _ => None,
-                })
-            };
+            let state = |k: usize| steps.ball(k, b);
             let (Some(s0), Some(s1)) = (state(inside[0]), state(*inside.last().expect("len>=2")))
             else {
                 continue;
             };
-            let h = |p: &crate::trace::PoolBall| p.velocity[1].atan2(p.velocity[0]);
+            let h = |p: &BallView| p.velocity[1].atan2(p.velocity[0]);
             if s0.velocity[0].hypot(s0.velocity[1]) < 1e-3
                 || s1.velocity[0].hypot(s1.velocity[1]) < 1e-3
             {
                 continue;
             }
-            let mut turn = (h(s1) - h(s0)).to_degrees().abs() % 360.0;
+            let mut turn = (h(&s1) - h(&s0)).to_degrees().abs() % 360.0;
             if turn > 180.0 {
                 turn = 360.0 - turn;
             }
@@ -725,16 +735,15 @@ impl<'a> Verifier<'a> {
             let r = s0.radius.max(1e-6);
             let near = inside.iter().any(|&k| {
                 let Some(me) = state(k) else { return false };
-                steps[k].objects.iter().any(|o| match &o.body {
-                    Body::Pool(p) if p.ball_id != b && p.motion_state != "pocketed" => {
-                        (p.position[0] - me.position[0]).hypot(p.position[1] - me.position[1])
+                steps.balls(k).any(|p| {
+                    p.ball_id != b
+                        && p.motion_state != "pocketed"
+                        && (p.position[0] - me.position[0]).hypot(p.position[1] - me.position[1])
                             < 4.0 * r
-                    }
-                    _ => false,
                 })
             });
             if near {
-                out.push((steps[inside[0]].t, usize::MAX - out.len()));
+                out.push((steps.t(inside[0]), usize::MAX - out.len()));
             }
         }
         out

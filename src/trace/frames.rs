@@ -28,6 +28,7 @@ use super::batch::{TraceBatches, TraceMeta, constant_dict, events_batch, traces_
 use super::model::{
     Body, Event, IphyreObject, JsonMap, Object, Outcome, PhyreObject, PoolBall, Timestep, Trace,
 };
+use super::pool_steps::BallView;
 use super::schema::{FRAMES, TIMESTEPS};
 use super::short_str::ShortStr;
 use super::view::{ColumnView, Keys};
@@ -206,6 +207,42 @@ impl PoolFrames {
 }
 
 impl PoolFrames {
+    /// Each timestep's time (s).
+    pub fn times(&self) -> &[f64] {
+        &self.rows.t
+    }
+
+    /// Each timestep's first frame row, then the number of rows (so step `k` holds rows
+    /// `starts[k]..starts[k + 1]`).
+    pub fn step_starts(&self) -> Vec<usize> {
+        let mut starts = Vec::with_capacity(self.rows.count.len() + 1);
+        let mut next = 0usize;
+        starts.push(0);
+        for &c in &self.rows.count {
+            next += usize::try_from(c).unwrap_or(0);
+            starts.push(next);
+        }
+        starts
+    }
+
+    /// Frame row `i`'s ball as rules read it: the same values [`Frames::timesteps`] gives its
+    /// `PoolBall` (an unknown motion-state code has the empty name there too).
+    pub fn ball_state(&self, i: usize) -> BallView<'_> {
+        let o = self.rows.obj[i] as usize;
+        let c = self.code[i];
+        BallView {
+            ball_id: &self.ids[o],
+            position: [self.rows.x[i], self.rows.y[i], self.z[i]],
+            velocity: [self.v[0][i], self.v[1][i], self.v[2][i]],
+            motion_state: usize::try_from(c)
+                .ok()
+                .and_then(|c| self.state_names.get(c))
+                .copied()
+                .unwrap_or(""),
+            radius: self.radius[o],
+        }
+    }
+
     /// The paper-layout objects of frame rows `range` (one timestep): what [`Frames::body`] gives
     /// row by row, with the columns sliced once (the per-sample trace of an optimisation chain is
     /// built here, one object per ball per step).

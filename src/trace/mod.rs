@@ -2,7 +2,7 @@
 //!
 //! **Owns:** the types of a trace ([`Trace`], [`Timestep`], [`Object`], [`Event`], [`Outcome`]), the
 //! environments ([`Env`]), the inline strings of its per-ball fields ([`ShortStr`]), the Arrow schemas of the trace tables ([`schema`]), conversion between traces
-//! and record batches ([`batch`]), traces held in columns straight from a simulator ([`frames`]), borrowed column views of them for a
+//! and record batches ([`batch`]), traces held in columns straight from a simulator ([`frames`]), billiard-ball states by step read alike from either form ([`pool_steps`]), borrowed column views of them for a
 //! columnar writer ([`view`]) and the
 //! JSON import/export format ([`json`]).
 //! **Does not:** read or write files of a run directory (`store/`), run SQL (`query/`) or order stages
@@ -16,6 +16,7 @@ mod env;
 pub mod frames;
 pub mod json;
 mod model;
+pub mod pool_steps;
 pub mod schema;
 mod short_str;
 pub mod view;
@@ -27,4 +28,5 @@ pub use model::{
     Body, Event, IphyreObject, JsonMap, Object, Outcome, PhyreObject, PoolBall, Timestep, Trace,
     json_map,
 };
+pub use pool_steps::{BallView, PoolSteps};
 pub use short_str::ShortStr;

@@ -537,3 +537,72 @@ fn goal_programs_find_their_objects_in_every_phyre_template_and_iphyre_game() {
         }
     }
 }
+
+/// A sparse billiards sample is checked on its columns, never built into a `Trace`: every goal rule
+/// and the rule functions that read ball states (`CURVE`, `HIT` with `state=` / `min_cut=`,
+/// `SUCCESS`) give the same verdict on the columns as on the trace, over random shots of the
+/// paper run's scattered scenes (and they hold on some of them, so the comparison is not vacuous).
+#[test]
+fn billiards_rules_read_the_same_from_columns_as_from_the_trace() {
+    use annotrace::optimise::{Layout, scenes};
+    use annotrace::reward::goals::GoalSet;
+
+    let set = GoalSet::load(&repo().join("data/goals/pooltool.toml"), &repo()).unwrap();
+    let mut rules: Vec<Rule> = set
+        .goals
+        .iter()
+        .map(|g| Rule::parse(&g.verify).unwrap())
+        .collect();
+    let curve_any = (1..=9)
+        .map(|b| format!("CURVE(\"{b}\")"))
+        .chain(["CURVE(\"cue\")".to_string()])
+        .collect::<Vec<_>>()
+        .join(", ");
+    let reads_states = [
+        format!("ANY({curve_any})"),
+        "HIT(\"cue\", \"*\", state=\"sliding\")".to_string(),
+        "HIT(\"cue\", \"*\", state=\"rolling\")".to_string(),
+        "HIT(\"*\", \"*\", min_cut=25)".to_string(),
+        "SEQ(HIT(\"cue\", \"*\", min_cut=10), POCKET(\"*\"))".to_string(),
+        "SUCCESS()".to_string(),
+    ];
+    let first_extra = rules.len();
+    rules.extend(reads_states.iter().map(|r| Rule::parse(r).unwrap()));
+
+    let mut env = PoolEnv::default();
+    env.trace.dt = 0.02;
+    let bounds = ShotBounds::default();
+    let scenes = scenes(&env, Layout::Scatter, 12, 1000).unwrap();
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut uniform = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut held = vec![0usize; rules.len()];
+    for scene in &scenes {
+        for _ in 0..25 {
+            let x = [
+                0.2 + 5.8 * uniform(),
+                360.0 * uniform(),
+                45.0 * uniform(),
+                1.8 * uniform() - 0.9,
+                1.8 * uniform() - 0.9,
+            ];
+            let cols = env.simulate_columns(scene, &bounds.shot(&x)).unwrap();
+            let trace = cols.clone().into_trace();
+            for (k, rule) in rules.iter().enumerate() {
+                let on_trace = rule.holds(&trace).map_err(|e| e.to_string());
+                let on_columns = rule.holds_on_columns(&cols).map_err(|e| e.to_string());
+                assert_eq!(on_trace, on_columns, "{} on {x:?}", rule.source);
+                held[k] += usize::from(on_trace == Ok(true));
+            }
+        }
+    }
+    for (k, r) in reads_states.iter().enumerate() {
+        if r != "SUCCESS()" {
+            assert!(held[first_extra + k] > 0, "{r} never held: {held:?}");
+        }
+    }
+}

@@ -5,9 +5,9 @@ use super::render::{self, RenderOptions};
 use super::scene::Scene;
 use super::shot::Shot;
 use super::simulate::{SimOptions, simulate};
-use super::to_trace::{TraceOptions, trace_of};
+use super::to_trace::{TraceOptions, trace_columns};
 use crate::envs::{ActionDim, EnvError, Environment};
-use crate::trace::{Env, Trace};
+use crate::trace::{Env, Trace, TraceColumns};
 
 /// The billiards environment: a table config, simulation caps and the trace's `dt`.
 #[derive(Debug, Clone)]
@@ -35,6 +35,20 @@ impl PoolEnv {
     /// The trace id [`Environment::simulate`] gives a shot: `<scene_id>-shot`.
     pub fn trace_id(scene: &Scene) -> String {
         format!("{}-shot", scene.scene_id)
+    }
+
+    /// [`Environment::simulate`]'s trace in columns, before its paper-layout `Trace` is built (the
+    /// optimiser checks sparse samples on these: `Rule::holds_on_columns`).
+    pub fn simulate_columns(&self, scene: &Scene, action: &Shot) -> Result<TraceColumns, EnvError> {
+        let system = scene.system(&self.config)?;
+        let sim = simulate(&system, action, &self.sim)?;
+        Ok(trace_columns(
+            &sim,
+            scene,
+            action,
+            &PoolEnv::trace_id(scene),
+            &self.trace,
+        ))
     }
 }
 
@@ -105,15 +119,7 @@ impl Environment for PoolEnv {
     }
 
     fn simulate(&self, scene: &Scene, action: &Shot) -> Result<Trace, EnvError> {
-        let system = scene.system(&self.config)?;
-        let sim = simulate(&system, action, &self.sim)?;
-        Ok(trace_of(
-            &sim,
-            scene,
-            action,
-            &PoolEnv::trace_id(scene),
-            &self.trace,
-        ))
+        Ok(self.simulate_columns(scene, action)?.into_trace())
     }
 
     fn render(&self, trace: &Trace, t: f64) -> Result<Vec<u8>, EnvError> {

@@ -287,7 +287,7 @@ pub fn outcome(sim: &Simulation, scene: &Scene, shot: &Shot, dt: f64) -> Outcome
 mod tests {
     use super::*;
     use crate::envs::pool::{PoolConfig, SimOptions, resample, simulate};
-    use crate::trace::{Body, Object, PoolBall};
+    use crate::trace::{Body, Object, PoolBall, PoolSteps};
 
     fn straight_pot() -> (Scene, Shot) {
         // The 9-ball 0.3 m in front of the right-top pocket's line, the cue ball behind it.
@@ -404,6 +404,25 @@ mod tests {
                     })
                     .collect();
                 assert_eq!(ts.objects, objects);
+            }
+            // What the verification rules read: the same from the columns as from the trace.
+            let crate::trace::Frames::Pool(frames) = &cols.frames else {
+                panic!("billiards columns")
+            };
+            let (a, b) = (PoolSteps::of_trace(&tr), PoolSteps::of_frames(frames));
+            assert_eq!(a.len(), b.len());
+            for k in 0..a.len() {
+                assert_eq!(a.t(k).to_bits(), b.t(k).to_bits());
+                assert_eq!(
+                    a.balls(k).collect::<Vec<_>>(),
+                    b.balls(k).collect::<Vec<_>>()
+                );
+                assert_eq!(b.balls(k).count(), 10);
+                assert_eq!(a.ball(k, "cue"), b.ball(k, "cue"));
+                assert!(b.ball(k, "cue").is_some() && b.ball(k, "nope").is_none());
+            }
+            for t in [-1.0, 0.0, 0.013, 0.05, 0.5, 1e9] {
+                assert_eq!(a.count_until(t), b.count_until(t));
             }
             let want = crate::trace::TraceBatchBuilder::from_trace(&tr, "s", "test").unwrap();
             let got = cols.batches("s", "test").unwrap();
