@@ -610,15 +610,65 @@ impl<'a> Cols<'a> {
             .ok_or_else(|| self.err(name, "Boolean"))
     }
 
-    /// A string column (plain or dictionary-encoded) as a plain string array.
-    fn str(&self, name: &str) -> Result<StringArray, DecodeError> {
+    /// A string column, plain or dictionary-encoded.
+    fn str(&self, name: &str) -> Result<StrCol, DecodeError> {
         let c = self.col(name).ok_or_else(|| self.err(name, "Utf8"))?;
-        let plain = match c.data_type() {
-            DataType::Utf8 => c.clone(),
-            DataType::Dictionary(_, v) if **v == DataType::Utf8 => cast(c, &DataType::Utf8)?,
+        Ok(match c.data_type() {
+            DataType::Utf8 => StrCol::Plain(c.as_string::<i32>().clone()),
+            DataType::Dictionary(k, v) if **k == DataType::Int32 && **v == DataType::Utf8 => {
+                let d = c.as_dictionary::<Int32Type>();
+                StrCol::Dict {
+                    keys: d.keys().clone(),
+                    values: d.values().as_string::<i32>().clone(),
+                }
+            }
+            DataType::Dictionary(_, v) if **v == DataType::Utf8 => {
+                StrCol::Plain(cast(c, &DataType::Utf8)?.as_string::<i32>().clone())
+            }
             _ => return Err(self.err(name, "Utf8")),
-        };
-        Ok(plain.as_string::<i32>().clone())
+        })
+    }
+}
+
+/// A string column as it was read: plain, or dictionary-encoded with `Int32` keys (the trace tables'
+/// labels), whose rows are looked up in the dictionary rather than cast to plain strings first (a
+/// cast copies every row's string, and the frames' labels repeat on every row).
+enum StrCol {
+    Plain(StringArray),
+    Dict {
+        keys: Int32Array,
+        values: StringArray,
+    },
+}
+
+impl StrCol {
+    fn len(&self) -> usize {
+        match self {
+            StrCol::Plain(a) => a.len(),
+            StrCol::Dict { keys, .. } => keys.len(),
+        }
+    }
+
+    fn is_null(&self, i: usize) -> bool {
+        match self {
+            StrCol::Plain(a) => a.is_null(i),
+            StrCol::Dict { keys, values } => {
+                keys.is_null(i) || values.is_null(keys.value(i) as usize)
+            }
+        }
+    }
+
+    /// Row `i` (the empty string where it is null).
+    fn value(&self, i: usize) -> &str {
+        match self {
+            StrCol::Plain(a) => a.value(i),
+            StrCol::Dict { keys, values } => values.value(keys.value(i) as usize),
+        }
+    }
+
+    /// Row `i`, `None` where it is null.
+    fn get(&self, i: usize) -> Option<&str> {
+        (!self.is_null(i)).then(|| self.value(i))
     }
 }
 
@@ -699,19 +749,9 @@ fn decode_outcome(tr: &Cols<'_>, trace_id: &str) -> Result<(Outcome, JsonMap), D
             "metrics",
             trace_id,
         )?,
-        extra: parse_map(
-            opt(&outcome_extra, 0, |i| outcome_extra.value(i)),
-            "traces",
-            "outcome_extra",
-            trace_id,
-        )?,
+        extra: parse_map(outcome_extra.get(0), "traces", "outcome_extra", trace_id)?,
     };
-    let top_extra = parse_map(
-        opt(&extra, 0, |i| extra.value(i)),
-        "traces",
-        "extra",
-        trace_id,
-    )?;
+    let top_extra = parse_map(extra.get(0), "traces", "extra", trace_id)?;
     Ok((outcome, top_extra))
 }
 
@@ -728,12 +768,7 @@ fn decode_timesteps(batch: &RecordBatch, trace_id: &str) -> Result<Vec<Timestep>
             index: steps.value(i),
             t: times.value(i),
             objects: Vec::new(),
-            extra: parse_map(
-                opt(&step_extra, i, |i| step_extra.value(i)),
-                "timesteps",
-                "extra",
-                trace_id,
-            )?,
+            extra: parse_map(step_extra.get(i), "timesteps", "extra", trace_id)?,
         });
     }
     Ok(timesteps)
@@ -753,7 +788,7 @@ fn decode_events(batch: &RecordBatch, trace_id: &str) -> Result<Vec<Event>, Deco
     );
     let mut events = Vec::with_capacity(ekind.len());
     for i in 0..ekind.len() {
-        let payload = match opt(&payload, i, |i| payload.value(i)) {
+        let payload = match payload.get(i) {
             None => None,
             Some(s) => Some(serde_json::from_str(s).map_err(|source| DecodeError::Json {
                 table: "events",
@@ -766,12 +801,7 @@ fn decode_events(batch: &RecordBatch, trace_id: &str) -> Result<Vec<Event>, Deco
             kind: ekind.value(i).to_string(),
             t: opt(et, i, |i| et.value(i)),
             payload,
-            extra: parse_map(
-                opt(&eextra, i, |i| eextra.value(i)),
-                "events",
-                "extra",
-                trace_id,
-            )?,
+            extra: parse_map(eextra.get(i), "events", "extra", trace_id)?,
         });
     }
     Ok(events)
@@ -783,7 +813,7 @@ struct FrameCols<'a> {
     env: Env,
     trace_id: &'a str,
     step: &'a Int64Array,
-    oid: StringArray,
+    oid: StrCol,
     x: &'a Float64Array,
     y: &'a Float64Array,
     z: &'a Float64Array,
@@ -794,13 +824,13 @@ struct FrameCols<'a> {
     wx: &'a Float64Array,
     wy: &'a Float64Array,
     wz: &'a Float64Array,
-    kind: StringArray,
+    kind: StrCol,
     msc: &'a Int32Array,
-    ms: StringArray,
+    ms: StrCol,
     radius: &'a Float64Array,
     diameter: &'a Float64Array,
-    shape: StringArray,
-    color: StringArray,
+    shape: StrCol,
+    color: StrCol,
     user: &'a BooleanArray,
     x1: &'a Float64Array,
     y1: &'a Float64Array,
@@ -810,7 +840,7 @@ struct FrameCols<'a> {
     dynamic: &'a Float64Array,
     joint: &'a Int64Array,
     spring: &'a Int64Array,
-    extra: StringArray,
+    extra: StrCol,
 }
 
 impl<'a> FrameCols<'a> {
@@ -872,12 +902,7 @@ impl<'a> FrameCols<'a> {
                 Env::Phyre => Body::Phyre(self.phyre_object(i)?),
                 Env::Iphyre => Body::Iphyre(self.iphyre_object(i)?),
             };
-            let extra = parse_map(
-                opt(&self.extra, i, |i| self.extra.value(i)),
-                "frames",
-                "extra",
-                self.trace_id,
-            )?;
+            let extra = parse_map(self.extra.get(i), "frames", "extra", self.trace_id)?;
             target.objects.push(Object { body, extra });
         }
         Ok(())
@@ -903,12 +928,8 @@ impl<'a> FrameCols<'a> {
     }
 
     /// Row `i` of a string column the object needs.
-    fn need_s(&self, a: &StringArray, col: &str, i: usize) -> Result<String, DecodeError> {
-        if a.is_null(i) {
-            Err(self.null(col, i))
-        } else {
-            Ok(a.value(i).to_string())
-        }
+    fn need_s<'s>(&self, a: &'s StrCol, col: &str, i: usize) -> Result<&'s str, DecodeError> {
+        a.get(i).ok_or_else(|| self.null(col, i))
     }
 
     fn pool_ball(&self, i: usize) -> Result<PoolBall, DecodeError> {
@@ -946,8 +967,8 @@ impl<'a> FrameCols<'a> {
                 .value(i)
                 .parse()
                 .map_err(|_| self.null("object_id", i))?,
-            shape: self.need_s(&self.shape, "shape", i)?,
-            color: self.need_s(&self.color, "color", i)?,
+            shape: self.need_s(&self.shape, "shape", i)?.to_string(),
+            color: self.need_s(&self.color, "color", i)?.to_string(),
             diameter: self.need_f(self.diameter, "diameter", i)?,
             x: self.x.value(i),
             y: self.y.value(i),

@@ -302,3 +302,61 @@ fn without_an_event_log_the_contacts_are_inferred_from_the_timesteps() {
     assert_eq!(count(found, "cushion rebound"), 0, "{found:?}");
     assert!(count(found, "rolling ball") >= 1 && count(found, "sliding ball") >= 1);
 }
+
+#[test]
+fn an_imported_file_set_is_annotated_as_the_pool_annotates_its_traces() {
+    // 150 shots in one imported file set. The stage takes the set's rows in the order the importer
+    // wrote them (grouped by trace, in step order) without sorting them, and rebuilds each trace
+    // from them: what the detectors find must be what they find on the traces themselves.
+    let traces: Vec<Trace> = (0..150)
+        .map(|i| straight_pot(0.6 + 0.02 * i as f64, [-0.3, 0.0, 0.3][i % 3], 0.05))
+        .collect();
+    let run = TestRun::new();
+    let src = run.write_jsonl("shots.jsonl", &traces);
+    let dir = run.path("r");
+    let dir = dir.to_str().unwrap();
+    run.run(&[
+        "import",
+        "--env",
+        "pooltool",
+        src.to_str().unwrap(),
+        "--run",
+        dir,
+        "-q",
+    ])
+    .ok();
+    run.run(&["annotate", "--run", dir, "--workers", "2"])
+        .ok()
+        .stdout_has("annotated 150 pooltool trace(s) with 12 detector(s)");
+    let mut stored: Vec<String> = run
+        .csv(
+            dir,
+            "SELECT trace_id, label, start_step, end_step FROM annotations",
+        )
+        .lines()
+        .skip(1)
+        .map(str::to_string)
+        .collect();
+    stored.sort();
+    let (_, found) = run_library(&traces);
+    let mut expected: Vec<String> = found
+        .iter()
+        .zip(&traces)
+        .flat_map(|(f, t)| {
+            f.iter()
+                .map(move |(label, _, s, e)| format!("{},{label},{s},{e}", t.trace_id))
+        })
+        .collect();
+    expected.sort();
+    assert!(expected.len() > 150, "{} patterns", expected.len());
+    assert_eq!(stored, expected);
+    // Every call is a row, every trace has the 12.
+    run.run(&[
+        "query",
+        "SELECT count(*) AS n, count(DISTINCT trace_id) AS t FROM detector_calls WHERE status = 'ok'",
+        "--run",
+        dir,
+    ])
+    .ok()
+    .stdout_has("| 1800 | 150 |");
+}

@@ -4,8 +4,10 @@
 //!
 //! Stages that write the trace tables (`import`, `simulate`) write one file per shard with the same name
 //! in `traces`, `timesteps`, `frames` and `events` (`<stage>.<shard>.parquet`). Reading such a set once,
-//! sorting each table by trace and slicing, rebuilds all of its traces at the cost of one read, where
-//! `store::read_trace` per trace would scan row groups once per trace.
+//! grouping each table by trace and slicing, rebuilds all of its traces at the cost of one read, where
+//! `store::read_trace` per trace would scan row groups once per trace. Those stages write each trace's
+//! rows together and in order, so a set's rows are checked to be grouped and are then taken as they
+//! are; rows in any other order (files from elsewhere) are sorted first.
 
 use arrow::array::{Array, ArrayRef, RecordBatch, StringArray};
 use arrow::compute::{
@@ -47,8 +49,10 @@ pub(crate) fn trace_file_sets(run: &RunDir, env: Env) -> Result<Vec<TraceFileSet
     Ok(out)
 }
 
-/// All rows of `table` in the set's file (an empty batch when no such file is published), sorted by
-/// `trace_id` then `sort_by`, with the trace ids as plain strings alongside.
+/// All rows of `table` in the set's file (an empty batch when no such file is published), grouped
+/// by `trace_id` and ordered by `sort_by` within each trace, with the trace ids as plain strings
+/// alongside. Rows a stage wrote are already so (one trace after another, in table order), and
+/// are then taken as they are; others are sorted by `trace_id` then `sort_by`.
 fn sorted_rows(
     run: &RunDir,
     set: &TraceFileSet,
@@ -77,16 +81,27 @@ fn sorted_rows(
     if all.num_rows() == 0 {
         return Ok((all, StringArray::from(Vec::<String>::new())));
     }
+    let keys = sort_by
+        .iter()
+        .map(|c| {
+            all.column_by_name(c)
+                .ok_or_else(|| StageError::Internal(format!("{table}: no {c} column")))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let plain = ids
+        .as_any()
+        .downcast_ref::<StringArray>()
+        .ok_or_else(|| StageError::Internal("trace ids are not strings".into()))?;
+    if grouped_order(plain, &keys) == Some(true) {
+        return Ok((all, plain.clone()));
+    }
     let mut columns = vec![SortColumn {
         values: ids.clone(),
         options: None,
     }];
-    for c in sort_by {
+    for k in keys {
         columns.push(SortColumn {
-            values: all
-                .column_by_name(c)
-                .ok_or_else(|| StageError::Internal(format!("{table}: no {c} column")))?
-                .clone(),
+            values: k.clone(),
             options: None,
         });
     }
@@ -99,6 +114,63 @@ fn sorted_rows(
         .cloned()
         .ok_or_else(|| StageError::Internal("trace ids are not strings".into()))?;
     Ok((sorted, ids))
+}
+
+/// Whether rows are already grouped by trace id (each id one contiguous run) and ordered by the
+/// integer `keys` within each run, with no nulls: `Some(true)` if so, `Some(false)` if not, `None`
+/// when a key is not a 32- or 64-bit integer column (so the caller sorts).
+fn grouped_order(ids: &StringArray, keys: &[&ArrayRef]) -> Option<bool> {
+    use arrow::array::{AsArray, Int32Array, Int64Array};
+    /// A sort key's values.
+    enum Key<'a> {
+        I64(&'a Int64Array),
+        I32(&'a Int32Array),
+    }
+    let keys: Vec<Key<'_>> = keys
+        .iter()
+        .map(|k| {
+            if k.null_count() > 0 {
+                return None;
+            }
+            match k.data_type() {
+                DataType::Int64 => Some(Key::I64(k.as_primitive())),
+                DataType::Int32 => Some(Key::I32(k.as_primitive())),
+                _ => None,
+            }
+        })
+        .collect::<Option<_>>()?;
+    if ids.null_count() > 0 {
+        return Some(false);
+    }
+    // Row `i - 1` against row `i` by the keys in order.
+    let order = |i: usize| {
+        for k in &keys {
+            let o = match k {
+                Key::I64(a) => a.value(i - 1).cmp(&a.value(i)),
+                Key::I32(a) => a.value(i - 1).cmp(&a.value(i)),
+            };
+            if o != std::cmp::Ordering::Equal {
+                return o;
+            }
+        }
+        std::cmp::Ordering::Equal
+    };
+    let mut seen = std::collections::HashSet::new();
+    let mut start = 0;
+    for i in 1..=ids.len() {
+        if i < ids.len() && ids.value(i) == ids.value(start) {
+            if order(i) == std::cmp::Ordering::Greater {
+                return Some(false);
+            }
+            continue;
+        }
+        if !seen.insert(ids.value(start)) {
+            // The trace's rows come in two runs.
+            return Some(false);
+        }
+        start = i;
+    }
+    Some(true)
 }
 
 /// The row range of each trace id in rows sorted by trace id.
@@ -196,4 +268,42 @@ pub(crate) fn read_traces_by_id(run: &RunDir, ids: &[String]) -> Result<Vec<Trac
             })
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use arrow::array::{Int32Array, Int64Array};
+    use std::sync::Arc;
+
+    fn order(ids: &[&str], steps: &[i64], slots: &[i32]) -> Option<bool> {
+        let ids = StringArray::from(ids.to_vec());
+        let steps: ArrayRef = Arc::new(Int64Array::from(steps.to_vec()));
+        let slots: ArrayRef = Arc::new(Int32Array::from(slots.to_vec()));
+        grouped_order(&ids, &[&steps, &slots])
+    }
+
+    #[test]
+    fn rows_as_a_stage_writes_them_are_taken_as_they_are_and_others_are_sorted() {
+        // One trace after another (in any order of ids), steps then slots rising within each.
+        assert_eq!(
+            order(
+                &["b", "b", "b", "a", "a"],
+                &[0, 0, 1, 0, 1],
+                &[0, 1, 0, 0, 0]
+            ),
+            Some(true)
+        );
+        // A slot out of order within a step.
+        assert_eq!(order(&["b", "b", "a"], &[0, 0, 0], &[1, 0, 0]), Some(false));
+        // A step out of order, whatever the slots.
+        assert_eq!(order(&["a", "a", "b"], &[1, 0, 0], &[0, 5, 0]), Some(false));
+        // A trace's rows in two runs.
+        assert_eq!(order(&["a", "b", "a"], &[0, 0, 1], &[0, 0, 0]), Some(false));
+        assert_eq!(order(&[], &[], &[]), Some(true));
+        // A key that is not an integer column: the caller sorts.
+        let ids = StringArray::from(vec!["a"]);
+        let t: ArrayRef = Arc::new(arrow::array::Float64Array::from(vec![0.0]));
+        assert_eq!(grouped_order(&ids, &[&t]), None);
+    }
 }
