@@ -356,16 +356,9 @@ fn score_all<S: Sync>(
             match c.kind {
                 RewardKind::Sparse => (if verified { 1.0 } else { 0.0 }, verified, false),
                 RewardKind::Dense => {
-                    // Dense samples are traces (`simulate_all`); columns would be built here.
-                    let built;
-                    let trace = match sample {
-                        Simulated::Trace(t) => t,
-                        Simulated::Columns(cols) => {
-                            built = cols.clone().into_trace();
-                            &built
-                        }
-                    };
-                    let at = AnnotatedTrace::new(trace, &anns[i]);
+                    // Dense samples are traces already (`simulate_all`): borrowed, not built.
+                    let trace = sample.trace();
+                    let at = AnnotatedTrace::new(&trace, &anns[i]);
                     match evaluate(&goal.program, &at) {
                         Ok(e) => (e.score, verified, false),
                         Err(_) => (0.0, verified, true),

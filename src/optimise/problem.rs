@@ -95,6 +95,14 @@ impl Simulated {
         }
     }
 
+    /// The paper-layout trace, borrowed, or built from the columns.
+    pub fn trace(&self) -> std::borrow::Cow<'_, Trace> {
+        match self {
+            Simulated::Trace(t) => std::borrow::Cow::Borrowed(t),
+            Simulated::Columns(c) => std::borrow::Cow::Owned(c.clone().into_trace()),
+        }
+    }
+
     /// Whether `rule` holds on the sample (read from the columns when it is held in columns).
     pub fn holds(&self, rule: &Rule) -> Result<bool, RewardError> {
         match self {

@@ -649,26 +649,21 @@ impl StrCol {
         }
     }
 
-    fn is_null(&self, i: usize) -> bool {
-        match self {
-            StrCol::Plain(a) => a.is_null(i),
-            StrCol::Dict { keys, values } => {
-                keys.is_null(i) || values.is_null(keys.value(i) as usize)
-            }
-        }
-    }
-
     /// Row `i` (the empty string where it is null).
     fn value(&self, i: usize) -> &str {
-        match self {
-            StrCol::Plain(a) => a.value(i),
-            StrCol::Dict { keys, values } => values.value(keys.value(i) as usize),
-        }
+        self.get(i).unwrap_or("")
     }
 
-    /// Row `i`, `None` where it is null.
+    /// Row `i`, `None` where it is null (or, in a damaged file, its key is outside the dictionary).
     fn get(&self, i: usize) -> Option<&str> {
-        (!self.is_null(i)).then(|| self.value(i))
+        match self {
+            StrCol::Plain(a) => (!a.is_null(i)).then(|| a.value(i)),
+            StrCol::Dict { keys, values } => {
+                let k = usize::try_from(keys.value(i)).ok()?;
+                (!keys.is_null(i) && k < values.len() && !values.is_null(k))
+                    .then(|| values.value(k))
+            }
+        }
     }
 }
 
