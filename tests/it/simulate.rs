@@ -191,6 +191,46 @@ fn output_is_byte_identical_whatever_the_thread_count() {
     assert_eq!(a, b);
 }
 
+/// One shard of 11 scenes × 2 shots: with three threads its items are simulated in chunks of 6 on
+/// every thread while the shard's thread writes the chunk before; the file is the one-thread file.
+#[test]
+fn one_shard_simulated_on_several_threads_is_the_one_thread_shard() {
+    let t = TestRun::new();
+    let args = |run: &'static str| {
+        vec![
+            "simulate",
+            "--scenes",
+            "11",
+            "--shots",
+            "2",
+            "--seed",
+            "12",
+            "--scenes-per-shard",
+            "11",
+            "--dt",
+            "0.1",
+            "--run",
+            run,
+        ]
+    };
+    t.run_env(&args("one"), &[("RAYON_NUM_THREADS", "1")]).ok();
+    t.run_env(&args("three"), &[("RAYON_NUM_THREADS", "3")])
+        .ok();
+    let (a, b) = (tree(&t, "one"), tree(&t, "three"));
+    assert_eq!(a.len(), 5, "1 shard × 5 tables: {:?}", a.keys());
+    assert_eq!(a, b);
+    t.run(&[
+        "query",
+        "--run",
+        "three",
+        "--format",
+        "csv",
+        "select count(*) as n from traces",
+    ])
+    .ok()
+    .stdout_has("22");
+}
+
 #[test]
 fn a_killed_simulation_resumes_to_the_same_tables() {
     let t = TestRun::new();

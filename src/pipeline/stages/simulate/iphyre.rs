@@ -3,7 +3,8 @@
 //! trace tables, sharded and resumable like the billiards datasets.
 //!
 //! **Owns:** the I-PHYRE half of the `simulate` stage: reading its parameters, choosing the
-//! (game, click set) work list, trace and scene ids, and writing one shard's tables.
+//! (game, click set) work list, trace and scene ids, and simulating one work item into its scene row,
+//! trace and counts.
 //! **Does not:** declare the stage kind or its parameter list (`simulate.rs`, which routes here), or
 //! simulate anything itself (`envs::iphyre`).
 //!
@@ -25,7 +26,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
-use super::shards::{ShardSinks, ShardTotals, replay_pair};
+use super::shards::{Count, ItemOutput, ShardTotals, replay_pair};
 use super::{ShardParams, SimulateSummary, Simulation};
 use crate::digest::hex;
 use crate::envs::iphyre::{
@@ -34,7 +35,7 @@ use crate::envs::iphyre::{
 };
 use crate::pipeline::registry::BuildError;
 use crate::pipeline::spec::PipelineSpec;
-use crate::pipeline::stage::{StageContext, StageError};
+use crate::pipeline::stage::StageError;
 use crate::trace::Env;
 use crate::trace::batch::scene_batch;
 
@@ -279,58 +280,49 @@ impl Simulation for IphyreSimulation {
         vec![self.item(i).2]
     }
 
-    fn fill_shard(
-        &self,
-        ctx: &StageContext<'_>,
-        sinks: &mut ShardSinks<'_, '_>,
-        lo: u64,
-        hi: u64,
-    ) -> Result<Value, StageError> {
-        let (mut traces, mut successes, mut eliminations, mut reward) = (0u64, 0u64, 0u64, 0.0);
-        for i in lo..hi {
-            let (game, sample, trace_id, clicks) = self.item(i);
-            let scene_id = format!("iphyre-{}", game.name);
-            if sample == 0 {
-                let spec = json!({
-                    "game": game.name,
-                    "index": game.index,
-                    "fold": game.fold,
-                    "fps": self.params.fps,
-                    "engine": self.params.engine.name(),
-                    "objects": game.objects.len(),
-                    "eliminable": game.eliminable().count(),
-                    "joints": game.joints,
-                    "springs": game.springs,
-                });
-                let batch = scene_batch(
-                    &scene_id,
-                    &game.name,
-                    sinks.source(),
-                    game.objects.len(),
-                    &spec,
-                )?;
-                sinks.write("scenes", &batch)?;
-            }
-            let result = Episode::new(game, &clicks, &self.params, true)
-                .map_err(|e| StageError::Simulation {
-                    item: format!("trace {trace_id}"),
-                    source: e.into(),
-                })?
-                .run();
-            let trace = trace_columns(&result, game, &trace_id);
-            traces += 1;
-            successes += u64::from(result.success);
-            eliminations += result.eliminations as u64;
-            reward += result.reward;
-            sinks.write_columns(trace, &scene_id, i == lo)?;
-            ctx.progress().advance(ctx.stage_id(), 1);
-        }
-        Ok(json!({
-            "traces": traces,
-            "successes": successes,
-            "eliminations": eliminations,
-            "reward": reward,
-        }))
+    fn simulate_item(&self, index: u64, source: &str) -> Result<ItemOutput, StageError> {
+        let (game, sample, trace_id, clicks) = self.item(index);
+        let scene_id = format!("iphyre-{}", game.name);
+        let scene = if sample == 0 {
+            let spec = json!({
+                "game": game.name,
+                "index": game.index,
+                "fold": game.fold,
+                "fps": self.params.fps,
+                "engine": self.params.engine.name(),
+                "objects": game.objects.len(),
+                "eliminable": game.eliminable().count(),
+                "joints": game.joints,
+                "springs": game.springs,
+            });
+            Some(scene_batch(
+                &scene_id,
+                &game.name,
+                source,
+                game.objects.len(),
+                &spec,
+            )?)
+        } else {
+            None
+        };
+        let result = Episode::new(game, &clicks, &self.params, true)
+            .map_err(|e| StageError::Simulation {
+                item: format!("trace {trace_id}"),
+                source: e.into(),
+            })?
+            .run();
+        let trace = trace_columns(&result, game, &trace_id);
+        Ok(ItemOutput {
+            scene,
+            scene_id,
+            traces: vec![trace],
+            counts: vec![
+                ("traces", Count::Int(1)),
+                ("successes", Count::Int(u64::from(result.success))),
+                ("eliminations", Count::Int(result.eliminations as u64)),
+                ("reward", Count::Float(result.reward)),
+            ],
+        })
     }
 
     fn report(&self, sums: &ShardTotals) -> (SimulateSummary, String) {

@@ -22,7 +22,7 @@ use serde_json::Value;
 pub use self::iphyre::{IphyreSimParams, parse_clicks, select_games};
 pub use self::phyre::{PhyreSimParams, select_tasks};
 pub use self::pool::{PoolSimParams, parse_shot};
-use self::shards::{ShardSinks, ShardTotals, check_ids_are_new, run_shards};
+use self::shards::{ItemOutput, ShardTotals, check_ids_are_new, run_shards};
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
@@ -153,14 +153,10 @@ pub(crate) trait Simulation: Send + Sync + std::fmt::Debug {
     /// What decides whether cached output is still valid beyond the parameters (the resolved seed,
     /// hashes of data files).
     fn fingerprint_extra(&self) -> Result<Value, StageError>;
-    /// Simulates items `lo..hi` into one shard's files; the shard's counts as a JSON object.
-    fn fill_shard(
-        &self,
-        ctx: &StageContext<'_>,
-        sinks: &mut ShardSinks<'_, '_>,
-        lo: u64,
-        hi: u64,
-    ) -> Result<Value, StageError>;
+    /// Simulates work item `index` (its scene row when it opens the scene, its traces, its counts for
+    /// the shard's record); `source` is the `source` column of the rows. Items are independent of one
+    /// another (any thread may simulate any item; `shards` writes them in order).
+    fn simulate_item(&self, index: u64, source: &str) -> Result<ItemOutput, StageError>;
     /// The stage's summary and terminal line from the summed shard counts.
     fn report(&self, sums: &ShardTotals) -> (SimulateSummary, String);
 }
@@ -262,8 +258,9 @@ impl Stage for SimulateStage {
             (0..total).flat_map(|i| sim.trace_ids(i)),
         )?;
         ctx.progress().set_total(ctx.stage_id(), total);
-        let sums = run_shards(ctx, sim.env(), total, self.per_shard, |sinks, lo, hi| {
-            sim.fill_shard(ctx, sinks, lo, hi)
+        let source = shards::source(ctx);
+        let sums = run_shards(ctx, sim.env(), total, self.per_shard, |i| {
+            sim.simulate_item(i, &source)
         })?;
         let (summary, line) = sim.report(&sums);
         Ok(StageOutput {

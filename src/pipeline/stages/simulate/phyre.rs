@@ -2,7 +2,8 @@
 //! trace tables, sharded and resumable like the other environments.
 //!
 //! **Owns:** the PHYRE half of the `simulate` stage: reading its parameters, choosing the (task, action)
-//! work list, scene and trace ids, and writing one shard's tables.
+//! work list, scene and trace ids, and simulating one work item (a task and action) into its scene row,
+//! trace and counts.
 //! **Does not:** declare the stage kind or its parameter list (`simulate.rs`, which routes here), or
 //! simulate anything itself (`envs::phyre`).
 //!
@@ -24,7 +25,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
-use super::shards::{ShardSinks, ShardTotals, replay_pair};
+use super::shards::{Count, ItemOutput, ShardTotals, replay_pair};
 use super::{ShardParams, SimulateSummary, Simulation};
 use crate::digest::hex;
 use crate::envs::phyre::{
@@ -34,7 +35,7 @@ use crate::envs::phyre::{
 };
 use crate::pipeline::registry::BuildError;
 use crate::pipeline::spec::PipelineSpec;
-use crate::pipeline::stage::{StageContext, StageError};
+use crate::pipeline::stage::StageError;
 use crate::trace::Env;
 use crate::trace::batch::scene_batch;
 
@@ -287,62 +288,58 @@ impl Simulation for PhyreSimulation {
         vec![self.item(i).2]
     }
 
-    fn fill_shard(
-        &self,
-        ctx: &StageContext<'_>,
-        sinks: &mut ShardSinks<'_, '_>,
-        lo: u64,
-        hi: u64,
-    ) -> Result<Value, StageError> {
-        let set = TaskSet::default_tasks().map_err(|e| StageError::Simulation {
+    fn simulate_item(&self, index: u64, source: &str) -> Result<ItemOutput, StageError> {
+        let tasks_error = |e: crate::envs::phyre::PhyreError| StageError::Simulation {
             item: "PHYRE tasks".to_string(),
             source: e.into(),
+        };
+        let set = TaskSet::default_tasks().map_err(tasks_error)?;
+        let (task_id, sample, trace_id) = self.item(index);
+        let task = set.get(task_id).map_err(tasks_error)?;
+        let scene_id = format!("phyre-{}", task_id.replace(':', "-"));
+        let scene = if sample == 0 {
+            let spec = json!({
+                "task_id": task.task_id,
+                "template_id": task.template_id,
+                "description": task.description,
+                "goal": {"body1": task.body1, "body2": task.body2, "relationships": task.relationships},
+                "bodies": task.bodies.len(),
+            });
+            Some(scene_batch(
+                &scene_id,
+                task_id,
+                source,
+                task.bodies.len(),
+                &spec,
+            )?)
+        } else {
+            None
+        };
+        let action = self.action(&task, sample, set)?;
+        let result = episode::run(&task, &action, &self.params, &self.record).map_err(|e| {
+            StageError::Simulation {
+                item: format!("trace {trace_id}"),
+                source: e.into(),
+            }
         })?;
-        let (mut traces, mut successes, mut invalid, mut steps) = (0u64, 0u64, 0u64, 0u64);
-        let mut task: Option<Task> = None;
-        for i in lo..hi {
-            let (task_id, sample, trace_id) = self.item(i);
-            if task.as_ref().is_none_or(|t| t.task_id != task_id) {
-                task = Some(set.get(task_id).map_err(|e| StageError::Simulation {
-                    item: "PHYRE tasks".to_string(),
-                    source: e.into(),
-                })?);
-            }
-            let Some(task) = task.as_ref() else { continue };
-            let scene_id = format!("phyre-{}", task_id.replace(':', "-"));
-            if sample == 0 {
-                let spec = json!({
-                    "task_id": task.task_id,
-                    "template_id": task.template_id,
-                    "description": task.description,
-                    "goal": {"body1": task.body1, "body2": task.body2, "relationships": task.relationships},
-                    "bodies": task.bodies.len(),
-                });
-                let batch =
-                    scene_batch(&scene_id, task_id, sinks.source(), task.bodies.len(), &spec)?;
-                sinks.write("scenes", &batch)?;
-            }
-            let action = self.action(task, sample, set)?;
-            let result = episode::run(task, &action, &self.params, &self.record).map_err(|e| {
-                StageError::Simulation {
-                    item: format!("trace {trace_id}"),
-                    source: e.into(),
-                }
-            })?;
-            let trace = trace_columns(&result, task, &trace_id);
-            traces += 1;
-            successes += u64::from(result.status == Status::Solved);
-            invalid += u64::from(result.status == Status::InvalidInput);
-            steps += result.steps as u64;
-            sinks.write_columns(trace, &scene_id, i == lo)?;
-            ctx.progress().advance(ctx.stage_id(), 1);
-        }
-        Ok(json!({
-            "traces": traces,
-            "successes": successes,
-            "invalid": invalid,
-            "steps": steps,
-        }))
+        let trace = trace_columns(&result, &task, &trace_id);
+        Ok(ItemOutput {
+            scene,
+            scene_id,
+            traces: vec![trace],
+            counts: vec![
+                ("traces", Count::Int(1)),
+                (
+                    "successes",
+                    Count::Int(u64::from(result.status == Status::Solved)),
+                ),
+                (
+                    "invalid",
+                    Count::Int(u64::from(result.status == Status::InvalidInput)),
+                ),
+                ("steps", Count::Int(result.steps as u64)),
+            ],
+        })
     }
 
     fn report(&self, sums: &ShardTotals) -> (SimulateSummary, String) {

@@ -2,7 +2,8 @@
 //! pooltool 0.6.0's physics (`envs::pool`).
 //!
 //! **Owns:** the billiards parameters ([`PoolSimParams`]), the work list, trace and scene ids, and
-//! filling one shard. **Does not:** simulate (`envs::pool`) or run shards (`shards`).
+//! simulating one work item (a rack and its shots). **Does not:** simulate (`envs::pool`) or run and write
+//! shards (`shards`).
 //!
 //! Two modes. **Dataset**: `scenes` seeded 9-ball racks × `shots` random shots each; scene `i` and shot
 //! `k` draw from RNGs derived from (`seed`, `i`) and (`seed`, `i`, `k`) alone, so the tables are
@@ -19,7 +20,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
-use super::shards::{ShardSinks, ShardTotals, replay_pair};
+use super::shards::{Count, ItemOutput, ShardTotals, replay_pair};
 use super::{ShardParams, SimulateSummary, Simulation};
 use crate::digest::hex;
 use crate::envs::pool::{
@@ -27,7 +28,7 @@ use crate::envs::pool::{
 };
 use crate::pipeline::registry::BuildError;
 use crate::pipeline::spec::PipelineSpec;
-use crate::pipeline::stage::{StageContext, StageError};
+use crate::pipeline::stage::StageError;
 use crate::trace::Env;
 use crate::trace::batch::scene_batch;
 
@@ -260,57 +261,51 @@ impl Simulation for PoolSimulation {
         Ok(json!({"table": table, "work": work}))
     }
 
-    fn fill_shard(
-        &self,
-        ctx: &StageContext<'_>,
-        sinks: &mut ShardSinks<'_, '_>,
-        lo: u64,
-        hi: u64,
-    ) -> Result<Value, StageError> {
-        let (mut traces, mut successes, mut capped, mut events) = (0u64, 0u64, 0u64, 0u64);
-        for index in lo..hi {
-            let (scene, shots) = self.scene_work(index);
-            let system = scene
-                .system(&self.config)
-                .map_err(|e| StageError::Simulation {
-                    item: format!("scene {}", scene.scene_id),
-                    source: e.into(),
-                })?;
-            let mut spec = scene.to_json();
-            spec["table"] = json!(self.config.name);
-            spec["index"] = json!(index);
-            let batch = scene_batch(
-                &scene.scene_id,
-                &scene.scene_id,
-                sinks.source(),
-                scene.balls.len(),
-                &spec,
-            )?;
-            sinks.write("scenes", &batch)?;
-            for (trace_id, shot) in &shots {
-                let sim =
-                    simulate(&system, shot, &self.sim).map_err(|e| StageError::Simulation {
-                        item: format!("trace {trace_id}"),
-                        source: e.into(),
-                    })?;
-                let trace = trace_columns(&sim, &scene, shot, trace_id, &self.trace);
-                traces += 1;
-                successes += u64::from(trace.outcome.success);
-                capped += u64::from(matches!(
-                    trace.outcome.terminal_status.as_str(),
-                    "max_events" | "max_time"
-                ));
-                events += sim.events.len() as u64;
-                sinks.write_columns(trace, &scene.scene_id, index == lo)?;
-            }
-            ctx.progress().advance(ctx.stage_id(), 1);
+    fn simulate_item(&self, index: u64, source: &str) -> Result<ItemOutput, StageError> {
+        let (scene, shots) = self.scene_work(index);
+        let system = scene
+            .system(&self.config)
+            .map_err(|e| StageError::Simulation {
+                item: format!("scene {}", scene.scene_id),
+                source: e.into(),
+            })?;
+        let mut spec = scene.to_json();
+        spec["table"] = json!(self.config.name);
+        spec["index"] = json!(index);
+        let batch = scene_batch(
+            &scene.scene_id,
+            &scene.scene_id,
+            source,
+            scene.balls.len(),
+            &spec,
+        )?;
+        let (mut successes, mut capped, mut events) = (0u64, 0u64, 0u64);
+        let mut traces = Vec::with_capacity(shots.len());
+        for (trace_id, shot) in &shots {
+            let sim = simulate(&system, shot, &self.sim).map_err(|e| StageError::Simulation {
+                item: format!("trace {trace_id}"),
+                source: e.into(),
+            })?;
+            let trace = trace_columns(&sim, &scene, shot, trace_id, &self.trace);
+            successes += u64::from(trace.outcome.success);
+            capped += u64::from(matches!(
+                trace.outcome.terminal_status.as_str(),
+                "max_events" | "max_time"
+            ));
+            events += sim.events.len() as u64;
+            traces.push(trace);
         }
-        Ok(json!({
-            "traces": traces,
-            "successes": successes,
-            "capped": capped,
-            "physics_events": events,
-        }))
+        Ok(ItemOutput {
+            scene: Some(batch),
+            scene_id: scene.scene_id,
+            counts: vec![
+                ("traces", Count::Int(traces.len() as u64)),
+                ("successes", Count::Int(successes)),
+                ("capped", Count::Int(capped)),
+                ("physics_events", Count::Int(events)),
+            ],
+            traces,
+        })
     }
 
     fn report(&self, sums: &ShardTotals) -> (SimulateSummary, String) {

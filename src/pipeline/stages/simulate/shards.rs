@@ -1,11 +1,17 @@
 //! The shard machinery every environment's `simulate` shares: work items `0..total` cut into shards
-//! of `per_shard` items, run in parallel on rayon's pool, each shard's tables written to its own
-//! Parquet files and committed, its counts recorded so a killed stage resumes at the first unfinished
-//! shard; and the checks every environment makes (trace ids new to the run, replay parameters given in
-//! pairs).
+//! of `per_shard` items, each shard's tables written to its own Parquet files and committed, its counts
+//! recorded so a killed stage resumes at the first unfinished shard; and the checks every environment
+//! makes (trace ids new to the run, replay parameters given in pairs).
 //!
-//! **Owns:** [`run_shards`], [`ShardSinks`], [`ShardTotals`], [`check_ids_are_new`], [`replay_pair`].
-//! **Does not:** know any environment (each `Simulation` fills a shard's items).
+//! **Parallelism.** Shards run in parallel on rayon's pool, and so do the items inside a shard: a
+//! shard's thread writes one chunk of items while the next chunk is simulated ([`fill_shard`]), so
+//! when fewer shards are left than threads (500 PHYRE tasks are 5 shards of 100: on two threads the
+//! last one ran alone), the idle threads simulate the last shards' items instead of waiting. Items
+//! are written in order, so the files do not depend on the thread count.
+//!
+//! **Owns:** [`run_shards`], [`ItemOutput`], [`ShardSinks`], [`ShardTotals`], [`check_ids_are_new`],
+//! [`replay_pair`].
+//! **Does not:** know any environment (each `Simulation` simulates one item into an [`ItemOutput`]).
 
 use std::collections::BTreeMap;
 
@@ -40,17 +46,44 @@ impl ShardTotals {
     }
 }
 
+/// A count an item reports for its shard's record: a whole number (`traces`) or a measure (`reward`).
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Count {
+    /// Summed as an integer, recorded as one.
+    Int(u64),
+    /// Summed in item order, recorded as a float.
+    Float(f64),
+}
+
+/// What simulating one work item gives, to be written in item order: the scene row to write before
+/// its traces (when the item opens a scene), its traces, the scene they belong to, and its counts.
+pub(crate) struct ItemOutput {
+    /// The `scenes` row(s) to write first, if this item opens its scene.
+    pub(crate) scene: Option<RecordBatch>,
+    /// The scene id of the item's traces.
+    pub(crate) scene_id: String,
+    /// The item's traces, in the order they are written.
+    pub(crate) traces: Vec<TraceColumns>,
+    /// Counts summed into the shard's record (every item names the same fields).
+    pub(crate) counts: Vec<(&'static str, Count)>,
+}
+
+/// The `source` column of the rows a `simulate` stage writes: `simulate:<stage id>`.
+pub(crate) fn source(ctx: &StageContext<'_>) -> String {
+    format!("simulate:{}", ctx.stage_id())
+}
+
 /// Splits `0..total` into shards of `per_shard` items, runs them in parallel (rayon) and sums their
-/// records. A shard an earlier run finished is skipped (its record reused). Otherwise `fill(sinks, lo,
-/// hi)` simulates items `lo..hi` into the shard's files and returns the shard's counts as a JSON
-/// object; the files are then committed and the counts, with the rows written per table (`rows`),
+/// records. A shard an earlier run finished is skipped (its record reused). Otherwise its items are
+/// simulated with `simulate(i)` and written in order into the shard's files ([`fill_shard`]); the
+/// files are then committed and the summed counts, with the rows written per table (`rows`),
 /// recorded as the shard's record.
 pub(crate) fn run_shards(
     ctx: &StageContext<'_>,
     env: Env,
     total: u64,
     per_shard: u64,
-    fill: impl Fn(&mut ShardSinks<'_, '_>, u64, u64) -> Result<Value, StageError> + Sync,
+    simulate: impl Fn(u64) -> Result<ItemOutput, StageError> + Sync,
 ) -> Result<ShardTotals, StageError> {
     let per_shard = per_shard.max(1);
     let shards: Vec<(u64, u64)> = (0..total.div_ceil(per_shard))
@@ -70,7 +103,7 @@ pub(crate) fn run_shards(
                 return Ok(record);
             }
             let mut sinks = ShardSinks::new(ctx, env, name.clone());
-            let mut record = fill(&mut sinks, lo, hi)?;
+            let mut record = fill_shard(ctx, &mut sinks, lo, hi, &simulate)?;
             record["rows"] = json!(sinks.commit()?);
             ctx.finish_shard(&name, &record)?;
             Ok(record)
@@ -89,6 +122,71 @@ pub(crate) fn run_shards(
         }
     }
     Ok(totals)
+}
+
+/// Items simulated ahead of a shard's writer: twice the threads (at least 2, at most 32), enough for
+/// every idle thread to take one while the writer writes the chunk before.
+fn chunk_len() -> u64 {
+    (2 * rayon::current_num_threads()).clamp(2, 32) as u64
+}
+
+/// Simulates items `lo..hi` of one shard and writes them in order; the shard's summed counts as a
+/// JSON object. The shard's thread writes chunk k while chunk k + 1 is simulated (`rayon::join`: the
+/// simulation is taken by an idle thread, or run by this one after the writes), so the files are the
+/// same for any thread count. An item that fails stops the shard with its error when the writer
+/// reaches it: the first failing item in order, as a sequential loop would report it.
+fn fill_shard(
+    ctx: &StageContext<'_>,
+    sinks: &mut ShardSinks<'_, '_>,
+    lo: u64,
+    hi: u64,
+    simulate: &(impl Fn(u64) -> Result<ItemOutput, StageError> + Sync),
+) -> Result<Value, StageError> {
+    let chunk = chunk_len();
+    let simulate_chunk = |a: u64, b: u64| -> Vec<Result<ItemOutput, StageError>> {
+        (a..b).into_par_iter().map(simulate).collect()
+    };
+    let mut ints: BTreeMap<&'static str, u64> = BTreeMap::new();
+    let mut floats: BTreeMap<&'static str, f64> = BTreeMap::new();
+    let mut at = lo;
+    let mut ready = simulate_chunk(lo, (lo + chunk).min(hi));
+    while !ready.is_empty() {
+        let next = at + ready.len() as u64;
+        let (written, upcoming) = rayon::join(
+            || -> Result<(), StageError> {
+                for (k, item) in ready.into_iter().enumerate() {
+                    let index = at + k as u64;
+                    let out = item?;
+                    if let Some(scene) = &out.scene {
+                        sinks.write("scenes", scene)?;
+                    }
+                    for trace in out.traces {
+                        sinks.write_columns(trace, &out.scene_id, index == lo)?;
+                    }
+                    for (field, count) in out.counts {
+                        match count {
+                            Count::Int(n) => *ints.entry(field).or_default() += n,
+                            Count::Float(x) => *floats.entry(field).or_default() += x,
+                        }
+                    }
+                    ctx.progress().advance(ctx.stage_id(), 1);
+                }
+                Ok(())
+            },
+            || simulate_chunk(next, (next + chunk).min(hi)),
+        );
+        written?;
+        ready = upcoming;
+        at = next;
+    }
+    let mut record = serde_json::Map::new();
+    for (field, n) in ints {
+        record.insert(field.to_string(), json!(n));
+    }
+    for (field, x) in floats {
+        record.insert(field.to_string(), json!(x));
+    }
+    Ok(Value::Object(record))
 }
 
 /// The two parameters of a replay (`scene_file` and `shot`, `game` and `clicks`, `task` and `action`):
@@ -159,16 +257,11 @@ impl<'a, 'c> ShardSinks<'a, 'c> {
             ctx,
             env,
             name,
-            source: format!("simulate:{}", ctx.stage_id()),
+            source: source(ctx),
             ordinal,
             sinks: BTreeMap::new(),
             column_sinks: BTreeMap::new(),
         }
-    }
-
-    /// The `source` column of the rows this stage writes (`simulate:<stage id>`).
-    pub(crate) fn source(&self) -> &str {
-        &self.source
     }
 
     /// Appends one trace's rows to the `traces`, `timesteps`, `frames` and `events` files, straight
