@@ -31,6 +31,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicUsize;
 use std::time::Instant;
 
+use rayon::prelude::*;
 use serde_json::{Map, Value};
 use sha2::{Digest, Sha256};
 
@@ -928,10 +929,13 @@ impl Session<'_> {
             done: 0,
         };
         steps.check()?;
-        let mut outputs = Vec::new();
-        for (staged, target) in staging.pending()? {
-            outputs.push(output_record(run, &staged, &target)?);
-        }
+        // Sizes and checksums of the staged files, read on every core (a billiards stage of 2,000
+        // traces stages 100 files, 142 MB): in file order, so the manifest is the same.
+        let mut outputs = staging
+            .pending()?
+            .par_iter()
+            .map(|(staged, target)| output_record(run, staged, target))
+            .collect::<Result<Vec<_>, _>>()?;
         for f in &output.files {
             let f = if f.is_absolute() || f.starts_with(run.root()) {
                 f.clone()
