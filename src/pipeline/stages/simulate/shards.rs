@@ -55,6 +55,19 @@ pub(crate) enum Count {
     Float(f64),
 }
 
+impl Count {
+    /// Adds another item's count of the same field (an integer to an integer, a float to a float;
+    /// a field reported both ways becomes a float).
+    fn add(&mut self, other: Count) {
+        *self = match (*self, other) {
+            (Count::Int(a), Count::Int(b)) => Count::Int(a + b),
+            (Count::Int(a), Count::Float(b)) => Count::Float(a as f64 + b),
+            (Count::Float(a), Count::Int(b)) => Count::Float(a + b as f64),
+            (Count::Float(a), Count::Float(b)) => Count::Float(a + b),
+        };
+    }
+}
+
 /// What simulating one work item gives, to be written in item order: the scene row to write before
 /// its traces (when the item opens a scene), its traces, the scene they belong to, and its counts.
 pub(crate) struct ItemOutput {
@@ -146,8 +159,8 @@ fn fill_shard(
     let simulate_chunk = |a: u64, b: u64| -> Vec<Result<ItemOutput, StageError>> {
         (a..b).into_par_iter().map(simulate).collect()
     };
-    let mut ints: BTreeMap<&'static str, u64> = BTreeMap::new();
-    let mut floats: BTreeMap<&'static str, f64> = BTreeMap::new();
+    // The shard's counts, in the order the items name them.
+    let mut counts: Vec<(&'static str, Count)> = Vec::new();
     let mut at = lo;
     let mut ready = simulate_chunk(lo, (lo + chunk).min(hi));
     while !ready.is_empty() {
@@ -164,9 +177,9 @@ fn fill_shard(
                         sinks.write_columns(trace, &out.scene_id, index == lo)?;
                     }
                     for (field, count) in out.counts {
-                        match count {
-                            Count::Int(n) => *ints.entry(field).or_default() += n,
-                            Count::Float(x) => *floats.entry(field).or_default() += x,
+                        match counts.iter_mut().find(|(f, _)| *f == field) {
+                            Some((_, sum)) => sum.add(count),
+                            None => counts.push((field, count)),
                         }
                     }
                     ctx.progress().advance(ctx.stage_id(), 1);
@@ -180,11 +193,12 @@ fn fill_shard(
         at = next;
     }
     let mut record = serde_json::Map::new();
-    for (field, n) in ints {
-        record.insert(field.to_string(), json!(n));
-    }
-    for (field, x) in floats {
-        record.insert(field.to_string(), json!(x));
+    for (field, count) in counts {
+        let value = match count {
+            Count::Int(n) => json!(n),
+            Count::Float(x) => json!(x),
+        };
+        record.insert(field.to_string(), value);
     }
     Ok(Value::Object(record))
 }
