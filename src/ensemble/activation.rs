@@ -30,6 +30,7 @@
 
 use std::collections::{BTreeMap, HashMap};
 
+use rayon::prelude::*;
 use serde_json::json;
 
 use crate::detect::{Annotation, Detector, DetectorId, EnsembleSettings, Library};
@@ -395,16 +396,22 @@ pub fn combine(detectors: &[Detector], traces: &[Trace], anns: Vec<Annotation>) 
         }
     }
     let prepared: Vec<Prepared> = ensembles.iter().map(Prepared::of).collect();
-    for trace in traces {
-        let Some(slots) = by_trace.get(trace.trace_id.as_str()) else {
-            continue;
-        };
-        for ((e, items), p) in ensembles.iter().zip(slots).zip(&prepared) {
-            if !items.is_empty() {
-                out.extend(e.clusters(trace, items, p));
+    // Traces are combined on every core (the detector workers wait meanwhile), in trace order.
+    let per_trace: Vec<Vec<Annotation>> = traces
+        .par_iter()
+        .map(|trace| {
+            let mut found = Vec::new();
+            if let Some(slots) = by_trace.get(trace.trace_id.as_str()) {
+                for ((e, items), p) in ensembles.iter().zip(slots).zip(&prepared) {
+                    if !items.is_empty() {
+                        found.extend(e.clusters(trace, items, p));
+                    }
+                }
             }
-        }
-    }
+            found
+        })
+        .collect();
+    out.extend(per_trace.into_iter().flatten());
     out
 }
 
