@@ -317,7 +317,6 @@ impl Simulation for IphyreSimulation {
             scene_id,
             traces: vec![trace],
             counts: vec![
-                ("traces", Count::Int(1)),
                 ("successes", Count::Int(u64::from(result.success))),
                 ("eliminations", Count::Int(result.eliminations as u64)),
                 ("reward", Count::Float(result.reward)),

@@ -328,7 +328,6 @@ impl Simulation for PhyreSimulation {
             scene_id,
             traces: vec![trace],
             counts: vec![
-                ("traces", Count::Int(1)),
                 (
                     "successes",
                     Count::Int(u64::from(result.status == Status::Solved)),

@@ -299,7 +299,6 @@ impl Simulation for PoolSimulation {
             scene: Some(batch),
             scene_id: scene.scene_id,
             counts: vec![
-                ("traces", Count::Int(traces.len() as u64)),
                 ("successes", Count::Int(successes)),
                 ("capped", Count::Int(capped)),
                 ("physics_events", Count::Int(events)),

@@ -46,7 +46,8 @@ impl ShardTotals {
     }
 }
 
-/// A count an item reports for its shard's record: a whole number (`traces`) or a measure (`reward`).
+/// A count an item reports for its shard's record: a whole number (`successes`) or a measure
+/// (`reward`).
 #[derive(Clone, Copy, Debug)]
 pub(crate) enum Count {
     /// Summed as an integer, recorded as one.
@@ -77,7 +78,8 @@ pub(crate) struct ItemOutput {
     pub(crate) scene_id: String,
     /// The item's traces, in the order they are written.
     pub(crate) traces: Vec<TraceColumns>,
-    /// Counts summed into the shard's record (every item names the same fields).
+    /// Counts summed into the shard's record after `traces` (which the writer counts; every item
+    /// names the same fields).
     pub(crate) counts: Vec<(&'static str, Count)>,
 }
 
@@ -173,10 +175,11 @@ fn fill_shard(
                     if let Some(scene) = &out.scene {
                         sinks.write("scenes", scene)?;
                     }
+                    let traces = ("traces", Count::Int(out.traces.len() as u64));
                     for trace in out.traces {
                         sinks.write_columns(trace, &out.scene_id, index == lo)?;
                     }
-                    for (field, count) in out.counts {
+                    for (field, count) in std::iter::once(traces).chain(out.counts) {
                         match counts.iter_mut().find(|(f, _)| *f == field) {
                             Some((_, sum)) => sum.add(count),
                             None => counts.push((field, count)),
