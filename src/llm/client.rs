@@ -15,8 +15,8 @@
 //! from inside an async runtime.
 
 use std::path::Path;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant, SystemTime};
 
 use super::backoff::{delay, parse_retry_after};
@@ -26,6 +26,7 @@ use super::error::LlmError;
 use super::message::{ChatReply, ChatRequest, excerpt, parse_answer};
 use super::record::{CallLog, CallRecord, now_ms, status};
 use super::replay::ReplayIndex;
+use super::slots::Slots;
 use super::waiting::{Board, WaitObserver, Watch};
 use crate::detect::count_tokens;
 use crate::digest::sha256_hex;
@@ -73,39 +74,6 @@ pub struct LlmClient {
     record_replayed: bool,
     session: String,
     seq: AtomicU64,
-}
-
-/// A counting semaphore: at most `n` requests in flight.
-#[derive(Debug)]
-struct Slots {
-    free: Mutex<usize>,
-    cv: Condvar,
-}
-
-struct SlotGuard<'a>(&'a Slots);
-
-impl Slots {
-    fn new(n: usize) -> Self {
-        Slots {
-            free: Mutex::new(n),
-            cv: Condvar::new(),
-        }
-    }
-    fn acquire(&self) -> SlotGuard<'_> {
-        let mut free = self.free.lock().unwrap_or_else(|p| p.into_inner());
-        while *free == 0 {
-            free = self.cv.wait(free).unwrap_or_else(|p| p.into_inner());
-        }
-        *free -= 1;
-        SlotGuard(self)
-    }
-}
-
-impl Drop for SlotGuard<'_> {
-    fn drop(&mut self) {
-        *self.0.free.lock().unwrap_or_else(|p| p.into_inner()) += 1;
-        self.0.cv.notify_one();
-    }
 }
 
 /// One call of [`LlmClient::chat`]: the request, its id and the body sent on every attempt.
@@ -426,7 +394,7 @@ impl LlmClient {
             let t0 = Instant::now();
             let (timeout, call_started, deadline);
             let outcome = {
-                let _slot = self.slots.acquire();
+                let _slot = self.slots.acquire(call.req.order);
                 (call_started, deadline) = *clock.get_or_insert_with(|| {
                     let now = Instant::now();
                     (now, now + self.config.call_timeout)

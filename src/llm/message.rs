@@ -122,6 +122,9 @@ pub struct ChatRequest {
     pub seed: Option<u64>,
     /// Stop sequences.
     pub stop: Vec<String>,
+    /// Where the request queues for one of the client's slots when all are taken: lower orders are
+    /// admitted first, `None` after every ordered request (`llm::slots`). Neither sent nor hashed.
+    pub order: Option<u64>,
 }
 
 impl ChatRequest {
@@ -134,6 +137,7 @@ impl ChatRequest {
             max_tokens: None,
             seed: None,
             stop: Vec::new(),
+            order: None,
         }
     }
     /// Adds a message.
@@ -152,6 +156,11 @@ impl ChatRequest {
     /// Sets the seed.
     pub fn seed(mut self, seed: u64) -> Self {
         self.seed = Some(seed);
+        self
+    }
+    /// Sets the order in which the request is admitted to a slot when it has to wait for one.
+    pub fn order(mut self, order: u64) -> Self {
+        self.order = Some(order);
         self
     }
     /// Sets the temperature.

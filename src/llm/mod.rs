@@ -40,6 +40,7 @@ mod message;
 mod prompt;
 pub mod record;
 mod replay;
+mod slots;
 mod waiting;
 
 pub use self::budget::Usage;

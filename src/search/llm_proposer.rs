@@ -77,12 +77,21 @@ impl LlmProposer {
         &self.client
     }
 
-    fn ask(&self, purpose: &str, prompt: String, seed: u64) -> Result<Proposal, ProposeError> {
+    /// One request; `step` orders it in the client's queue when every slot is taken (a round's
+    /// proposals and repairs before the next round's).
+    fn ask(
+        &self,
+        purpose: &str,
+        prompt: String,
+        seed: u64,
+        step: u64,
+    ) -> Result<Proposal, ProposeError> {
         let system = self.prompts.system().map_err(unavailable)?;
         let mut req = ChatRequest::new(purpose)
             .system(system)
             .user(prompt)
-            .seed(seed);
+            .seed(seed)
+            .order(step);
         req.temperature = self.temperature;
         let reply = self.client.chat(&req).map_err(map_error)?;
         to_proposal(&reply)
@@ -165,7 +174,7 @@ impl Proposer for LlmProposer {
             library_labels: req.library_labels.clone(),
         };
         let prompt = self.prompts.render("evolve.j2", ctx).map_err(unavailable)?;
-        self.ask(PURPOSE_EVOLVE, prompt, req.seed)
+        self.ask(PURPOSE_EVOLVE, prompt, req.seed, req.step)
     }
 
     fn repair(
@@ -187,8 +196,13 @@ impl Proposer for LlmProposer {
             attempt,
         };
         let prompt = self.prompts.render("repair.j2", ctx).map_err(unavailable)?;
-        self.ask(PURPOSE_REPAIR, prompt, repair_seed(req.seed, attempt))
-            .map(Some)
+        self.ask(
+            PURPOSE_REPAIR,
+            prompt,
+            repair_seed(req.seed, attempt),
+            req.step,
+        )
+        .map(Some)
     }
 }
 

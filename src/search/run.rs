@@ -550,13 +550,15 @@ impl LabelSearch<'_> {
 
     /// Settles a launched round: each child is checked and scored as soon as its proposal is back,
     /// in step order (later proposals, and with a lag the next round's, are still in flight), and
-    /// applied to `state`. Sets `exhausted` when the proposer's budget ran out.
+    /// applied to `state`. Calls `on_first_answer` once the first proposal is back, before it is
+    /// scored. Sets `exhausted` when the proposer's budget ran out.
     fn settle_round(
         &self,
         launched: Launched<'_>,
         state: &mut State,
         busy: &Busy,
         exhausted: &mut bool,
+        mut on_first_answer: impl FnMut(),
     ) -> Result<Vec<CandidateRecord>, SearchError> {
         let mut records = Vec::with_capacity(launched.len());
         for (plan, handle) in launched {
@@ -566,6 +568,9 @@ impl LabelSearch<'_> {
                     0.0,
                 )
             });
+            if records.is_empty() {
+                on_first_answer();
+            }
             let rec = self.settle(plan, proposal, took, state, busy)?;
             *exhausted |= rec.status == "budget_exhausted";
             state.apply(&rec, self.config, self.label_index);
@@ -584,8 +589,9 @@ impl LabelSearch<'_> {
     ///
     /// Round r's parents are sampled from the database after round r − 1 − `lag` (round 0 is the
     /// seed programs; earlier rounds count as round 0). With `lag` 1 and `overlap`, round r + 1's
-    /// requests are sent as soon as round r's are all back, and round r is evaluated while they are
-    /// in flight. Saved rounds are replayed first (their records applied without proposing or
+    /// requests are sent once round r − 1 is settled (when round r's requests went out only now, as
+    /// the first round's do, once round r's first answer is back), and round r is evaluated while
+    /// they are in flight. Saved rounds are replayed first (their records applied without proposing or
     /// evaluating), keeping the database before the last of them, so a resumed search plans its next
     /// rounds from the same databases as an uninterrupted one.
     pub fn run(&self) -> Result<LabelOutcome, SearchError> {
@@ -630,29 +636,47 @@ impl LabelSearch<'_> {
             let mut next: Option<Launched<'_>> = None;
             let mut round = first_live;
             while round <= rounds && !exhausted {
-                let current = match next.take() {
-                    Some(l) => l,
+                let (current, fresh) = match next.take() {
+                    Some(l) => (l, false),
                     None => {
                         let db = if lagged && round == first_live {
                             &before_last
                         } else {
                             state.db.as_ref().expect("seeded")
                         };
-                        self.launch(sc, self.plan(db, self.steps(round)), &busy)
+                        (
+                            self.launch(sc, self.plan(db, self.steps(round)), &busy),
+                            true,
+                        )
                     }
                 };
                 // With a lag, round + 1 is planned from the database after round − 1: the one now.
+                // With the overlap it is launched now, or, when round's own requests went out just
+                // now (the first round, or after a resume), once round's first answer is back, so
+                // that round's requests reach the endpoint's slots before round + 1's (the client
+                // queues waiting requests by step, but a request that finds a free slot takes it).
                 let mut planned = None;
                 if lagged && round < rounds {
                     let plans =
                         self.plan(state.db.as_ref().expect("seeded"), self.steps(round + 1));
-                    if cfg.overlap {
+                    if cfg.overlap && !fresh {
                         next = Some(self.launch(sc, plans, &busy));
                     } else {
                         planned = Some(plans);
                     }
                 }
-                let records = self.settle_round(current, &mut state, &busy, &mut exhausted)?;
+                let mut early = planned.take_if(|_| cfg.overlap);
+                let on_first_answer = || {
+                    if let Some(plans) = early.take() {
+                        next = Some(self.launch(sc, plans, &busy));
+                    }
+                };
+                let records =
+                    self.settle_round(current, &mut state, &busy, &mut exhausted, on_first_answer)?;
+                if let Some(plans) = early.take().filter(|_| !exhausted) {
+                    // No answer came back (an empty round): launch as the overlap would have.
+                    next = Some(self.launch(sc, plans, &busy));
+                }
                 self.checkpoint.save(self.label_index, round, &records)?;
                 all.extend(records);
                 if let Some(plans) = planned.filter(|_| !exhausted) {
@@ -889,6 +913,8 @@ mod tests {
     struct FromParent {
         delay: bool,
         asked: Mutex<Vec<u64>>,
+        /// (step, asked at, answered at) of every proposal.
+        times: Mutex<Vec<(u64, Instant, Instant)>>,
     }
 
     impl FromParent {
@@ -896,6 +922,7 @@ mod tests {
             FromParent {
                 delay,
                 asked: Mutex::new(Vec::new()),
+                times: Mutex::new(Vec::new()),
             }
         }
     }
@@ -906,9 +933,14 @@ mod tests {
         }
         fn propose(&self, req: &ProposalRequest) -> Result<Proposal, ProposeError> {
             self.asked.lock().unwrap().push(req.step);
+            let asked = Instant::now();
             if self.delay {
                 std::thread::sleep(std::time::Duration::from_millis(req.seed % 7 * 15));
             }
+            self.times
+                .lock()
+                .unwrap()
+                .push((req.step, asked, Instant::now()));
             let parent = &req.parents[0].code;
             let (head, rest) = parent.split_once("THRESHOLD = ").expect("a threshold");
             let (value, tail) = rest.split_once('\n').expect("a line");
@@ -990,6 +1022,16 @@ mod tests {
         let slow = FromParent::new(true);
         let overlapped = run(&lagged, &slow, &MemoryCheckpoint::default()).unwrap();
         assert_eq!(overlapped.records.len(), 13);
+        // Round 1's requests went out alone: round 2's (steps 3–5) only once step 0 was answered,
+        // so they cannot take the endpoint's free slots from round 1's.
+        let times = slow.times.lock().unwrap().clone();
+        let step0 = times.iter().find(|t| t.0 == 0).expect("step 0").2;
+        for &(step, asked, _) in times.iter().filter(|t| (3..6).contains(&t.0)) {
+            assert!(
+                asked >= step0,
+                "step {step} was asked before step 0's answer"
+            );
+        }
         assert!(overlapped.propose_s > 0.0 && overlapped.propose_s <= overlapped.wall_s);
         // The same schedule one phase after the other: the same search.
         let sequential = SearchConfig {
