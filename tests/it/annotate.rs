@@ -360,3 +360,54 @@ fn an_imported_file_set_is_annotated_as_the_pool_annotates_its_traces() {
     .ok()
     .stdout_has("| 1800 | 150 |");
 }
+
+/// The rows of a finished `annotate` stage, sorted, without the timing columns of `detector_calls`.
+fn annotate_rows(t: &TestRun, run: &str) -> (String, String) {
+    (
+        t.csv(
+            run,
+            "SELECT detector_id, trace_id, label, seq, start_step, end_step, objects, parameters, \
+             activation FROM annotations ORDER BY detector_id, trace_id, seq",
+        ),
+        t.csv(
+            run,
+            "SELECT detector_id, trace_id, status, error, n_patterns FROM detector_calls \
+             ORDER BY detector_id, trace_id",
+        ),
+    )
+}
+
+/// Sets are finished on a second thread while the next one runs: a kill or a failure after some of
+/// them leaves no partial table, and the resumed stage ends with the tables of an uninterrupted run.
+#[test]
+fn a_killed_or_failed_annotate_stage_resumes_to_the_same_tables() {
+    let t = TestRun::new();
+    let pipeline = "[pipeline]\nname = \"p\"\nseed = 4\n\n[[stage]]\nid = \"sim\"\nkind = \"simulate\"\n\
+                    scenes = 10\nshots = 1\ndt = 0.1\nscenes_per_shard = 2\n\n[[stage]]\nid = \"ann\"\n\
+                    kind = \"annotate\"\nworkers = 2\n";
+    t.write("pipelines/p.toml", pipeline);
+    t.run(&["run", "pipelines/p.toml", "--run-dir", "fresh"])
+        .ok();
+    let expected = annotate_rows(&t, "fresh");
+    assert!(expected.0.lines().count() > 10, "{}", expected.0);
+    assert_eq!(expected.1.lines().count(), 1 + 10 * 12);
+    for (dir, fault) in [
+        ("killed", "ann:after-shards=2"),
+        ("failed", "ann:after-shards=3:fail"),
+    ] {
+        let r = t.run_env(
+            &["run", "pipelines/p.toml", "--run-dir", dir],
+            &[("ANNOTRACE_FAULT", fault)],
+        );
+        assert_ne!(r.code, Some(0), "{fault}: the fault stops the run");
+        assert!(r.stderr.contains("injected fault"), "{fault}: {}", r.stderr);
+        for table in ["annotations", "detector_calls"] {
+            assert!(
+                !t.path(&format!("{dir}/{table}")).exists(),
+                "{fault}: no partial {table} table is published"
+            );
+        }
+        t.run(&["run", "pipelines/p.toml", "--run-dir", dir]).ok();
+        assert_eq!(annotate_rows(&t, dir), expected, "{fault}");
+    }
+}

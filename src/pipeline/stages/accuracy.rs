@@ -344,7 +344,7 @@ impl AccuracyStage {
                 for (k, v) in status_counts(&batch) {
                     *statuses.entry(k).or_default() += v;
                 }
-                annotations_of(lib, &traces, &batch)
+                annotations_of(lib, &traces, batch)
             }
         };
         let mut scores: BTreeMap<String, LabelScore> = BTreeMap::new();

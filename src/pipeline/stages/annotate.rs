@@ -5,6 +5,12 @@
 //! resumes at the first unfinished set; the `detectors` rows are a last shard of their own. A detector
 //! that fails (syntax, forbidden construct, exception, timeout, memory, invalid output) is a
 //! `detector_calls` row with its status and error, never a failed stage.
+//!
+//! The sets form a pipeline of two threads: while the worker pool runs set k, and while the next set's
+//! traces are read, a second thread turns set k − 1's results into annotations, writes its tables,
+//! marks its shard finished and frees its traces (at most one set is being finished at a time, and
+//! shard records are kept in set order). The reading and the finishing are the stage's own work; the
+//! workers would otherwise wait through both.
 
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
@@ -83,16 +89,16 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
 pub(crate) fn annotations_of(
     library: &Library,
     traces: &[Trace],
-    batch: &BatchResult,
+    batch: BatchResult,
 ) -> Vec<Annotation> {
     let mut out = Vec::new();
-    for r in &batch.results {
+    for r in batch.results {
         if r.status != CandidateStatus::Ok {
             continue;
         }
         let det = &library.detectors[r.detector];
-        for (seq, p) in r.patterns.iter().enumerate() {
-            out.push(Annotation::new(det, &traces[r.trace], seq, p.clone()));
+        for (seq, p) in r.patterns.into_iter().enumerate() {
+            out.push(Annotation::new(det, &traces[r.trace], seq, p));
         }
     }
     crate::ensemble::activation::combine(&library.detectors, traces, out)
@@ -105,6 +111,53 @@ pub(crate) fn status_counts(batch: &BatchResult) -> BTreeMap<String, u64> {
         *out.entry(r.status.as_str().to_string()).or_default() += 1;
     }
     out
+}
+
+/// Finishes one annotated set: its annotations and call rows written as shard `shard`'s tables, the
+/// shard marked finished; returns the shard's record. Frees the set's traces and results.
+#[allow(clippy::too_many_arguments)]
+fn finish_set(
+    ctx: &StageContext<'_>,
+    lib: &Library,
+    env: Env,
+    shard: &str,
+    traces: Vec<Trace>,
+    batch: BatchResult,
+    layers: Value,
+    read_s: f64,
+    batch_s: f64,
+) -> Result<Value, StageError> {
+    let ids: Vec<&str> = traces.iter().map(|t| t.trace_id.as_str()).collect();
+    let mut rows = BTreeMap::new();
+    let calls = calls_batch(&lib.detectors, &ids, &batch.results)?;
+    rows.insert(
+        "detector_calls",
+        ctx.write_batch("detector_calls", env, shard, &calls)?,
+    );
+    drop(calls);
+    let statuses = status_counts(&batch);
+    let s = batch.stats.clone();
+    let anns = annotations_of(lib, &traces, batch);
+    if !anns.is_empty() {
+        let b = annotations_batch(&anns)?;
+        rows.insert(
+            "annotations",
+            ctx.write_batch("annotations", env, shard, &b)?,
+        );
+    }
+    let record = json!({
+        "traces": traces.len(),
+        "annotations": anns.len(),
+        "statuses": statuses,
+        "rows": rows,
+        "layers": layers,
+        "stats": {"read_s": read_s, "batch_s": batch_s, "calls": s.calls, "detector_wall_s": s.detector_wall_s,
+                  "round_trip_s": s.round_trip_s, "convert_s": s.convert_s,
+                  "load_s": s.load_s, "compile_s": s.compile_s, "decode_s": s.decode_s,
+                  "restarts": s.restarts},
+    });
+    ctx.finish_shard(shard, &record)?;
+    Ok(record)
 }
 
 impl Stage for AnnotateStage {
@@ -129,58 +182,54 @@ impl Stage for AnnotateStage {
         ctx.progress().set_total(ctx.stage_id(), sets.len() as u64);
         let mut pool: Option<WorkerPool> = None;
         let mut records = Vec::new();
-        for (i, set) in sets.iter().enumerate() {
-            let shard = format!("{i:05}");
-            if !ctx.owns(&shard) {
-                // Another process's slice (`--shard`): its record is summed at the commit.
-                continue;
+        std::thread::scope(|sc| -> Result<(), StageError> {
+            // The set being finished on the second thread, if any.
+            let mut finishing: Option<std::thread::ScopedJoinHandle<'_, _>> = None;
+            let join = |finishing: &mut Option<std::thread::ScopedJoinHandle<'_, _>>,
+                        records: &mut Vec<Value>|
+             -> Result<(), StageError> {
+                if let Some(h) = finishing.take() {
+                    let record = h.join().unwrap_or_else(|_| {
+                        Err(StageError::Internal(
+                            "the thread finishing an annotated trace set panicked".into(),
+                        ))
+                    })?;
+                    records.push(record);
+                    ctx.progress().advance(ctx.stage_id(), 1);
+                }
+                Ok(())
+            };
+            for (i, set) in sets.iter().enumerate() {
+                let shard = format!("{i:05}");
+                if !ctx.owns(&shard) {
+                    continue;
+                }
+                if let Some(r) = ctx.finished_shard(&shard)? {
+                    join(&mut finishing, &mut records)?;
+                    records.push(r);
+                    ctx.progress().advance(ctx.stage_id(), 1);
+                    continue;
+                }
+                if pool.is_none() {
+                    pool = Some(self.setup.pool()?);
+                }
+                let pool = pool.as_ref().expect("just started");
+                let r0 = std::time::Instant::now();
+                let traces = read_traces(ctx.run(), set)?;
+                let read_s = r0.elapsed().as_secs_f64();
+                let b0 = std::time::Instant::now();
+                let batch = pool.run(&lib.detectors, &traces);
+                let batch_s = b0.elapsed().as_secs_f64();
+                join(&mut finishing, &mut records)?;
+                let layers = serde_json::to_value(pool.layers()).unwrap_or(Value::Null);
+                finishing = Some(sc.spawn(move || {
+                    finish_set(
+                        ctx, lib, env, &shard, traces, batch, layers, read_s, batch_s,
+                    )
+                }));
             }
-            if let Some(r) = ctx.finished_shard(&shard)? {
-                records.push(r);
-                ctx.progress().advance(ctx.stage_id(), 1);
-                continue;
-            }
-            if pool.is_none() {
-                pool = Some(self.setup.pool()?);
-            }
-            let pool = pool.as_ref().expect("just started");
-            let r0 = std::time::Instant::now();
-            let traces = read_traces(ctx.run(), set)?;
-            let read_s = r0.elapsed().as_secs_f64();
-            let b0 = std::time::Instant::now();
-            let batch = pool.run(&lib.detectors, &traces);
-            let batch_s = b0.elapsed().as_secs_f64();
-            let anns = annotations_of(lib, &traces, &batch);
-            let ids: Vec<&str> = traces.iter().map(|t| t.trace_id.as_str()).collect();
-            let mut rows = BTreeMap::new();
-            let calls = calls_batch(&lib.detectors, &ids, &batch.results)?;
-            rows.insert(
-                "detector_calls",
-                ctx.write_batch("detector_calls", env, &shard, &calls)?,
-            );
-            if !anns.is_empty() {
-                let b = annotations_batch(&anns)?;
-                rows.insert(
-                    "annotations",
-                    ctx.write_batch("annotations", env, &shard, &b)?,
-                );
-            }
-            let s = &batch.stats;
-            let record = json!({
-                "traces": traces.len(),
-                "annotations": anns.len(),
-                "statuses": status_counts(&batch),
-                "rows": rows,
-                "layers": pool.layers(),
-                "stats": {"read_s": read_s, "batch_s": batch_s, "calls": s.calls, "detector_wall_s": s.detector_wall_s,
-                          "round_trip_s": s.round_trip_s, "convert_s": s.convert_s,
-                          "load_s": s.load_s, "compile_s": s.compile_s, "decode_s": s.decode_s,
-                          "restarts": s.restarts},
-            });
-            ctx.finish_shard(&shard, &record)?;
-            records.push(record);
-            ctx.progress().advance(ctx.stage_id(), 1);
-        }
+            join(&mut finishing, &mut records)
+        })?;
         if ctx.owns("detectors") && ctx.finished_shard("detectors")?.is_none() {
             // An ensemble library also lists one pseudo-detector per ensemble label, the id its
             // annotations carry.
