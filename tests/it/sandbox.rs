@@ -515,3 +515,26 @@ def find_pattern(trace):
     assert_eq!(params[1]["step"]["index"], 0);
     assert!(params[1]["step"]["objects"].is_array(), "{}", params[1]);
 }
+
+/// `cpu_s` is the worker's CPU time of the call, exact under the worker's CPU limit. (The process-wide
+/// clock, once RLIMIT_CPU is set, moves only at scheduler ticks: calls under a millisecond mostly read
+/// 0.0.)
+#[test]
+fn a_short_call_s_cpu_time_is_measured() {
+    let pool = WorkerPool::new(limits(true)).expect("workers start");
+    let busy = "def find_pattern(trace):\n    x = 0\n    for i in range(20000):\n        x += i\n    return []\n";
+    let dets: Vec<Detector> = (0..5)
+        .map(|k| det(&format!("{busy}# copy {k}\n")))
+        .collect();
+    let batch = pool.run(&dets, &traces());
+    assert_eq!(batch.results.len(), 10);
+    for r in &batch.results {
+        assert_eq!(r.status, CandidateStatus::Ok, "{r:?}");
+        assert!(
+            r.cpu_s > 0.0 && r.cpu_s <= r.wall_s + 1e-3,
+            "cpu {} s, wall {} s",
+            r.cpu_s,
+            r.wall_s
+        );
+    }
+}
