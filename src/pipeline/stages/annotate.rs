@@ -118,20 +118,36 @@ pub(crate) fn status_counts(batch: &BatchResult) -> BTreeMap<String, u64> {
     out
 }
 
-/// Finishes one annotated set: its annotations and call rows written as shard `shard`'s tables, the
+/// One set the worker pool has run, waiting to be finished.
+struct RanSet {
+    /// The shard the set's tables are written as.
+    shard: String,
+    traces: Vec<Trace>,
+    batch: BatchResult,
+    /// `pool.layers()`, for the shard record.
+    layers: Value,
+    /// Seconds spent reading the set's traces and running the pool over them.
+    read_s: f64,
+    batch_s: f64,
+}
+
+/// Finishes one annotated set: its annotations and call rows written as its shard's tables, the
 /// shard marked finished; returns the shard's record. Frees the set's traces and results.
-#[allow(clippy::too_many_arguments)]
 fn finish_set(
     ctx: &StageContext<'_>,
     lib: &Library,
     env: Env,
-    shard: &str,
-    traces: Vec<Trace>,
-    batch: BatchResult,
-    layers: Value,
-    read_s: f64,
-    batch_s: f64,
+    set: RanSet,
 ) -> Result<Value, StageError> {
+    let RanSet {
+        shard,
+        traces,
+        batch,
+        layers,
+        read_s,
+        batch_s,
+    } = set;
+    let shard = shard.as_str();
     let ids: Vec<&str> = traces.iter().map(|t| t.trace_id.as_str()).collect();
     let mut rows = BTreeMap::new();
     let calls = calls_batch(&lib.detectors, &ids, &batch.results)?;
@@ -231,12 +247,15 @@ impl Stage for AnnotateStage {
                     .flat_map(|t| &t.timesteps)
                     .map(|s| s.objects.len())
                     .sum();
-                let layers = serde_json::to_value(pool.layers()).unwrap_or(Value::Null);
-                finishing = Some(sc.spawn(move || {
-                    finish_set(
-                        ctx, lib, env, &shard, traces, batch, layers, read_s, batch_s,
-                    )
-                }));
+                let set = RanSet {
+                    shard,
+                    traces,
+                    batch,
+                    layers: serde_json::to_value(pool.layers()).unwrap_or(Value::Null),
+                    read_s,
+                    batch_s,
+                };
+                finishing = Some(sc.spawn(move || finish_set(ctx, lib, env, set)));
                 if rows > OVERLAP_MAX_ROWS {
                     // A large set is finished before the next is read: two of them in memory at once
                     // would double the stage's peak.
