@@ -655,31 +655,27 @@ impl LabelSearch<'_> {
                 // now (the first round, or after a resume), once round's first answer is back, so
                 // that round's requests reach the endpoint's slots before round + 1's (the client
                 // queues waiting requests by step, but a request that finds a free slot takes it).
-                let mut planned = None;
+                // Without the overlap it is launched once round is settled.
+                let mut deferred = None;
                 if lagged && round < rounds {
                     let plans =
                         self.plan(state.db.as_ref().expect("seeded"), self.steps(round + 1));
                     if cfg.overlap && !fresh {
                         next = Some(self.launch(sc, plans, &busy));
                     } else {
-                        planned = Some(plans);
+                        deferred = Some(plans);
                     }
                 }
-                let mut early = planned.take_if(|_| cfg.overlap);
                 let on_first_answer = || {
-                    if let Some(plans) = early.take() {
+                    if let Some(plans) = deferred.take_if(|_| cfg.overlap) {
                         next = Some(self.launch(sc, plans, &busy));
                     }
                 };
                 let records =
                     self.settle_round(current, &mut state, &busy, &mut exhausted, on_first_answer)?;
-                if let Some(plans) = early.take().filter(|_| !exhausted) {
-                    // No answer came back (an empty round): launch as the overlap would have.
-                    next = Some(self.launch(sc, plans, &busy));
-                }
                 self.checkpoint.save(self.label_index, round, &records)?;
                 all.extend(records);
-                if let Some(plans) = planned.filter(|_| !exhausted) {
+                if let Some(plans) = deferred.filter(|_| !exhausted) {
                     next = Some(self.launch(sc, plans, &busy));
                 }
                 round += 1;
