@@ -173,8 +173,9 @@ pub fn annotations_batch(rows: &[Annotation]) -> Result<RecordBatch, ArrowError>
                 rows.iter().map(|a| finite(a.t_end)),
             )),
             Arc::new(objects.finish()),
+            // The map is written as the `Value::Object` holding it would be, without a copy of it.
             Arc::new(StringArray::from_iter_values(rows.iter().map(|a| {
-                serde_json::Value::Object(a.parameters.clone()).to_string()
+                serde_json::to_string(&a.parameters).unwrap_or_else(|_| "{}".into())
             }))),
             Arc::new(StringArray::from(
                 rows.iter()

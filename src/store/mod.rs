@@ -54,6 +54,7 @@ pub use self::columns::ColumnSink;
 pub use self::manifest::{Manifest, OutputFile, StageStatus};
 pub use self::parquet::{
     Codec, ParquetSettings, ParquetSink, ROW_GROUP_ROWS, Stats, read_batches, read_file,
+    read_file_whole,
 };
 pub use self::traces::{ReadTraceError, read_trace, trace_ids};
 pub use self::verify::Problem;

@@ -200,6 +200,23 @@ pub fn read_batches(
     }))
 }
 
+/// Reads a whole Parquet file as one record batch (none for an empty file), so that a reader which
+/// needs every row together (`concat_batches` of one batch slices, it does not copy) pays no second
+/// copy of the rows.
+pub fn read_file_whole(path: &Path) -> Result<Vec<RecordBatch>, StoreError> {
+    let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
+    let builder =
+        ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| StoreError::parquet(path, e))?;
+    let rows = usize::try_from(builder.metadata().file_metadata().num_rows()).unwrap_or(0);
+    let reader = builder
+        .with_batch_size(rows.max(1))
+        .build()
+        .map_err(|e| StoreError::parquet(path, e))?;
+    reader
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| StoreError::parquet(path, parquet::errors::ParquetError::from(e)))
+}
+
 /// Reads every batch of a Parquet file.
 pub fn read_file(path: &Path) -> Result<Vec<RecordBatch>, StoreError> {
     let file = File::open(path).map_err(|e| StoreError::io(path, e))?;

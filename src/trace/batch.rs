@@ -892,6 +892,13 @@ impl<'a> FrameCols<'a> {
             let Some(target) = timesteps.get_mut(cursor).filter(|t| t.index == step) else {
                 return Err(self.null("step", i));
             };
+            if target.objects.is_empty() {
+                // The step's rows are together: room for all of them at once, not grown by doubling.
+                let run = (i..self.step.len())
+                    .take_while(|&j| self.step.value(j) == step)
+                    .count();
+                target.objects.reserve_exact(run);
+            }
             let body = match self.env {
                 Env::Pooltool => Body::Pool(self.pool_ball(i)?),
                 Env::Phyre => Body::Phyre(self.phyre_object(i)?),

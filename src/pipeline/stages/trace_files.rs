@@ -18,7 +18,7 @@ use arrow::datatypes::DataType;
 use crate::digest::words_u64;
 use crate::pipeline::stage::StageError;
 use crate::rng::SplitMix64;
-use crate::store::{ReadTraceError, RunDir, read_file, read_trace, trace_ids};
+use crate::store::{ReadTraceError, RunDir, read_file_whole, read_trace, trace_ids};
 use crate::trace::schema::table_schema;
 use crate::trace::{Env, Trace, TraceRows, decode_trace};
 
@@ -66,7 +66,7 @@ fn sorted_rows(
         f.env == Some(set.env) && f.path.file_name().is_some_and(|n| n == set.name.as_str())
     });
     let batches = match published {
-        Some(f) => read_file(&f.path)?,
+        Some(f) => read_file_whole(&f.path)?,
         None => Vec::new(),
     };
     let all = concat_batches(&schema, &batches)?;
@@ -191,7 +191,7 @@ pub(crate) fn read_traces(run: &RunDir, set: &TraceFileSet) -> Result<Vec<Trace>
     let schema = table_schema("traces")
         .ok_or_else(|| StageError::Internal("no schema for traces".into()))?;
     let path = run.partition_dir("traces", Some(set.env)).join(&set.name);
-    let traces = concat_batches(&schema, &read_file(&path)?)?;
+    let traces = concat_batches(&schema, &read_file_whole(&path)?)?;
     let (steps, step_ids) = sorted_rows(run, set, "timesteps", &["step"])?;
     let (frames, frame_ids) = sorted_rows(run, set, "frames", &["step", "slot"])?;
     let (events, event_ids) = sorted_rows(run, set, "events", &["seq"])?;
