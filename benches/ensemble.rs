@@ -1,7 +1,9 @@
 //! Annotation cost of an ensemble library against a single one (paper §3.3 calls it negligible; issue
 //! goal: at most 1.5× the single library's time for K ≤ 4 members per label).
 //!
-//! `cargo bench --bench ensemble` (`ENSEMBLE_BENCH_TRACES=N` to change the default 400 traces). The
+//! `cargo bench --bench ensemble` (`ENSEMBLE_BENCH_TRACES=N` to change the default 400 traces;
+//! `ENSEMBLE_BENCH_KEEP=DIR` keeps the libraries it writes, `copies-k2`, `copies-k4`, `mutants-k2` and
+//! `mutants-k4`, for timing them through `annotrace annotate --library`). The
 //! single library is the built-in pooltool library (12 detectors). The ensemble libraries give every
 //! label K members (K = 2 and 4), written with `ensemble::library::write` and loaded back through
 //! `detect::Library` as the `annotate` stage loads them, in two kinds:
@@ -252,7 +254,12 @@ fn main() {
     let base =
         Library::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("data/libraries/pooltool"))
             .expect("the built-in library loads");
-    let tmp = std::env::temp_dir().join(format!("annotrace-ensemble-bench-{}", std::process::id()));
+    // `ENSEMBLE_BENCH_KEEP=DIR` writes the libraries into DIR and keeps them, so that the same
+    // libraries can be timed through `annotrace annotate --library DIR/<name>`.
+    let keep = std::env::var_os("ENSEMBLE_BENCH_KEEP").map(std::path::PathBuf::from);
+    let tmp = keep.clone().unwrap_or_else(|| {
+        std::env::temp_dir().join(format!("annotrace-ensemble-bench-{}", std::process::id()))
+    });
     let workers = std::thread::available_parallelism()
         .map(|c| c.get())
         .unwrap_or(1);
@@ -371,5 +378,7 @@ fn main() {
             cpu(s.combine_cpu)
         );
     }
-    let _ = std::fs::remove_dir_all(&tmp);
+    if keep.is_none() {
+        let _ = std::fs::remove_dir_all(&tmp);
+    }
 }
