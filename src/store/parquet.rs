@@ -200,16 +200,26 @@ pub fn read_batches(
     }))
 }
 
-/// Reads a whole Parquet file as one record batch (none for an empty file), so that a reader which
-/// needs every row together (`concat_batches` of one batch slices, it does not copy) pays no second
-/// copy of the rows.
+/// The most rows [`read_file_whole`] reads as one batch. The reader reserves a batch's worth of each
+/// column up front from the row counts the footer claims, so a damaged or forged footer must not be
+/// able to ask for more than this (a few tens of megabytes per column).
+const WHOLE_FILE_MAX_ROWS: usize = 1 << 22;
+
+/// Reads a whole Parquet file as one record batch (none for an empty file, several for a file of more
+/// than `WHOLE_FILE_MAX_ROWS` rows), so that a reader which needs every row together
+/// (`concat_batches` of one batch slices, it does not copy) pays no second copy of the rows.
 pub fn read_file_whole(path: &Path) -> Result<Vec<RecordBatch>, StoreError> {
     let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
     let builder =
         ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| StoreError::parquet(path, e))?;
-    let rows = usize::try_from(builder.metadata().file_metadata().num_rows()).unwrap_or(0);
+    let rows = builder
+        .metadata()
+        .row_groups()
+        .iter()
+        .map(|g| usize::try_from(g.num_rows()).unwrap_or(0))
+        .fold(0usize, usize::saturating_add);
     let reader = builder
-        .with_batch_size(rows.max(1))
+        .with_batch_size(rows.clamp(1, WHOLE_FILE_MAX_ROWS))
         .build()
         .map_err(|e| StoreError::parquet(path, e))?;
     reader
@@ -231,7 +241,56 @@ pub fn read_file(path: &Path) -> Result<Vec<RecordBatch>, StoreError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use parquet::file::properties::EnabledStatistics;
+    use arrow::array::{Array, DictionaryArray, Float64Array, StringArray};
+    use arrow::datatypes::{Field, Int32Type, Schema};
+    use std::sync::Arc;
+
+    #[test]
+    fn a_whole_file_is_one_batch_across_row_groups_and_their_dictionaries() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("f.parquet");
+        let schema = Arc::new(Schema::new(vec![
+            Field::new(
+                "label",
+                DataType::Dictionary(Box::new(DataType::Int32), Box::new(DataType::Utf8)),
+                false,
+            ),
+            Field::new("x", DataType::Float64, false),
+        ]));
+        // More rows than `read_file` puts in a batch, in row groups of 1,000 rows, each with its own
+        // dictionary of labels.
+        let n = ROW_GROUP_ROWS + 10;
+        let labels: Vec<String> = (0..n).map(|i| format!("l{}", i / 700)).collect();
+        let batch = RecordBatch::try_new(
+            schema.clone(),
+            vec![
+                Arc::new(
+                    labels
+                        .iter()
+                        .map(String::as_str)
+                        .collect::<DictionaryArray<Int32Type>>(),
+                ),
+                Arc::new(Float64Array::from_iter_values((0..n).map(|i| i as f64))),
+            ],
+        )
+        .unwrap();
+        let props = WriterProperties::builder()
+            .set_max_row_group_row_count(Some(1000))
+            .build();
+        let mut w =
+            ArrowWriter::try_new(File::create(&path).unwrap(), schema, Some(props)).unwrap();
+        w.write(&batch).unwrap();
+        w.close().unwrap();
+
+        let whole = read_file_whole(&path).unwrap();
+        assert_eq!(whole.len(), 1);
+        assert_eq!(whole[0].num_rows(), n);
+        let got = arrow::compute::cast(whole[0].column(0), &DataType::Utf8).unwrap();
+        let got = got.as_any().downcast_ref::<StringArray>().unwrap();
+        assert_eq!(got.iter().flatten().collect::<Vec<_>>(), labels);
+        assert_eq!(whole[0].column(1).as_ref(), batch.column(1).as_ref());
+        assert!(read_file(&path).unwrap().len() > 1);
+    }
 
     #[test]
     fn trace_ids_keep_statistics_and_floats_lose_dictionaries() {
