@@ -7,8 +7,9 @@ use arrow::array::RecordBatch;
 use arrow::datatypes::DataType;
 use arrow::datatypes::SchemaRef;
 use parquet::arrow::ArrowWriter;
-use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+use parquet::arrow::arrow_reader::{ParquetRecordBatchReader, ParquetRecordBatchReaderBuilder};
 use parquet::basic::{Compression, Encoding, ZstdLevel};
+use parquet::file::metadata::ParquetMetaData;
 use parquet::file::properties::{EnabledStatistics, WriterProperties};
 use parquet::schema::types::ColumnPath;
 
@@ -186,14 +187,33 @@ impl ParquetSink {
     }
 }
 
+/// A reader of the Parquet file at `path`, in batches of the rows `batch_rows` gives for its metadata.
+fn reader(
+    path: &Path,
+    batch_rows: impl FnOnce(&ParquetMetaData) -> usize,
+) -> Result<ParquetRecordBatchReader, StoreError> {
+    let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
+    let builder =
+        ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| StoreError::parquet(path, e))?;
+    let rows = batch_rows(builder.metadata());
+    builder
+        .with_batch_size(rows)
+        .build()
+        .map_err(|e| StoreError::parquet(path, e))
+}
+
+/// Every batch a reader of the file at `path` gives.
+fn collect(path: &Path, reader: ParquetRecordBatchReader) -> Result<Vec<RecordBatch>, StoreError> {
+    reader
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| StoreError::parquet(path, parquet::errors::ParquetError::from(e)))
+}
+
 /// Reads a Parquet file batch by batch, without holding the whole file.
 pub fn read_batches(
     path: &Path,
 ) -> Result<impl Iterator<Item = Result<RecordBatch, StoreError>>, StoreError> {
-    let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
-    let reader = ParquetRecordBatchReaderBuilder::try_new(file)
-        .and_then(|b| b.with_batch_size(ROW_GROUP_ROWS).build())
-        .map_err(|e| StoreError::parquet(path, e))?;
+    let reader = reader(path, |_| ROW_GROUP_ROWS)?;
     let path = path.to_path_buf();
     Ok(reader.map(move |b| {
         b.map_err(|e| StoreError::parquet(&path, parquet::errors::ParquetError::from(e)))
@@ -209,33 +229,19 @@ const WHOLE_FILE_MAX_ROWS: usize = 1 << 22;
 /// than `WHOLE_FILE_MAX_ROWS` rows), so that a reader which needs every row together
 /// (`concat_batches` of one batch slices, it does not copy) pays no second copy of the rows.
 pub fn read_file_whole(path: &Path) -> Result<Vec<RecordBatch>, StoreError> {
-    let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
-    let builder =
-        ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| StoreError::parquet(path, e))?;
-    let rows = builder
-        .metadata()
-        .row_groups()
-        .iter()
-        .map(|g| usize::try_from(g.num_rows()).unwrap_or(0))
-        .fold(0usize, usize::saturating_add);
-    let reader = builder
-        .with_batch_size(rows.clamp(1, WHOLE_FILE_MAX_ROWS))
-        .build()
-        .map_err(|e| StoreError::parquet(path, e))?;
-    reader
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| StoreError::parquet(path, parquet::errors::ParquetError::from(e)))
+    let whole = |meta: &ParquetMetaData| {
+        meta.row_groups()
+            .iter()
+            .map(|g| usize::try_from(g.num_rows()).unwrap_or(0))
+            .fold(0usize, usize::saturating_add)
+            .clamp(1, WHOLE_FILE_MAX_ROWS)
+    };
+    collect(path, reader(path, whole)?)
 }
 
 /// Reads every batch of a Parquet file.
 pub fn read_file(path: &Path) -> Result<Vec<RecordBatch>, StoreError> {
-    let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
-    let reader = ParquetRecordBatchReaderBuilder::try_new(file)
-        .and_then(|b| b.with_batch_size(ROW_GROUP_ROWS).build())
-        .map_err(|e| StoreError::parquet(path, e))?;
-    reader
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| StoreError::parquet(path, parquet::errors::ParquetError::from(e)))
+    collect(path, reader(path, |_| ROW_GROUP_ROWS)?)
 }
 
 #[cfg(test)]

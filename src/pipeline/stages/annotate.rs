@@ -223,6 +223,7 @@ impl Stage for AnnotateStage {
             for (i, set) in sets.iter().enumerate() {
                 let shard = format!("{i:05}");
                 if !ctx.owns(&shard) {
+                    // Another process's slice (`--shard`): its record is summed at the commit.
                     continue;
                 }
                 if let Some(r) = ctx.finished_shard(&shard)? {
