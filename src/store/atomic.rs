@@ -5,7 +5,7 @@
 //! process has a name that starts with `.` and ends in `.tmp`, which no reader lists.
 
 use std::fs::{self, File};
-use std::io::{self, Write};
+use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -79,7 +79,26 @@ impl AtomicFile {
     pub fn take_file(&mut self) -> File {
         self.file.take().expect("the file handle is taken once")
     }
+
+    /// The open handle behind a [`WRITE_BUFFER`]-byte buffer, for a writer that needs ownership; hand
+    /// it back to [`AtomicFile::commit_buffered`].
+    pub fn take_buffered(&mut self) -> BufWriter<File> {
+        BufWriter::with_capacity(WRITE_BUFFER, self.take_file())
+    }
+
+    /// Writes out what the buffer holds, then commits as [`AtomicFile::commit`] does.
+    pub fn commit_buffered(self, buffered: BufWriter<File>) -> io::Result<PathBuf> {
+        let file = buffered
+            .into_inner()
+            .map_err(io::IntoInnerError::into_error)?;
+        self.commit_with(file)
+    }
 }
+
+/// Bytes a buffered file ([`AtomicFile::take_buffered`]) gathers before writing. The Parquet writers
+/// hand their output over in pieces of at most 8 KiB (parquet-rs's own buffer), a system call each
+/// without this one: about 18,000 per 2,000 billiard traces.
+pub const WRITE_BUFFER: usize = 1 << 20;
 
 impl Write for AtomicFile {
     fn write(&mut self, buf: &[u8]) -> io::Result<usize> {

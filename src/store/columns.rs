@@ -21,6 +21,7 @@
 
 use std::collections::HashMap;
 use std::fs::File;
+use std::io::BufWriter;
 use std::path::PathBuf;
 
 use arrow::datatypes::{DataType, SchemaRef};
@@ -312,7 +313,7 @@ struct EncodedChunk {
 /// A Parquet file written from column views; it appears at its path only on
 /// [`ColumnSink::commit`].
 pub struct ColumnSink {
-    writer: SerializedFileWriter<File>,
+    writer: SerializedFileWriter<BufWriter<File>>,
     atomic: AtomicFile,
     columns: Vec<Column>,
     compressor: Compressor,
@@ -353,7 +354,7 @@ impl ColumnSink {
         let props = settings.properties(&schema);
         // The Arrow writer only sets the file up (Parquet schema from the Arrow one, the encoded
         // Arrow schema in the key-value metadata); no batch goes through it.
-        let (writer, _) = ArrowWriter::try_new(atomic.take_file(), schema.clone(), Some(props))
+        let (writer, _) = ArrowWriter::try_new(atomic.take_buffered(), schema.clone(), Some(props))
             .and_then(|w| w.into_serialized_writer())
             .map_err(|e| StoreError::parquet(&target, e))?;
         let descrs: Vec<ColumnDescPtr> = writer.schema_descr().columns().to_vec();
@@ -480,7 +481,7 @@ impl ColumnSink {
             .map_err(|e| StoreError::parquet(&target, e))?;
         let path = self
             .atomic
-            .commit_with(file)
+            .commit_buffered(file)
             .map_err(|e| StoreError::io(&target, e))?;
         Ok((path, self.rows))
     }

@@ -1,6 +1,7 @@
 //! Parquet files of a run: an atomic writer and a reader of whole datasets.
 
 use std::fs::File;
+use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use arrow::array::RecordBatch;
@@ -130,7 +131,7 @@ impl ParquetSettings {
 
 /// A Parquet file being written; it appears at its path only on [`ParquetSink::commit`].
 pub struct ParquetSink {
-    writer: ArrowWriter<File>,
+    writer: ArrowWriter<BufWriter<File>>,
     atomic: AtomicFile,
     rows: usize,
 }
@@ -150,7 +151,7 @@ impl ParquetSink {
         let target = target.into();
         let mut atomic = AtomicFile::create(&target).map_err(|e| StoreError::io(&target, e))?;
         let props = settings.properties(&schema);
-        let writer = ArrowWriter::try_new(atomic.take_file(), schema, Some(props))
+        let writer = ArrowWriter::try_new(atomic.take_buffered(), schema, Some(props))
             .map_err(|e| StoreError::parquet(&target, e))?;
         Ok(ParquetSink {
             writer,
@@ -181,7 +182,7 @@ impl ParquetSink {
             .map_err(|e| StoreError::parquet(&target, e))?;
         let path = self
             .atomic
-            .commit_with(file)
+            .commit_buffered(file)
             .map_err(|e| StoreError::io(&target, e))?;
         Ok((path, self.rows))
     }
