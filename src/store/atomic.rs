@@ -80,8 +80,8 @@ impl AtomicFile {
         self.file.take().expect("the file handle is taken once")
     }
 
-    /// The open handle behind a [`WRITE_BUFFER`]-byte buffer, for a writer that needs ownership; hand
-    /// it back to [`AtomicFile::commit_buffered`].
+    /// The open handle behind a buffer of `WRITE_BUFFER` bytes (1 MiB), for a writer that needs
+    /// ownership; hand it back to [`AtomicFile::commit_buffered`].
     pub fn take_buffered(&mut self) -> BufWriter<File> {
         BufWriter::with_capacity(WRITE_BUFFER, self.take_file())
     }
