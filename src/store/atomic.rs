@@ -69,19 +69,18 @@ impl AtomicFile {
     }
 
     /// Commits a file whose handle was passed to another writer and came back.
-    pub fn commit_with(mut self, file: File) -> io::Result<PathBuf> {
+    fn commit_with(mut self, file: File) -> io::Result<PathBuf> {
         self.file = Some(file);
         self.commit()
     }
 
-    /// Gives the open handle to a writer that needs ownership (the Parquet writer); hand it back to
-    /// [`AtomicFile::commit_with`].
-    pub fn take_file(&mut self) -> File {
+    /// The open handle, for a writer that needs ownership of it (through [`AtomicFile::take_buffered`]).
+    fn take_file(&mut self) -> File {
         self.file.take().expect("the file handle is taken once")
     }
 
     /// The open handle behind a buffer of `WRITE_BUFFER` bytes (1 MiB), for a writer that needs
-    /// ownership; hand it back to [`AtomicFile::commit_buffered`].
+    /// ownership (the Parquet writers); hand it back to [`AtomicFile::commit_buffered`].
     pub fn take_buffered(&mut self) -> BufWriter<File> {
         BufWriter::with_capacity(WRITE_BUFFER, self.take_file())
     }
