@@ -203,11 +203,16 @@ fn reader(
         .map_err(|e| StoreError::parquet(path, e))
 }
 
+/// A reader's failure on a batch of the file at `path`.
+fn batch_error(path: &Path, e: arrow::error::ArrowError) -> StoreError {
+    StoreError::parquet(path, parquet::errors::ParquetError::from(e))
+}
+
 /// Every batch a reader of the file at `path` gives.
 fn collect(path: &Path, reader: ParquetRecordBatchReader) -> Result<Vec<RecordBatch>, StoreError> {
     reader
         .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| StoreError::parquet(path, parquet::errors::ParquetError::from(e)))
+        .map_err(|e| batch_error(path, e))
 }
 
 /// Reads a Parquet file batch by batch, without holding the whole file.
@@ -216,9 +221,7 @@ pub fn read_batches(
 ) -> Result<impl Iterator<Item = Result<RecordBatch, StoreError>>, StoreError> {
     let reader = reader(path, |_| ROW_GROUP_ROWS)?;
     let path = path.to_path_buf();
-    Ok(reader.map(move |b| {
-        b.map_err(|e| StoreError::parquet(&path, parquet::errors::ParquetError::from(e)))
-    }))
+    Ok(reader.map(move |b| b.map_err(|e| batch_error(&path, e))))
 }
 
 /// The most rows [`read_file_whole`] reads as one batch. The reader reserves a batch's worth of each
