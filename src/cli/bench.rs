@@ -206,6 +206,20 @@ fn candidate_settings() -> Vec<(&'static str, ParquetSettings, bool)> {
             "column writer, zstd 1 (the default now: timesteps and frames)",
             default,
         ),
+        (
+            "column writer, zstd 1, 2^12-entry hash table for per-row floats (billiards' default now)",
+            ParquetSettings {
+                float_hash_log: 12,
+                ..default
+            },
+        ),
+        (
+            "column writer, zstd 1, 2^10-entry hash table for per-row floats",
+            ParquetSettings {
+                float_hash_log: 10,
+                ..default
+            },
+        ),
         ("column writer, zstd 3", column(Codec::Zstd(3))),
         ("column writer, zstd -1 (fast)", column(Codec::Zstd(-1))),
         ("column writer, zstd -5 (fast)", column(Codec::Zstd(-5))),

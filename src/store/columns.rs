@@ -81,6 +81,10 @@ struct Column {
     /// Definition levels of an optional column as runs of (present, rows).
     def_runs: Vec<(bool, u32)>,
     nulls: u64,
+    /// Whether the column was fed a value per row ([`ColumnView::F64`]): its pages are compressed
+    /// with [`ParquetSettings::float_hash_log`]. Columns repeated per step (`t`) or per object
+    /// (radius) keep zstd's own table: their matches lie far apart and a smaller table loses them.
+    per_row_floats: bool,
 }
 
 impl Column {
@@ -134,7 +138,8 @@ fn for_run_rows(counts: &[i32], lo: usize, hi: usize, mut f: impl FnMut(usize, i
 
 /// A page compressor for the file's codec.
 enum Compressor {
-    Zstd(Box<zstd::bulk::Compressor<'static>>),
+    /// The compressor and the hash log it is set to (0: the level's own).
+    Zstd(Box<zstd::bulk::Compressor<'static>>, u32),
     Lz4Raw,
     Snappy(Box<snap::raw::Encoder>),
     None,
@@ -143,17 +148,24 @@ enum Compressor {
 impl Compressor {
     fn new(codec: Codec) -> std::io::Result<Self> {
         Ok(match codec {
-            Codec::Zstd(level) => Compressor::Zstd(Box::new(zstd::bulk::Compressor::new(level)?)),
+            Codec::Zstd(level) => {
+                Compressor::Zstd(Box::new(zstd::bulk::Compressor::new(level)?), 0)
+            }
             Codec::Lz4Raw => Compressor::Lz4Raw,
             Codec::Snappy => Compressor::Snappy(Box::new(snap::raw::Encoder::new())),
             Codec::None => Compressor::None,
         })
     }
 
-    /// `input` compressed (or `None` when the codec is none).
-    fn compress(&mut self, input: &[u8]) -> std::io::Result<Option<Vec<u8>>> {
+    /// `input` compressed (or `None` when the codec is none); zstd with a match-finder hash table
+    /// of 2^`hash_log` entries (0: the level's own), which changes how, not whether, it compresses.
+    fn compress(&mut self, input: &[u8], hash_log: u32) -> std::io::Result<Option<Vec<u8>>> {
         Ok(Some(match self {
-            Compressor::Zstd(c) => {
+            Compressor::Zstd(c, set) => {
+                if *set != hash_log {
+                    c.set_parameter(zstd::zstd_safe::CParameter::HashLog(hash_log))?;
+                    *set = hash_log;
+                }
                 let mut out = Vec::with_capacity(zstd::zstd_safe::compress_bound(input.len()));
                 c.compress_to_buffer(input, &mut out)?;
                 out
@@ -318,6 +330,7 @@ pub struct ColumnSink {
     columns: Vec<Column>,
     compressor: Compressor,
     compression: Compression,
+    float_hash_log: u32,
     group_cap: usize,
     group_rows: usize,
     rows: usize,
@@ -374,6 +387,7 @@ impl ColumnSink {
                     data: empty_data(kind),
                     def_runs: Vec::new(),
                     nulls: 0,
+                    per_row_floats: false,
                 }
             })
             .collect();
@@ -384,6 +398,7 @@ impl ColumnSink {
             columns,
             compressor,
             compression: compression(settings.codec),
+            float_hash_log: settings.float_hash_log,
             group_cap: settings.row_group_rows.max(1),
             group_rows: 0,
             rows: 0,
@@ -452,8 +467,14 @@ impl ColumnSink {
         let mut chunks = Vec::with_capacity(self.columns.len());
         for c in &mut self.columns {
             chunks.push(
-                encode_chunk(c, rows, &mut self.compressor, self.compression)
-                    .map_err(|e| StoreError::parquet(&target, e))?,
+                encode_chunk(
+                    c,
+                    rows,
+                    &mut self.compressor,
+                    self.compression,
+                    self.float_hash_log,
+                )
+                .map_err(|e| StoreError::parquet(&target, e))?,
             );
             c.data = empty_data_like(&mut c.data);
             c.def_runs.clear();
@@ -583,7 +604,10 @@ fn push(c: &mut Column, view: &ColumnView<'_>, lo: usize, hi: usize) -> Result<(
     }
     let of = |values_len: usize, keys| keyed(keys, values_len, lo, hi);
     match (&mut c.data, view) {
-        (Data::F64(out), ColumnView::F64(s)) => out.extend_from_slice(&s[lo..hi]),
+        (Data::F64(out), ColumnView::F64(s)) => {
+            c.per_row_floats = true;
+            out.extend_from_slice(&s[lo..hi])
+        }
         (Data::F64(out), ColumnView::F64Of { values, keys }) => {
             out.extend(of(values.len(), keys).map(|k| values[k]))
         }
@@ -835,6 +859,7 @@ fn encode_chunk(
     rows: usize,
     compressor: &mut Compressor,
     compression: Compression,
+    float_hash_log: u32,
 ) -> parquet::errors::Result<EncodedChunk> {
     let mut data = Vec::with_capacity(rows * 8 + 64);
     if c.nullable {
@@ -846,9 +871,10 @@ fn encode_chunk(
     let mut page_stats = Vec::new();
     let (mut compressed_total, mut uncompressed_total) = (0u64, 0u64);
     let (mut dict_offset, data_offset);
+    let hash_log = if c.per_row_floats { float_hash_log } else { 0 };
     let mut compress = |buf: Vec<u8>| -> parquet::errors::Result<(Bytes, usize)> {
         let raw = buf.len();
-        Ok(match compressor.compress(&buf)? {
+        Ok(match compressor.compress(&buf, hash_log)? {
             Some(z) => (Bytes::from(z), raw),
             None => (Bytes::from(buf), raw),
         })

@@ -440,7 +440,7 @@ impl Staging {
     }
 
     /// Starts a staged Parquet file for `table` written by the column writer ([`ColumnSink`]), with
-    /// the default [`ParquetSettings`].
+    /// the environment's [`ParquetSettings::for_frames`].
     pub fn column_sink(
         &self,
         table: &str,
@@ -455,7 +455,7 @@ impl Staging {
         ColumnSink::create(
             path.join(shard_file_name(&self.stage_id, shard)),
             schema,
-            &ParquetSettings::default(),
+            &ParquetSettings::for_frames(env),
         )
     }
 
