@@ -207,7 +207,7 @@ fn candidate_settings() -> Vec<(&'static str, ParquetSettings, bool)> {
             default,
         ),
         (
-            "column writer, zstd 1, 2^12-entry hash table for per-row floats (billiards' default now)",
+            "column writer, zstd 1, 2^12-entry hash table for per-row floats",
             ParquetSettings {
                 float_hash_log: 12,
                 ..default
@@ -219,6 +219,18 @@ fn candidate_settings() -> Vec<(&'static str, ParquetSettings, bool)> {
                 float_hash_log: 10,
                 ..default
             },
+        ),
+        (
+            "column writer, zstd 1, 2^12-entry hash table and raw literals for per-row floats",
+            ParquetSettings {
+                float_hash_log: 12,
+                float_raw_literals: true,
+                ..default
+            },
+        ),
+        (
+            "column writer, zstd 1, 2^10-entry hash table and raw literals for per-row floats (billiards' default now)",
+            ParquetSettings::for_frames(Some(annotrace::trace::Env::Pooltool)),
         ),
         ("column writer, zstd 3", column(Codec::Zstd(3))),
         ("column writer, zstd -1 (fast)", column(Codec::Zstd(-1))),

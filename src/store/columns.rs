@@ -82,7 +82,7 @@ struct Column {
     def_runs: Vec<(bool, u32)>,
     nulls: u64,
     /// Whether the column was fed a value per row ([`ColumnView::F64`]): its pages are compressed
-    /// with [`ParquetSettings::float_hash_log`]. Columns repeated per step (`t`) or per object
+    /// with [`ParquetSettings::float_hash_log`] and [`ParquetSettings::float_raw_literals`]. Columns repeated per step (`t`) or per object
     /// (radius) keep zstd's own table: their matches lie far apart and a smaller table loses them.
     per_row_floats: bool,
 }
@@ -136,10 +136,19 @@ fn for_run_rows(counts: &[i32], lo: usize, hi: usize, mut f: impl FnMut(usize, i
     }
 }
 
+/// zstd options of one column's pages (the defaults: the level's own).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct ZstdPage {
+    /// The match finder's hash table, 2^`hash_log` entries (0: the level's own).
+    hash_log: u32,
+    /// Literals stored as they are, not Huffman-coded.
+    raw_literals: bool,
+}
+
 /// A page compressor for the file's codec.
 enum Compressor {
-    /// The compressor and the hash log it is set to (0: the level's own).
-    Zstd(Box<zstd::bulk::Compressor<'static>>, u32),
+    /// The compressor and the page options it is set to.
+    Zstd(Box<zstd::bulk::Compressor<'static>>, ZstdPage),
     Lz4Raw,
     Snappy(Box<snap::raw::Encoder>),
     None,
@@ -148,24 +157,33 @@ enum Compressor {
 impl Compressor {
     fn new(codec: Codec) -> std::io::Result<Self> {
         Ok(match codec {
-            Codec::Zstd(level) => {
-                Compressor::Zstd(Box::new(zstd::bulk::Compressor::new(level)?), 0)
-            }
+            Codec::Zstd(level) => Compressor::Zstd(
+                Box::new(zstd::bulk::Compressor::new(level)?),
+                ZstdPage::default(),
+            ),
             Codec::Lz4Raw => Compressor::Lz4Raw,
             Codec::Snappy => Compressor::Snappy(Box::new(snap::raw::Encoder::new())),
             Codec::None => Compressor::None,
         })
     }
 
-    /// `input` compressed (or `None` when the codec is none); zstd with a match-finder hash table
-    /// of 2^`hash_log` entries (0: the level's own), which changes how, not whether, it compresses.
-    fn compress(&mut self, input: &[u8], hash_log: u32) -> std::io::Result<Option<Vec<u8>>> {
+    /// `input` compressed (or `None` when the codec is none); zstd with the options of `page`,
+    /// which change how, not whether, it compresses.
+    fn compress(&mut self, input: &[u8], page: ZstdPage) -> std::io::Result<Option<Vec<u8>>> {
         Ok(Some(match self {
             Compressor::Zstd(c, set) => {
-                if *set != hash_log {
-                    c.set_parameter(zstd::zstd_safe::CParameter::HashLog(hash_log))?;
-                    *set = hash_log;
+                use zstd::zstd_safe::{CParameter, ParamSwitch};
+                if set.hash_log != page.hash_log {
+                    c.set_parameter(CParameter::HashLog(page.hash_log))?;
                 }
+                if set.raw_literals != page.raw_literals {
+                    c.set_parameter(CParameter::LiteralCompressionMode(if page.raw_literals {
+                        ParamSwitch::Disable
+                    } else {
+                        ParamSwitch::Auto
+                    }))?;
+                }
+                *set = page;
                 let mut out = Vec::with_capacity(zstd::zstd_safe::compress_bound(input.len()));
                 c.compress_to_buffer(input, &mut out)?;
                 out
@@ -330,7 +348,8 @@ pub struct ColumnSink {
     columns: Vec<Column>,
     compressor: Compressor,
     compression: Compression,
-    float_hash_log: u32,
+    /// zstd options of the per-row float columns' pages.
+    float_pages: ZstdPage,
     group_cap: usize,
     group_rows: usize,
     rows: usize,
@@ -398,7 +417,10 @@ impl ColumnSink {
             columns,
             compressor,
             compression: compression(settings.codec),
-            float_hash_log: settings.float_hash_log,
+            float_pages: ZstdPage {
+                hash_log: settings.float_hash_log,
+                raw_literals: settings.float_raw_literals,
+            },
             group_cap: settings.row_group_rows.max(1),
             group_rows: 0,
             rows: 0,
@@ -472,7 +494,7 @@ impl ColumnSink {
                     rows,
                     &mut self.compressor,
                     self.compression,
-                    self.float_hash_log,
+                    self.float_pages,
                 )
                 .map_err(|e| StoreError::parquet(&target, e))?,
             );
@@ -859,7 +881,7 @@ fn encode_chunk(
     rows: usize,
     compressor: &mut Compressor,
     compression: Compression,
-    float_hash_log: u32,
+    float_pages: ZstdPage,
 ) -> parquet::errors::Result<EncodedChunk> {
     let mut data = Vec::with_capacity(rows * 8 + 64);
     if c.nullable {
@@ -871,10 +893,14 @@ fn encode_chunk(
     let mut page_stats = Vec::new();
     let (mut compressed_total, mut uncompressed_total) = (0u64, 0u64);
     let (mut dict_offset, data_offset);
-    let hash_log = if c.per_row_floats { float_hash_log } else { 0 };
+    let page = if c.per_row_floats {
+        float_pages
+    } else {
+        ZstdPage::default()
+    };
     let mut compress = |buf: Vec<u8>| -> parquet::errors::Result<(Bytes, usize)> {
         let raw = buf.len();
-        Ok(match compressor.compress(&buf, hash_log)? {
+        Ok(match compressor.compress(&buf, page)? {
             Some(z) => (Bytes::from(z), raw),
             None => (Bytes::from(buf), raw),
         })

@@ -75,6 +75,9 @@ pub struct ParquetSettings {
     /// 0 keeps the level's own (2^13 entries at level 1 for pages over 256 KiB). It changes how
     /// zstd finds matches, not what a reader reads. See [`ParquetSettings::for_frames`].
     pub float_hash_log: u32,
+    /// Whether zstd stores the literals of those pages (the bytes no match covers) as they are
+    /// instead of Huffman-coding them; a standard zstd frame either way.
+    pub float_raw_literals: bool,
 }
 
 impl Default for ParquetSettings {
@@ -95,23 +98,23 @@ impl Default for ParquetSettings {
             row_group_rows: ROW_GROUP_ROWS,
             page_rows: PAGE_ROWS,
             float_hash_log: 0,
+            float_raw_literals: false,
         }
     }
 }
 
 impl ParquetSettings {
     /// What the column writer writes an environment's `timesteps` and `frames` with: the default,
-    /// and for billiards a zstd hash table of 2^12 entries (16 KiB rather than the 32 KiB of a
-    /// core's whole L1 data cache) for the per-row float pages. Measured (docs/performance.md,
-    /// "zstd's hash table for float pages"): billiards `simulate` about 5 % less CPU and frames
-    /// 0.8 % smaller; for I-PHYRE the smaller table made frames 5 % larger for no time saved and
-    /// for PHYRE it changed nothing, so they keep zstd's own.
+    /// and for billiards' per-row float pages a zstd hash table of 2^10 entries (4 KiB rather than
+    /// the 32 KiB of a core's whole L1 data cache) and raw literals. Measured (docs/performance.md,
+    /// "zstd's hash table and literals for billiards' float pages"): the column writer takes a fifth
+    /// less CPU for frames of the same size. For PHYRE and I-PHYRE either change made the frames
+    /// 5–18 % larger for little or no time saved, so they keep zstd's own settings.
     pub fn for_frames(env: Option<Env>) -> Self {
+        let pool = env == Some(Env::Pooltool);
         ParquetSettings {
-            float_hash_log: match env {
-                Some(Env::Pooltool) => 12,
-                _ => 0,
-            },
+            float_hash_log: if pool { 10 } else { 0 },
+            float_raw_literals: pool,
             ..ParquetSettings::default()
         }
     }
