@@ -988,7 +988,7 @@ mod tests {
     use crate::store::parquet::read_file;
     use crate::trace::frames::{IphyreBody, IphyreFrames, PhyreBody, PhyreFrames, PoolFrames};
     use crate::trace::schema::{FRAMES, TIMESTEPS};
-    use crate::trace::{Event, JsonMap, Outcome, TraceColumns};
+    use crate::trace::{Env, Event, JsonMap, Outcome, TraceColumns};
     use arrow::array::{Array, ArrayRef, RecordBatch};
     use arrow::compute::{cast, concat_batches};
 
@@ -1161,6 +1161,61 @@ mod tests {
         let iphyres = vec![iphyre("i1", 40), iphyre("i2", 9)];
         round_trip(&iphyres, &ParquetSettings::default());
         round_trip(&iphyres, &small);
+        // Each environment's own settings, as `simulate` writes its frames.
+        round_trip(&pools, &ParquetSettings::for_frames(Some(Env::Pooltool)));
+        round_trip(&phyres, &ParquetSettings::for_frames(Some(Env::Phyre)));
+        round_trip(&iphyres, &ParquetSettings::for_frames(Some(Env::Iphyre)));
+    }
+
+    /// The compressed size of every column chunk of a frames file written with `settings`.
+    fn chunk_sizes(traces: &[TraceColumns], settings: &ParquetSettings) -> Vec<(String, i64)> {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("f.parquet");
+        let mut sink = ColumnSink::create(&path, FRAMES.clone(), settings).unwrap();
+        for t in traces {
+            let tables = t.tables("s", "src").unwrap();
+            sink.append(tables.frame_rows, &tables.frames).unwrap();
+        }
+        sink.commit().unwrap();
+        let reader =
+            parquet::file::reader::SerializedFileReader::new(File::open(&path).unwrap()).unwrap();
+        use parquet::file::reader::FileReader;
+        let group = reader.metadata().row_group(0).clone();
+        group
+            .columns()
+            .iter()
+            .map(|c| (c.column_path().string(), c.compressed_size()))
+            .collect()
+    }
+
+    #[test]
+    fn float_page_options_change_only_the_per_row_float_pages() {
+        let traces = vec![pool("a", &["cue", "1", "2", "3", "9"], 2000, 0)];
+        let default = chunk_sizes(&traces, &ParquetSettings::default());
+        let billiards = chunk_sizes(&traces, &ParquetSettings::for_frames(Some(Env::Pooltool)));
+        assert_eq!(
+            ParquetSettings::for_frames(Some(Env::Phyre)),
+            ParquetSettings::default()
+        );
+        assert_eq!(
+            ParquetSettings::for_frames(Some(Env::Iphyre)),
+            ParquetSettings::default()
+        );
+        let per_row = ["x", "y", "vx", "vy", "wx", "wy", "wz"];
+        let mut changed = Vec::new();
+        for ((name, a), (name_b, b)) in default.iter().zip(&billiards) {
+            assert_eq!(name, name_b);
+            if a != b {
+                changed.push(name.as_str());
+            }
+        }
+        assert!(!changed.is_empty(), "the options change some float pages");
+        for name in &changed {
+            assert!(
+                per_row.contains(name),
+                "{name} is not a per-row float column"
+            );
+        }
     }
 
     #[test]
