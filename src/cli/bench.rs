@@ -203,7 +203,7 @@ fn candidate_settings() -> Vec<(&'static str, ParquetSettings, bool)> {
     let column = |codec| ParquetSettings { codec, ..default };
     let columns: Vec<(&'static str, ParquetSettings)> = vec![
         (
-            "column writer, zstd 1 (the default now: timesteps and frames)",
+            "column writer, zstd 1 (the default now: timesteps and frames; PHYRE's and I-PHYRE's float pages)",
             default,
         ),
         (

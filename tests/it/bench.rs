@@ -51,7 +51,10 @@ fn a_case_is_measured_from_the_files_it_wrote_and_settings_compare_on_them() {
     s.ok()
         .stdout_has("40 trace(s)")
         .stdout_has("64 Ki-row pages (the default now: other tables)")
-        .stdout_has("| column writer, zstd 1 (the default now: timesteps and frames) |")
+        .stdout_has(
+            "| column writer, zstd 1 (the default now: timesteps and frames; PHYRE's and I-PHYRE's float pages) |",
+        )
+        .stdout_has("raw literals for per-row floats (billiards' default now) |")
         .stdout_has("| column writer, lz4 (raw) |")
         .stdout_has("| lz4 (raw) |");
 }
