@@ -201,6 +201,11 @@ fn candidate_settings() -> Vec<(&'static str, ParquetSettings, bool)> {
     ];
     let default = ParquetSettings::default();
     let column = |codec| ParquetSettings { codec, ..default };
+    let floats = |float_hash_log, float_raw_literals| ParquetSettings {
+        float_hash_log,
+        float_raw_literals,
+        ..default
+    };
     let columns: Vec<(&'static str, ParquetSettings)> = vec![
         (
             "column writer, zstd 1 (the default now: timesteps and frames; PHYRE's and I-PHYRE's float pages)",
@@ -208,25 +213,15 @@ fn candidate_settings() -> Vec<(&'static str, ParquetSettings, bool)> {
         ),
         (
             "column writer, zstd 1, 2^12-entry hash table for per-row floats",
-            ParquetSettings {
-                float_hash_log: 12,
-                ..default
-            },
+            floats(12, false),
         ),
         (
             "column writer, zstd 1, 2^10-entry hash table for per-row floats",
-            ParquetSettings {
-                float_hash_log: 10,
-                ..default
-            },
+            floats(10, false),
         ),
         (
             "column writer, zstd 1, 2^12-entry hash table and raw literals for per-row floats",
-            ParquetSettings {
-                float_hash_log: 12,
-                float_raw_literals: true,
-                ..default
-            },
+            floats(12, true),
         ),
         (
             "column writer, zstd 1, 2^10-entry hash table and raw literals for per-row floats (billiards' default now)",

@@ -82,8 +82,9 @@ struct Column {
     def_runs: Vec<(bool, u32)>,
     nulls: u64,
     /// Whether the column was fed a value per row ([`ColumnView::F64`]): its pages are compressed
-    /// with [`ParquetSettings::float_hash_log`] and [`ParquetSettings::float_raw_literals`]. Columns repeated per step (`t`) or per object
-    /// (radius) keep zstd's own table: their matches lie far apart and a smaller table loses them.
+    /// with [`ParquetSettings::float_hash_log`] and [`ParquetSettings::float_raw_literals`].
+    /// Columns repeated per step (`t`) or per object (radius) keep zstd's own settings: their
+    /// matches lie far apart and a smaller table loses them.
     per_row_floats: bool,
 }
 
