@@ -43,12 +43,17 @@ def table(work: Path, scale: str) -> str:
     rows = [json.loads(l) for l in (work / "annotrace.jsonl").read_text().splitlines() if l.strip()]
     by = {(r["case"], r["threads"]): r for r in rows}
     env = dict(l.split("=", 1) for l in (work / "env.txt").read_text().splitlines() if "=" in l)
-    profile = rows[0]["profile"] if rows else "?"
+    profile = env.get("build") or (rows[0]["profile"] if rows else "?")
+    if profile == "dist":
+        profile = ("**dist build** (release with LTO across crates and one codegen unit: "
+                   "`cargo build --profile dist`)")
+    else:
+        profile = f"**{profile} build**"
     lines = [
         BEGIN,
         "",
         f"Measured by `SCALE={scale} tools/side_by_side.sh` on {env.get('date')}: {env.get('machine')}; "
-        f"load average at the end {env.get('load')}. {env.get('annotrace')}, **{profile} build**; "
+        f"load average at the end {env.get('load')}. {env.get('annotrace')}, {profile}; "
         f"pooltool {env.get('pooltool')}; PHYRE {env.get('phyre')}; I-PHYRE {env.get('iphyre')}. "
         "annotrace figures are `annotrace bench` (the `simulate` command as a child process, into "
         "Parquet, wall time of the process); the originals' are their own speed scripts in the same "
