@@ -1,5 +1,6 @@
 use crate::b2_math::*;
 use crate::b2_common::*;
+use crate::b2_settings::B2_MAX_POLYGON_VERTICES;
 use crate::b2_shape::*;
 use crate::private::collision::b2_distance as private;
 
@@ -15,7 +16,10 @@ pub static B2_GJK_MAX_ITERS: AtomicUsize = AtomicUsize::new(0);
 pub struct B2distanceProxy {
     pub m_buffer: [B2vec2; 2],
     //box2d-rs: reference to shape vertices replaced by copy, because of borrowing/lifetime problems
-    pub m_vertices: Vec<B2vec2>,
+    //annotrace: the copy is held inline (a shape has at most B2_MAX_POLYGON_VERTICES), not in a Vec:
+    //no allocation per distance or time-of-impact query (PATCHES.md). The first m_count are the vertices.
+    pub m_vertices: [B2vec2; B2_MAX_POLYGON_VERTICES],
+    pub m_count: usize,
     //const b2Vec2* m_vertices;
     pub m_radius: f32,
 }
@@ -132,18 +136,18 @@ mod inline {
     use super::*;
 
     pub fn get_vertex_count(self_: &B2distanceProxy) -> usize {
-        return self_.m_vertices.len();
+        return self_.m_count;
     }
 
     pub fn get_vertex(self_: &B2distanceProxy, index: usize) -> B2vec2 {
-        b2_assert(index < self_.m_vertices.len());
+        b2_assert(index < self_.m_count);
         return self_.m_vertices[index];
     }
 
     pub fn get_support(self_: &B2distanceProxy, d: B2vec2) -> usize {
         let mut best_index: usize = 0;
         let mut best_value: f32 = b2_dot(self_.m_vertices[0], d);
-        for i in 1..self_.m_vertices.len() {
+        for i in 1..self_.m_count {
             let value: f32 = b2_dot(self_.m_vertices[i], d);
             if value > best_value {
                 best_index = i;
@@ -157,7 +161,7 @@ mod inline {
     pub fn get_support_vertex(self_: &B2distanceProxy, d: B2vec2) -> B2vec2 {
         let mut best_index: usize = 0;
         let mut best_value: f32 = b2_dot(self_.m_vertices[0], d);
-        for i in 1..self_.m_vertices.len() {
+        for i in 1..self_.m_count {
             let value: f32 = b2_dot(self_.m_vertices[i], d);
             if value > best_value {
                 best_index = i;

@@ -318,6 +318,11 @@ pub struct B2world<D: UserDataType> {
 	pub(crate) m_step_complete: bool,
 
 	pub(crate) m_profile: B2Profile,
+
+	// annotrace: the islands of `solve` and `solve_toi`, kept empty between steps so that their buffers
+	// are not allocated again every step (PATCHES.md).
+	pub(crate) m_island: Option<crate::private::dynamics::b2_island::B2island<D>>,
+	pub(crate) m_toi_island: Option<crate::private::dynamics::b2_island::B2island<D>>,
 }
 
 impl<D: UserDataType> Drop for B2world<D>

@@ -132,7 +132,8 @@ where
 {
     type Item = Rc<RefCell<T>>;
     fn next(&mut self) -> Option<Self::Item> {
-        self.next.clone().map(|node| {
+        // annotrace: the cursor is moved out, not cloned and then dropped (PATCHES.md).
+        self.next.take().map(|node| {
             self.next = node.borrow().get_next();
             node
         })

@@ -2,6 +2,7 @@
 use crate::b2_distance::*;
 use crate::b2_math::*;
 use crate::b2_common::*;
+use crate::b2_settings::B2_MAX_POLYGON_VERTICES;
 use crate::b2_shape::*;
 
 use crate::shapes::b2rs_to_derived_shape::*;
@@ -17,11 +18,11 @@ pub fn set_shape(
 ) {
 	match shape.as_derived() {
 		ShapeAsDerived::AsCircle(circle) => {
-			self_.m_vertices = vec![circle.m_p];
+			set_points(self_, &[circle.m_p]);
 			self_.m_radius = circle.base.m_radius;
 		}
 		ShapeAsDerived::AsPolygon(polygon) => {
-			self_.m_vertices = polygon.m_vertices[..polygon.m_count].to_vec();
+			set_points(self_, &polygon.m_vertices[..polygon.m_count]);
 			self_.m_radius = polygon.base.m_radius;
 		}
 		ShapeAsDerived::AsChain(chain) => {
@@ -34,18 +35,27 @@ pub fn set_shape(
 				self_.m_buffer[1] = chain.m_vertices[0];
 			}
 
-			self_.m_vertices = self_.m_buffer.to_vec();
+			let buffer = self_.m_buffer;
+			set_points(self_, &buffer);
 			self_.m_radius = chain.base.m_radius;
 		}
 		ShapeAsDerived::AsEdge(edge)  => {
-			self_.m_vertices = [edge.m_vertex1, edge.m_vertex2].to_vec();
+			set_points(self_, &[edge.m_vertex1, edge.m_vertex2]);
 			self_.m_radius = edge.base.m_radius;
 		}
 	}
 }
 
+// annotrace: the proxy holds its vertices inline (PATCHES.md); a shape has at most
+// B2_MAX_POLYGON_VERTICES of them, as Box2D's b2DistanceProxy::Set asserts.
+fn set_points(self_: &mut B2distanceProxy, vertices: &[B2vec2]) {
+	assert!(vertices.len() <= B2_MAX_POLYGON_VERTICES, "a distance proxy holds at most B2_MAX_POLYGON_VERTICES vertices");
+	self_.m_vertices[..vertices.len()].copy_from_slice(vertices);
+	self_.m_count = vertices.len();
+}
+
 pub fn set_vertices(self_: &mut B2distanceProxy, vertices: &[B2vec2], radius: f32) {
-	self_.m_vertices = Vec::from(vertices);
+	set_points(self_, vertices);
 	self_.m_radius = radius;
 }
 

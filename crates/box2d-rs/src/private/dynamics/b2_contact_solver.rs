@@ -55,7 +55,15 @@ impl B2contactSolver
 {
 	pub fn new<D: UserDataType>(def: &B2contactSolverDef, 
 		contacts: &Vec<ContactPtr<D>>)->Self{
-		return private::new(def, contacts);
+		return private::new(def, contacts, Vec::new(), Vec::new());
+	}
+
+	/// annotrace: as `new`, writing the constraints into buffers the caller keeps between steps.
+	pub fn new_in<D: UserDataType>(def: &B2contactSolverDef,
+		contacts: &Vec<ContactPtr<D>>,
+		position_constraints: Vec<B2contactPositionConstraint>,
+		velocity_constraints: Vec<B2contactVelocityConstraint>)->Self{
+		return private::new(def, contacts, position_constraints, velocity_constraints);
 	}
 
 	pub fn  initialize_velocity_constraints<D: UserDataType>(&mut self,

@@ -17,9 +17,17 @@ const B2_DEBUG_SOLVER: bool = false;
 //struct B2contactPositionConstraint
 //moved to header
 
-pub(crate) fn new<D: UserDataType>(def: &B2contactSolverDef, contacts: &Vec<ContactPtr<D>>) -> B2contactSolver
+// annotrace: the constraints are written into the given buffers (emptied first, so every constraint
+// starts from its default as before), which the caller keeps between steps (PATCHES.md).
+pub(crate) fn new<D: UserDataType>(def: &B2contactSolverDef, contacts: &Vec<ContactPtr<D>>,
+	mut position_constraints: Vec<B2contactPositionConstraint>,
+	mut velocity_constraints: Vec<B2contactVelocityConstraint>) -> B2contactSolver
 {
 	let mut result = B2contactSolver::default();
+	position_constraints.clear();
+	velocity_constraints.clear();
+	result.m_position_constraints = position_constraints;
+	result.m_velocity_constraints = velocity_constraints;
 
 	let count = contacts.len();
 	

@@ -30,7 +30,35 @@ impl<D: UserDataType> B2island<D> {
 		
 			m_positions,
 			m_velocities,
+			m_position_constraints: Vec::new(),
+			m_velocity_constraints: Vec::new(),
 		}
+	}
+
+	/// annotrace: makes a kept island what `new` with these capacities makes, reusing its buffers
+	/// (PATCHES.md): the same empty lists and the same default positions and velocities.
+	pub fn reset(
+		&mut self,
+		body_capacity: usize,
+		contact_capacity: usize,
+		joint_capacity: usize,
+		listener: Option<B2contactListenerPtr<D>>,
+	) {
+		self.m_listener = listener;
+		self.clear();
+		self.m_bodies.reserve(body_capacity);
+		self.m_contacts.reserve(contact_capacity);
+		self.m_joints.reserve(joint_capacity);
+		self.m_positions.clear();
+		self.m_velocities.clear();
+		self.m_positions.resize(body_capacity, Default::default());
+		self.m_velocities.resize(body_capacity, Default::default());
+	}
+
+	/// annotrace: lets go of everything the island refers to, as dropping it did, and keeps its buffers.
+	pub fn release(&mut self) {
+		self.m_listener = None;
+		self.clear();
 	}
 
 	pub fn clear(&mut self) {
@@ -77,4 +105,8 @@ pub(crate) struct B2island<D: UserDataType> {
 
 	pub(crate) m_positions: Vec<B2position>,
 	pub(crate) m_velocities: Vec<B2velocity>,
+
+	// annotrace: the contact solver's constraint buffers, kept between solves (PATCHES.md).
+	pub(crate) m_position_constraints: Vec<B2contactPositionConstraint>,
+	pub(crate) m_velocity_constraints: Vec<B2contactVelocityConstraint>,
 }

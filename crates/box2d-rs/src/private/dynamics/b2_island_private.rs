@@ -187,7 +187,8 @@ pub(crate) fn solve<D: UserDataType>(self_: &mut B2island<D>, profile: &mut B2Pr
 		//velocities : &mut self_.m_velocities,
 	};
 
-	let mut contact_solver = B2contactSolver::new::<D>(&contact_solver_def, &self_.m_contacts);
+	let mut contact_solver = B2contactSolver::new_in::<D>(&contact_solver_def, &self_.m_contacts,
+		std::mem::take(&mut self_.m_position_constraints), std::mem::take(&mut self_.m_velocity_constraints));
 	contact_solver.initialize_velocity_constraints(&self_.m_positions, &self_.m_velocities, &self_.m_contacts);
 
 	if step.warm_starting
@@ -325,6 +326,11 @@ pub(crate) fn solve<D: UserDataType>(self_: &mut B2island<D>, profile: &mut B2Pr
 			}
 		}
 	}
+
+	// annotrace: the constraint buffers go back to the island, which the world keeps for its next step
+	// (PATCHES.md).
+	self_.m_position_constraints = std::mem::take(&mut contact_solver.m_position_constraints);
+	self_.m_velocity_constraints = std::mem::take(&mut contact_solver.m_velocity_constraints);
 }
 
 pub(crate) fn solve_toi<D: UserDataType>(self_: &mut B2island<D>, sub_step: &B2timeStep, toi_index_a: i32, toi_index_b: i32)
@@ -347,7 +353,8 @@ pub(crate) fn solve_toi<D: UserDataType>(self_: &mut B2island<D>, sub_step: &B2t
 	// contact_solver_def.positions = m_positions;
 	// contact_solver_def.velocities = m_velocities;
 	};
-	let mut contact_solver = B2contactSolver::new::<D>(&contact_solver_def, &self_.m_contacts);
+	let mut contact_solver = B2contactSolver::new_in::<D>(&contact_solver_def, &self_.m_contacts,
+		std::mem::take(&mut self_.m_position_constraints), std::mem::take(&mut self_.m_velocity_constraints));
 
 	// solve position constraints.
 	for _i in 0..sub_step.position_iterations
@@ -455,6 +462,11 @@ pub(crate) fn solve_toi<D: UserDataType>(self_: &mut B2island<D>, sub_step: &B2t
 	}
 
 	self_.report(&contact_solver.m_velocity_constraints);
+
+	// annotrace: the constraint buffers go back to the island, which the world keeps for its next step
+	// (PATCHES.md).
+	self_.m_position_constraints = std::mem::take(&mut contact_solver.m_position_constraints);
+	self_.m_velocity_constraints = std::mem::take(&mut contact_solver.m_velocity_constraints);
 }
 
 pub(crate) fn report<D: UserDataType>(self_: &B2island<D>, constraints: &[B2contactVelocityConstraint])

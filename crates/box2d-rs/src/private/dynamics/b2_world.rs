@@ -52,6 +52,9 @@ pub(crate) fn b2_world_new<D: UserDataType>(gravity: B2vec2) -> B2worldPtr<D> {
 		m_contact_manager: Rc::new(RefCell::new(B2contactManager::new())),
 
 		m_profile: Default::default(),
+
+		m_island: None,
+		m_toi_island: None,
 	}));
 }
 
@@ -358,11 +361,12 @@ pub(crate) fn solve<D: UserDataType>(self_: &mut B2world<D>, step: B2timeStep) {
 	self_.m_profile.solve_velocity = 0.0;
 	self_.m_profile.solve_position = 0.0;
 
-	let mut island;
+	// annotrace: the world's kept island, made what `B2island::new` made here (PATCHES.md).
+	let mut island = self_.m_island.take().unwrap_or_else(|| B2island::new(0, 0, 0, None));
 	{
 		let contact_manager = self_.m_contact_manager.borrow();
 		// Size the island for the worst case.
-		island = B2island::new(
+		island.reset(
 			self_.m_body_count,
 			contact_manager.m_contact_count as usize,
 			self_.m_joint_count,
@@ -528,11 +532,17 @@ pub(crate) fn solve<D: UserDataType>(self_: &mut B2world<D>, step: B2timeStep) {
 		self_.m_contact_manager.borrow_mut().find_new_contacts();
 		self_.m_profile.broadphase = timer.get_milliseconds();
 	}
+
+	// annotrace: the island lets go of its bodies and contacts here, where it used to be dropped.
+	island.release();
+	self_.m_island = Some(island);
 }
 
 // Find TOI contacts and solve them.
 pub(crate) fn solve_toi<D: UserDataType>(self_: &mut B2world<D>, step: B2timeStep) {
-	let mut island = B2island::new(
+	// annotrace: the world's kept island, made what `B2island::new` made here (PATCHES.md).
+	let mut island = self_.m_toi_island.take().unwrap_or_else(|| B2island::new(0, 0, 0, None));
+	island.reset(
 		2 * B2_MAX_TOICONTACTS,
 		B2_MAX_TOICONTACTS,
 		0,
@@ -868,7 +878,8 @@ pub(crate) fn solve_toi<D: UserDataType>(self_: &mut B2world<D>, step: B2timeSte
 		}
 
 		// reset island flags and synchronize broad-phase proxies.
-		for body in island.m_bodies.clone() {
+		// annotrace: the island's bodies are read in place (they were cloned into a new Vec per event).
+		for body in island.m_bodies.iter() {
 			let mut body = body.borrow_mut();
 			body.m_flags.remove(BodyFlags::E_ISLAND_FLAG);
 
@@ -898,6 +909,10 @@ pub(crate) fn solve_toi<D: UserDataType>(self_: &mut B2world<D>, step: B2timeSte
 			break;
 		}
 	}
+
+	// annotrace: the island lets go of its bodies and contacts here, where it used to be dropped.
+	island.release();
+	self_.m_toi_island = Some(island);
 }
 
 pub(crate) fn step<D: UserDataType>(
