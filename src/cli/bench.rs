@@ -20,6 +20,9 @@ use annotrace::trace::view::ColumnView;
 
 use super::{CliError, CliResult};
 
+/// The Cargo profile that built this binary (`debug`, `release`, `dist`), from `build.rs`.
+const BUILD_PROFILE: &str = env!("ANNOTRACE_PROFILE");
+
 /// One row of the throughput table.
 #[derive(Clone, Copy, Debug)]
 struct Case {
@@ -270,11 +273,7 @@ fn compare_settings(run: &Path) -> anyhow::Result<()> {
         traces,
         files.len(),
         on_disk as f64 / 1e6,
-        if cfg!(debug_assertions) {
-            "debug"
-        } else {
-            "release"
-        }
+        BUILD_PROFILE
     );
     println!(
         "| setting | encode s (wall) | encode CPU s | M rows per CPU s | MB | MB per 1,000 traces | frames MB | size vs the first |"
@@ -498,11 +497,7 @@ fn run_case(
         parquet_bytes,
         parquet_bytes_per_1000_traces: parquet_bytes as f64 * 1000.0 / traces.max(1) as f64,
         frames_bytes,
-        profile: if cfg!(debug_assertions) {
-            "debug"
-        } else {
-            "release"
-        },
+        profile: BUILD_PROFILE,
     })
 }
 

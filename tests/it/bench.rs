@@ -33,6 +33,12 @@ fn a_case_is_measured_from_the_files_it_wrote_and_settings_compare_on_them() {
     assert!(m["parquet_bytes"].as_u64().unwrap() > m["frames_bytes"].as_u64().unwrap());
     assert!(m["wall_s"].as_f64().unwrap() > 0.0 && m["cpu_s"].as_f64().unwrap() > 0.0);
     assert!(m["frame_rows_per_cpu_s"].as_f64().unwrap() > 0.0);
+    // The profile that built the binary, named as its folder is (`debug`, `release`, `dist`): this test's
+    // executable sits in `<target>/<profile>/deps/`, beside the binary's own `<target>/<profile>/`.
+    let exe = std::env::current_exe().unwrap();
+    let profile = exe.parent().and_then(|deps| deps.parent()).and_then(|p| p.file_name());
+    let profile = profile.unwrap().to_str().unwrap().to_string();
+    assert_eq!(m["profile"], profile.as_str());
     // The same frame rows as the run's own table.
     let q = t.run(&[
         "query",
@@ -50,6 +56,7 @@ fn a_case_is_measured_from_the_files_it_wrote_and_settings_compare_on_them() {
     ]);
     s.ok()
         .stdout_has("40 trace(s)")
+        .stdout_has(&format!("; profile {profile}"))
         .stdout_has("64 Ki-row pages (the default now: other tables)")
         .stdout_has(
             "| column writer, zstd 1 (the default now: timesteps and frames; PHYRE's and I-PHYRE's float pages) |",
