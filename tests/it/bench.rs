@@ -36,7 +36,10 @@ fn a_case_is_measured_from_the_files_it_wrote_and_settings_compare_on_them() {
     // The profile that built the binary, named as its folder is (`debug`, `release`, `dist`): this test's
     // executable sits in `<target>/<profile>/deps/`, beside the binary's own `<target>/<profile>/`.
     let exe = std::env::current_exe().unwrap();
-    let profile = exe.parent().and_then(|deps| deps.parent()).and_then(|p| p.file_name());
+    let profile = exe
+        .parent()
+        .and_then(|deps| deps.parent())
+        .and_then(|p| p.file_name());
     let profile = profile.unwrap().to_str().unwrap().to_string();
     assert_eq!(m["profile"], profile.as_str());
     // The same frame rows as the run's own table.
