@@ -11,8 +11,8 @@
 #   ANNOTRACE      the annotrace binary (default: target/debug/annotrace of $CARGO_TARGET_DIR or ./target,
 #                  built with `cargo build --locked` when missing). For the throughput figures build
 #                  `cargo build --locked --profile dist` and pass target/dist/annotrace (Cargo.toml, [profile.dist])
-#   BUILD          the build named in the table, as given (default: the folder the binary sits in when it
-#                  is debug, release or dist; else what the binary reports, debug or release)
+#   BUILD          the build named in the table, as given (default: the profile the binary reports,
+#                  debug, release or dist: `annotrace bench` reads it from its build, see build.rs)
 #   POOL_VENV      pooltool venv (default /work/venvs/pooltool if present, else tools/pooltool/venv, made
 #                  with tools/pooltool/install.sh)
 #   PHYRE_VENV     PHYRE venv, Python 3.9 (default /work/venvs/phyre39 if present, else tools/phyre/venv39,
@@ -150,13 +150,7 @@ echo "== annotrace bench --scale $SCALE --threads 1,2" >&2
   echo "machine=$(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//'), $(free -g | awk '/Mem:/{print $2}') GiB, $(uname -sr)"
   echo "load=$(cut -d' ' -f1-3 /proc/loadavg)"
   echo "annotrace=$("$ANNOTRACE" --version) ($(git rev-parse --short HEAD 2>/dev/null || echo '?'))"
-  if [ -n "${BUILD:-}" ]; then
-    echo "build=$BUILD"
-  else
-    case "$(basename "$(dirname "$ANNOTRACE")")" in
-      debug|release|dist) echo "build=$(basename "$(dirname "$ANNOTRACE")")" ;;
-    esac
-  fi
+  if [ -n "${BUILD:-}" ]; then echo "build=$BUILD"; fi
   echo "pooltool=$("$POOL_VENV/bin/python" -c 'import pooltool, sys; print(pooltool.__version__, "Python", sys.version.split()[0])' 2>/dev/null)"
   echo "phyre=$("$PHYRE_VENV/bin/pip" show phyre 2>/dev/null | awk '/^Version/{print $2}') Python $("$PHYRE_VENV/bin/python" -c 'import sys; print(sys.version.split()[0])')"
   echo "iphyre=$("$IPHYRE_VENV/bin/pip" show iphyre 2>/dev/null | awk '/^Version/{print $2}') pymunk $("$IPHYRE_VENV/bin/pip" show pymunk 2>/dev/null | awk '/^Version/{print $2}') Python $("$IPHYRE_VENV/bin/python" -c 'import sys; print(sys.version.split()[0])')"
