@@ -76,11 +76,18 @@ cp "$WORK/pooltool/bench_results/main.json" "$WORK/pooltool.json"
 
 echo "== PHYRE 0.2.2: simulate_action, status only, featurised objects every step, images every 60" >&2
 PHYRE_N="$(n_of 500)"
-(cd tools/phyre && "$PHYRE_VENV/bin/python" - "$PHYRE_N" >"$WORK/phyre.log" 2>&1) <<'EOF'
+# annotrace's own PHYRE episodes (the tasks and actions of the bench's phyre cases: same count, seed 0),
+# for the original to simulate too: the same work on both sides, beside the original's own random set.
+"$ANNOTRACE" -q simulate --env phyre --scenes "$PHYRE_N" --shots 1 --stride 6 --seed 0 --run "$WORK/phyre-ours" >&2
+"$ANNOTRACE" -q query --run "$WORK/phyre-ours" --format csv --out "$WORK/phyre-episodes.csv" \
+  "select task_id, extra, success from traces order by trace_id"
+(cd tools/phyre && "$PHYRE_VENV/bin/python" - "$PHYRE_N" "$WORK/phyre-episodes.csv" >"$WORK/phyre.log" 2>&1) <<'EOF'
 # The modes of phyre_traces.py speed that the table compares (status only; featurised objects every
 # step; images every 60 steps), on the first tasks of the ball tier's templates, round-robin, one valid
 # random action each (the images-every-step mode of that script is left out: it dominates its time).
-import sys, time
+# Then status only and featurised objects again on annotrace's episodes (argv[2]: task id, action and
+# outcome per trace), the steps each set simulates, and how many outcomes agree with annotrace's.
+import csv, json, sys, time
 import numpy as np
 import phyre
 n = int(sys.argv[1])
@@ -111,6 +118,26 @@ for label, kw in [('status only', dict(need_images=False)),
         sim.simulate_action(ti, a, **kw)
     dt = time.perf_counter() - t0
     print(f'simulate_action [{label}]: {len(acts) / dt:.1f} episodes/s over {len(acts)}')
+ours = list(csv.DictReader(open(sys.argv[2])))
+ours_ids = [r['task_id'] for r in ours]
+ours_acts = [np.array([json.loads(r['extra'])['action'][k] for k in 'xyr']) for r in ours]
+sim2 = phyre.initialize_simulator(ours_ids, 'ball')
+agree = 0
+for ti, (a, r) in enumerate(zip(ours_acts, ours)):
+    solved = sim2.simulate_action(ti, a, need_images=False).status == phyre.SimulationStatus.SOLVED
+    agree += solved == (r['success'] == 'true')
+print(f'outcomes agreeing with annotrace: {agree} of {len(ours)}')
+for label, kw in [('status only', dict(need_images=False)),
+                  ('featurized objects stride 1', dict(need_images=False, need_featurized_objects=True, stride=1))]:
+    t0 = time.perf_counter()
+    for ti, a in enumerate(ours_acts):
+        sim2.simulate_action(ti, a, **kw)
+    dt = time.perf_counter() - t0
+    print(f'simulate_action [{label}, annotrace episodes]: {len(ours_acts) / dt:.1f} episodes/s over {len(ours_acts)}')
+for label, s, aa in [('own set', sim, acts), ('annotrace episodes', sim2, ours_acts)]:
+    steps = sum(len(s.simulate_action(ti, a, need_images=False, need_featurized_objects=True,
+                                      stride=1).featurized_objects.features) for ti, a in enumerate(aa))
+    print(f'steps [{label}]: {steps / len(aa):.1f} per episode over {len(aa)}')
 EOF
 
 echo "== I-PHYRE: simulate() at 60 fps and the trace recorder" >&2

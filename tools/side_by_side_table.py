@@ -26,6 +26,12 @@ def originals(work: Path) -> dict:
         m = re.match(r"simulate_action \[(.*)\]: ([0-9.]+) episodes/s", line)
         if m:
             out["phyre " + m.group(1)] = float(m.group(2))
+        m = re.match(r"steps \[(.*)\]: ([0-9.]+) per episode", line)
+        if m:
+            out["phyre steps " + m.group(1)] = float(m.group(2))
+        m = re.match(r"outcomes agreeing with annotrace: (\d+) of (\d+)", line)
+        if m:
+            out["phyre agree"] = (int(m.group(1)), int(m.group(2)))
     for line in (work / "iphyre.log").read_text().splitlines():
         m = re.match(r"(simulate60|recorder60) ([0-9.]+) episodes/s over (\d+)", line)
         if m:
@@ -91,6 +97,28 @@ def table(work: Path, scale: str) -> str:
         f"iphyre `simulate()` without recording ({o.get('iphyre simulate60 n')} episodes; its trace recorder "
         f"{fmt(o.get('iphyre recorder60', 0))} /s)",
         o.get("iphyre simulate60", 0), "≥ 1×", lambda r, x: x >= 1)
+    ours_status = o.get("phyre status only, annotrace episodes")
+    ours_feat = o.get("phyre featurized objects stride 1, annotrace episodes")
+    if ours_status and ours_feat and (("phyre-6", 1) in by or ("phyre-1", 1) in by):
+        ratios = []
+        if ("phyre-1", 1) in by:
+            ratios.append(f"every step {by[('phyre-1', 1)]['items_per_s'] / ours_feat:.2f}× its featurised "
+                          f"stride 1 ({fmt(ours_feat)} /s)")
+        if ("phyre-6", 1) in by:
+            ratios.append(f"stride 6 {by[('phyre-6', 1)]['items_per_s'] / ours_status:.2f}× its status only "
+                          f"({fmt(ours_status)} /s)")
+        agree = o.get("phyre agree")
+        lines += [
+            "",
+            "**The same PHYRE episodes on both sides.** The original's rates above are over its own random "
+            "valid actions on the ball tier's first within-template test tasks; run instead on annotrace's "
+            "own episodes (the tasks and actions of the PHYRE cases above), PHYRE gives "
+            + "; ".join(ratios)
+            + f". Steps simulated per episode: {o.get('phyre steps own set', float('nan')):.1f} in the "
+            f"original's set, {o.get('phyre steps annotrace episodes', float('nan')):.1f} in annotrace's"
+            + (f"; the original's outcome (solved or not) agrees with annotrace's on {agree[0]} of "
+               f"{agree[1]} episodes." if agree else "."),
+        ]
     lines += [
         "",
         "Two threads against one: "
