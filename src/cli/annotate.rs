@@ -14,6 +14,7 @@ use annotrace::trace::Env;
 use sha2::{Digest, Sha256};
 
 use super::one_stage::{OneStage, absolute, existing_run, summary};
+use super::worker_args::WorkerArgs;
 use super::{CliError, CliResult, open_query};
 
 /// The flags of the commands that run detectors (`annotate`, `accuracy`).
@@ -29,15 +30,8 @@ pub(crate) struct SandboxArgs {
     /// Environment of the traces: pooltool, phyre or iphyre.
     #[arg(long, default_value = "pooltool")]
     pub env: Env,
-    /// Python worker processes (0 = one per core).
-    #[arg(long, default_value_t = SandboxParams::default().workers)]
-    pub workers: u64,
-    /// Wall-clock limit of one detector call (s).
-    #[arg(long, default_value_t = SandboxParams::default().timeout)]
-    pub timeout: f64,
-    /// Address-space limit of a worker (MiB).
-    #[arg(long, default_value_t = SandboxParams::default().memory_mb)]
-    pub memory_mb: u64,
+    #[command(flatten)]
+    pub limits: WorkerArgs,
 }
 
 impl SandboxArgs {
@@ -46,9 +40,9 @@ impl SandboxArgs {
         Ok(SandboxParams {
             env: self.env,
             library: self.library.as_deref().map(absolute).transpose()?,
-            workers: self.workers,
-            timeout: self.timeout,
-            memory_mb: self.memory_mb,
+            workers: self.limits.workers,
+            timeout: self.limits.timeout,
+            memory_mb: self.limits.memory_mb,
         })
     }
 

@@ -11,6 +11,7 @@ use annotrace::pipeline::stages::ensemble::{EnsembleParams, EnsembleSummary, KIN
 use annotrace::trace::Env;
 
 use super::one_stage::{OneStage, absolute, existing_run, params_id, summary};
+use super::worker_args::WorkerArgs;
 use super::{CliError, CliResult};
 
 /// The stage's defaults, shown by `--help`.
@@ -81,15 +82,8 @@ pub struct Args {
     /// Seed of the split, K-means and calibration.
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Python worker processes (0 = one per core).
-    #[arg(long, default_value_t = D.workers)]
-    workers: u64,
-    /// Wall-clock limit of one detector call (s).
-    #[arg(long, default_value_t = D.timeout)]
-    timeout: f64,
-    /// Address-space limit of a worker (MiB).
-    #[arg(long, default_value_t = D.memory_mb)]
-    memory_mb: u64,
+    #[command(flatten)]
+    limits: WorkerArgs,
     /// Start over even if the same settings finished before.
     #[arg(long)]
     force: bool,
@@ -131,9 +125,9 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
         baseline: a.baseline.as_deref().map(absolute).transpose()?,
         output: a.output.as_deref().map(absolute).transpose()?,
         seed: Some(a.seed),
-        workers: a.workers,
-        timeout: a.timeout,
-        memory_mb: a.memory_mb,
+        workers: a.limits.workers,
+        timeout: a.limits.timeout,
+        memory_mb: a.limits.memory_mb,
         ..EnsembleParams::DEFAULT
     };
     let id = params_id("ensemble", &params);

@@ -16,6 +16,7 @@ use annotrace::trace::Env;
 
 use super::llm_args::LlmArgs;
 use super::one_stage::{OneStage, absolute, existing_run, params_id, summary};
+use super::worker_args::WorkerArgs;
 use super::{CliError, CliResult};
 
 /// The stage's defaults, shown by `--help`.
@@ -116,15 +117,8 @@ pub struct Args {
     /// Folder for the grown library (default: <run>/exports/<stage>/library).
     #[arg(long)]
     output: Option<PathBuf>,
-    /// Python worker processes (0 = one per core).
-    #[arg(long, default_value_t = D.workers)]
-    workers: u64,
-    /// Wall-clock limit of one detector call (s).
-    #[arg(long, default_value_t = D.timeout)]
-    timeout: f64,
-    /// Address-space limit of a worker (MiB).
-    #[arg(long, default_value_t = D.memory_mb)]
-    memory_mb: u64,
+    #[command(flatten)]
+    limits: WorkerArgs,
     /// Start over instead of resuming or reusing an earlier identical search.
     #[arg(long)]
     force: bool,
@@ -191,9 +185,9 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
         max_edits: a.max_edits,
         seed: Some(a.seed),
         output: a.output.as_deref().map(absolute).transpose()?,
-        workers: a.workers,
-        timeout: a.timeout,
-        memory_mb: a.memory_mb,
+        workers: a.limits.workers,
+        timeout: a.limits.timeout,
+        memory_mb: a.limits.memory_mb,
     };
     let id = params_id("evolve", &params);
     let stage = OneStage {

@@ -46,6 +46,7 @@ mod summarise;
 mod survey;
 mod tables;
 mod verify;
+mod worker_args;
 
 use std::process::ExitCode;
 

@@ -13,6 +13,7 @@ use annotrace::trace::Env;
 
 use super::llm_args::LlmArgs;
 use super::one_stage::{OneStage, absolute, existing_run, params_id, summary};
+use super::worker_args::{WorkerArgs, kebab};
 use super::{CliError, CliResult};
 
 #[derive(clap::Args, Debug)]
@@ -57,25 +58,13 @@ pub struct Args {
     /// Only these labels of the library annotate; comma-separated or repeated.
     #[arg(long, value_delimiter = ',')]
     labels: Vec<String>,
-    /// Python worker processes (0 = one per core).
-    #[arg(long, default_value_t = 0)]
-    workers: u64,
-    /// Wall-clock limit of one detector call (s).
-    #[arg(long, default_value_t = 10.0)]
-    timeout: f64,
-    /// Address-space limit of a worker (MiB).
-    #[arg(long, default_value_t = 2048)]
-    memory_mb: u64,
+    #[command(flatten)]
+    limits: WorkerArgs,
     /// Start over instead of resuming or reusing an identical earlier run of this command.
     #[arg(long)]
     force: bool,
     #[command(flatten)]
     llm: LlmArgs,
-}
-
-fn kebab<T: serde::de::DeserializeOwned>(flag: &str, v: &str) -> Result<T, CliError> {
-    serde_json::from_value(serde_json::Value::String(v.to_string()))
-        .map_err(|e| CliError::input(anyhow::anyhow!("--{flag}: {e}")))
 }
 
 pub fn run(a: Args, quiet: bool) -> CliResult {
@@ -108,9 +97,9 @@ pub fn run(a: Args, quiet: bool) -> CliResult {
         labels: (!a.labels.is_empty()).then(|| a.labels.clone()),
         llm: (uses_llm && llm != LlmSettings::default()).then_some(llm),
         prompts: a.llm.prompts.as_deref().map(absolute).transpose()?,
-        workers: a.workers,
-        timeout: a.timeout,
-        memory_mb: a.memory_mb,
+        workers: a.limits.workers,
+        timeout: a.limits.timeout,
+        memory_mb: a.limits.memory_mb,
     };
     // A replay gives the same tables under the same stage id: the id leaves out where answers come
     // from (the endpoint's address, the replay run).
