@@ -67,6 +67,15 @@ fi
 
 n_of() { python3 -c "import sys; print(max(1, round($1 * float(sys.argv[1]))))" "$SCALE"; }
 
+# --- annotrace, same session ---
+echo "== annotrace bench --scale $SCALE --threads 1,2" >&2
+"$ANNOTRACE" bench --scale "$SCALE" --threads 1,2 --dir "$WORK/bench" --json "$WORK/annotrace.jsonl" >"$WORK/annotrace.md"
+# The episodes of the bench's PHYRE stride-6 case (its tasks and actions, kept in its run folder), for
+# the original to simulate too: the same work on both sides, beside the original's own random set.
+"$ANNOTRACE" -q query --run "$WORK/bench/phyre-6-t1" --format csv --out "$WORK/phyre-episodes.csv" \
+  "select task_id, extra, success from traces order by trace_id"
+rm -rf "$WORK/bench"
+
 # --- the originals ---
 echo "== pooltool 0.6.0: simulate + continuize(dt 0.01), bench.py" >&2
 cp -r tools/pooltool "$WORK/pooltool"
@@ -76,11 +85,6 @@ cp "$WORK/pooltool/bench_results/main.json" "$WORK/pooltool.json"
 
 echo "== PHYRE 0.2.2: simulate_action, status only, featurised objects every step, images every 60" >&2
 PHYRE_N="$(n_of 500)"
-# annotrace's own PHYRE episodes (the tasks and actions of the bench's phyre cases: same count, seed 0),
-# for the original to simulate too: the same work on both sides, beside the original's own random set.
-"$ANNOTRACE" -q simulate --env phyre --scenes "$PHYRE_N" --shots 1 --stride 6 --seed 0 --run "$WORK/phyre-ours" >&2
-"$ANNOTRACE" -q query --run "$WORK/phyre-ours" --format csv --out "$WORK/phyre-episodes.csv" \
-  "select task_id, extra, success from traces order by trace_id"
 (cd tools/phyre && "$PHYRE_VENV/bin/python" - "$PHYRE_N" "$WORK/phyre-episodes.csv" >"$WORK/phyre.log" 2>&1) <<'EOF'
 # The modes of phyre_traces.py speed that the table compares (status only; featurised objects every
 # step; images every 60 steps), on the first tasks of the ball tier's templates, round-robin, one valid
@@ -166,10 +170,6 @@ for g in GAMES[::4]:
 dt = time.perf_counter() - t0
 print(f"recorder60 {eps / dt:.2f} episodes/s over {eps}")
 EOF
-
-# --- annotrace, same session ---
-echo "== annotrace bench --scale $SCALE --threads 1,2" >&2
-"$ANNOTRACE" bench --scale "$SCALE" --threads 1,2 --json "$WORK/annotrace.jsonl" >"$WORK/annotrace.md"
 
 # --- versions and machine ---
 {
