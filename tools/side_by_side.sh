@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The side-by-side throughput table: annotrace's `simulate` (command line to Parquet, `annotrace bench`)
 # and the three original simulators (pooltool 0.6.0, PHYRE 0.2.2, I-PHYRE 0.2.3) measured on this
-# machine in one session, written into docs/performance.md between the `side-by-side` markers.
+# machine in one session, with the bench's `annotate` case (the built-in billiards library over the
+# billiards case's shots), written into docs/performance.md between the `side-by-side` markers.
 #
 #   tools/side_by_side.sh                 # scale 1: the sizes (tens of minutes in a debug build)
 #   SCALE=0.1 tools/side_by_side.sh       # a tenth of every annotrace case, fewer original episodes

@@ -128,6 +128,24 @@ def table(work: Path, scale: str) -> str:
             if (c, 1) in by and (c, 2) in by
         )
         + " (goal ≥ 1.8×).",
+    ]
+    ann = [by[("annotate", w)] for w in (1, 2) if ("annotate", w) in by]
+    if ann:
+        last = ann[-1]
+        met = "met" if last["threads"] == 2 and last["wall_ms_per_item"] <= 3.0 else "**not met**"
+        lines += [
+            "",
+            f"**Annotation** (`annotrace bench`'s `annotate` case: `annotrace annotate --env pooltool "
+            f"--workers <n>`, the 12 built-in detectors over the pool case's {last['traces']} shots, each "
+            "run on its own copy of them; CPU includes the detector workers): "
+            + "; ".join(
+                f"{r['threads']} worker{'s' if r['threads'] > 1 else ''} {r['wall_ms_per_item']:.2f} ms "
+                f"per trace of wall, {1000 * r['cpu_s'] / max(r['items'], 1):.2f} ms of CPU"
+                for r in ann
+            )
+            + f" (goal ≤ 3 ms per trace on 2 workers: {met}).",
+        ]
+    lines += [
         "",
         END,
     ]

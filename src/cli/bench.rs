@@ -6,6 +6,11 @@
 //! for the trace and frame-row counts and sums the file sizes. Nothing here is simulated in-process, so
 //! the figures include start-up, sharding, the manifest and the commit, exactly as `simulate` pays them.
 //! `--scale` shrinks every case in proportion (the side-by-side script uses it to fit a time budget).
+//!
+//! The `annotate` case measures the next command a user runs on those traces: the built-in pooltool
+//! library over the `pool` case's shots. The shots are simulated once, untimed; each thread count
+//! then times `annotrace annotate --workers <threads>` on its own copy of them (a run folder takes
+//! one annotate stage), and the CPU time includes the detector workers, which `annotate` waits for.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -23,11 +28,22 @@ use super::{CliError, CliResult};
 /// The Cargo profile that built this binary (`debug`, `release`, `dist`), from `build.rs`.
 const BUILD_PROFILE: &str = env!("ANNOTRACE_PROFILE");
 
+/// What a case times.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Timed {
+    /// `simulate` with the case's arguments.
+    Simulate,
+    /// `annotate` with the built-in library, over traces simulated (untimed) with the case's
+    /// arguments; the thread count is the number of workers.
+    Annotate,
+}
+
 /// One row of the throughput table.
 #[derive(Clone, Copy, Debug)]
 struct Case {
     name: &'static str,
     what: &'static str,
+    timed: Timed,
     /// `simulate` arguments before scaling; `{n}` is replaced by the scaled count.
     args: &'static [&'static str],
     /// The count `--scale` multiplies.
@@ -40,6 +56,7 @@ const CASES: &[Case] = &[
     Case {
         name: "pool",
         what: "billiards, racks x 1 shot, dt 0.01",
+        timed: Timed::Simulate,
         args: &[
             "--env", "pooltool", "--scenes", "{n}", "--shots", "1", "--dt", "0.01",
         ],
@@ -49,6 +66,7 @@ const CASES: &[Case] = &[
     Case {
         name: "phyre-1",
         what: "PHYRE, tasks x 1 action, every step",
+        timed: Timed::Simulate,
         args: &[
             "--env", "phyre", "--scenes", "{n}", "--shots", "1", "--stride", "1",
         ],
@@ -58,6 +76,7 @@ const CASES: &[Case] = &[
     Case {
         name: "phyre-6",
         what: "PHYRE, tasks x 1 action, stride 6",
+        timed: Timed::Simulate,
         args: &[
             "--env", "phyre", "--scenes", "{n}", "--shots", "1", "--stride", "6",
         ],
@@ -67,20 +86,32 @@ const CASES: &[Case] = &[
     Case {
         name: "iphyre",
         what: "I-PHYRE 60 fps, 40 games x click sets",
+        timed: Timed::Simulate,
         args: &[
             "--env", "iphyre", "--games", "all", "--shots", "{n}", "--fps", "60",
         ],
         count: 25,
         unit: "episodes",
     },
+    Case {
+        name: "annotate",
+        what: "billiards, 12 built-in detectors over the pool case's shots",
+        timed: Timed::Annotate,
+        args: &[
+            "--env", "pooltool", "--scenes", "{n}", "--shots", "1", "--dt", "0.01",
+        ],
+        count: 2000,
+        unit: "traces",
+    },
 ];
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Cases to run, comma-separated: pool, phyre-1, phyre-6, iphyre, or all.
+    /// Cases to run, comma-separated: pool, phyre-1, phyre-6, iphyre, annotate, or all.
     #[arg(long, default_value = "all")]
     cases: String,
-    /// Thread counts, comma-separated (each case runs once per count).
+    /// Thread counts, comma-separated (each case runs once per count; for `annotate`, the number of
+    /// detector workers).
     #[arg(long, default_value = "1,2")]
     threads: String,
     /// Multiplies every case's size (racks, tasks, click sets per game); 1 = the table.
@@ -363,6 +394,8 @@ struct Measured {
     /// CPU time of the process (user + system): on a shared machine a steadier measure than wall time.
     cpu_s: f64,
     items_per_s: f64,
+    /// Wall milliseconds per item (the unit of `annotate`'s goal: ms per trace).
+    wall_ms_per_item: f64,
     /// Items per CPU second.
     items_per_cpu_s: f64,
     frame_rows_per_s: f64,
@@ -396,7 +429,7 @@ fn cases(list: &str) -> Result<Vec<Case>, CliError> {
                 .copied()
                 .ok_or_else(|| {
                     CliError::input(anyhow!(
-                        "--cases: unknown case {name:?} (expected pool, phyre-1, phyre-6, iphyre or all)"
+                        "--cases: unknown case {name:?} (expected pool, phyre-1, phyre-6, iphyre, annotate or all)"
                     ))
                 })
         })
@@ -452,23 +485,35 @@ fn cpu_s(who: libc::c_int) -> f64 {
     secs(usage.ru_utime) + secs(usage.ru_stime)
 }
 
-fn run_case(
-    exe: &Path,
-    case: &Case,
-    n: u64,
-    threads: usize,
-    seed: u64,
-    run: &Path,
-) -> anyhow::Result<Measured> {
+/// The `simulate` arguments of `case` at count `n`, into `run`.
+fn simulate_args(case: &Case, n: u64, seed: u64, run: &Path) -> Vec<String> {
     let mut args: Vec<String> = vec!["-q".into(), "simulate".into()];
     args.extend(case.args.iter().map(|a| a.replace("{n}", &n.to_string())));
     args.extend(["--seed".to_string(), seed.to_string(), "--run".to_string()]);
     args.push(run.display().to_string());
+    args
+}
+
+/// Runs `exe args` to its end (with `RAYON_NUM_THREADS=threads` when given); its wall and CPU
+/// seconds (its own and those of the processes it waited for). With `quiet`, its standard output is
+/// dropped (`annotate` prints its per-label table there, which would break the bench's own).
+fn time_child(
+    exe: &Path,
+    args: &[String],
+    threads: Option<usize>,
+    quiet: bool,
+) -> anyhow::Result<(f64, f64)> {
     let cpu_before = children_cpu_s();
     let start = Instant::now();
-    let status = Command::new(exe)
-        .args(&args)
-        .env("RAYON_NUM_THREADS", threads.to_string())
+    let mut cmd = Command::new(exe);
+    cmd.args(args);
+    if let Some(t) = threads {
+        cmd.env("RAYON_NUM_THREADS", t.to_string());
+    }
+    if quiet {
+        cmd.stdout(std::process::Stdio::null());
+    }
+    let status = cmd
         .status()
         .with_context(|| format!("starting {}", exe.display()))?;
     let wall_s = start.elapsed().as_secs_f64();
@@ -476,10 +521,79 @@ fn run_case(
     if !status.success() {
         return Err(anyhow!("annotrace {} failed: {status}", args.join(" ")));
     }
+    Ok((wall_s, cpu_s))
+}
+
+/// Copies the folder `from` (files and folders, recursively) to `to`, which must not exist.
+fn copy_dir(from: &Path, to: &Path) -> anyhow::Result<()> {
+    fs::create_dir(to).with_context(|| to.display().to_string())?;
+    for entry in fs::read_dir(from).with_context(|| from.display().to_string())? {
+        let entry = entry?;
+        let target = to.join(entry.file_name());
+        if entry.file_type()?.is_dir() {
+            copy_dir(&entry.path(), &target)?;
+        } else {
+            fs::copy(entry.path(), &target)
+                .with_context(|| format!("copying {}", entry.path().display()))?;
+        }
+    }
+    Ok(())
+}
+
+/// Times one case at count `n` on `threads` threads into the fresh run folder `run`; an `annotate`
+/// case copies the traces simulated into `input` there first.
+fn run_case(
+    exe: &Path,
+    case: &Case,
+    n: u64,
+    threads: usize,
+    seed: u64,
+    run: &Path,
+    input: &Path,
+) -> anyhow::Result<Measured> {
+    let (wall_s, cpu_s, written) = match case.timed {
+        Timed::Simulate => {
+            let (wall, cpu) = time_child(
+                exe,
+                &simulate_args(case, n, seed, run),
+                Some(threads),
+                false,
+            )?;
+            (wall, cpu, None)
+        }
+        Timed::Annotate => {
+            copy_dir(input, run)?;
+            let (_, before) = parquet_totals(run, None)?;
+            let args: Vec<String> = [
+                "-q",
+                "annotate",
+                "--env",
+                "pooltool",
+                "--workers",
+                &threads.to_string(),
+                "--run",
+                &run.display().to_string(),
+            ]
+            .map(String::from)
+            .to_vec();
+            let (wall, cpu) = time_child(exe, &args, None, true)?;
+            let (_, after) = parquet_totals(run, None)?;
+            (wall, cpu, Some(after.saturating_sub(before)))
+        }
+    };
     let (traces, _) = parquet_totals(run, Some("traces"))?;
     let (frame_rows, frames_bytes) = parquet_totals(run, Some("frames"))?;
-    let (_, parquet_bytes) = parquet_totals(run, None)?;
-    let items = if case.name == "iphyre" { n * 40 } else { n };
+    // What the timed command wrote: every table of a simulate run, the annotation tables of an
+    // annotate run.
+    let (parquet_bytes, frames_bytes) = match written {
+        Some(bytes) => (bytes, 0),
+        None => (parquet_totals(run, None)?.1, frames_bytes),
+    };
+    let items = match case.timed {
+        Timed::Annotate => traces,
+        Timed::Simulate if case.name == "iphyre" => n * 40,
+        Timed::Simulate => n,
+    };
     Ok(Measured {
         case: case.name,
         what: case.what,
@@ -491,6 +605,7 @@ fn run_case(
         wall_s,
         cpu_s,
         items_per_s: items as f64 / wall_s,
+        wall_ms_per_item: wall_s * 1000.0 / items.max(1) as f64,
         items_per_cpu_s: items as f64 / cpu_s.max(1e-9),
         frame_rows_per_s: frame_rows as f64 / wall_s,
         frame_rows_per_cpu_s: frame_rows as f64 / cpu_s.max(1e-9),
@@ -536,12 +651,25 @@ pub fn run(args: Args) -> CliResult {
     let result = (|| -> anyhow::Result<()> {
         for case in &cases {
             let n = ((case.count as f64 * args.scale).round() as u64).max(1);
+            let input = dir.join(format!("{}-input", case.name));
+            if case.timed == Timed::Annotate {
+                // The traces to annotate, simulated once and not timed.
+                if input.exists() {
+                    fs::remove_dir_all(&input).with_context(|| input.display().to_string())?;
+                }
+                time_child(
+                    &exe,
+                    &simulate_args(case, n, args.seed, &input),
+                    None,
+                    false,
+                )?;
+            }
             for &t in &threads {
                 let run = dir.join(format!("{}-t{t}", case.name));
                 if run.exists() {
                     fs::remove_dir_all(&run).with_context(|| run.display().to_string())?;
                 }
-                let m = run_case(&exe, case, n, t, args.seed, &run)?;
+                let m = run_case(&exe, case, n, t, args.seed, &run, &input)?;
                 println!(
                     "| {} | {} | {} | {} {} | {} | {} | {:.2} | {:.2} | {:.1} {}/s | {:.1} | {:.2} | {:.2} | {:.2} | {} |",
                     m.case,
@@ -565,6 +693,9 @@ pub fn run(args: Args) -> CliResult {
                     let _ = fs::remove_dir_all(&run);
                 }
                 out.push(m);
+            }
+            if !keep && input.exists() {
+                let _ = fs::remove_dir_all(&input);
             }
         }
         Ok(())

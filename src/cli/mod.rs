@@ -192,7 +192,7 @@ enum Command {
     Tables(tables::Args),
     /// Check a run's files against the sizes and SHA-256 sums in its manifest; list foreign files.
     Verify(verify::Args),
-    /// Measure `simulate` end to end (command line to Parquet) for each row of the throughput table.
+    /// Measure `simulate` and `annotate` end to end (command line to Parquet) for each row of the throughput table.
     Bench(bench::Args),
 }
 

@@ -1,5 +1,6 @@
 //! `annotrace bench`: one case end to end (the `simulate` child, Parquet counted from the footers, the
-//! JSON record), the Parquet settings comparison on the run it kept (both writers), and bad flags.
+//! JSON record), the `annotate` case, the Parquet settings comparison on the run it kept (both
+//! writers), and bad flags.
 
 use serde_json::Value;
 
@@ -67,6 +68,63 @@ fn a_case_is_measured_from_the_files_it_wrote_and_settings_compare_on_them() {
         .stdout_has("raw literals for per-row floats (billiards' default now) |")
         .stdout_has("| column writer, lz4 (raw) |")
         .stdout_has("| lz4 (raw) |");
+}
+
+#[test]
+fn the_annotate_case_times_the_built_in_library_over_shots_it_simulated_first() {
+    let t = TestRun::new();
+    let dir = t.path("b");
+    let json = t.path("b.jsonl");
+    let r = t.run(&[
+        "bench",
+        "--cases",
+        "annotate",
+        "--scale",
+        "0.005",
+        "--threads",
+        "1",
+        "--dir",
+        dir.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    r.ok().stdout_has("| annotate |");
+    // annotate's own per-label table stays out of the bench's.
+    assert!(!r.stdout.contains("| label "), "{}", r.stdout);
+    let text = std::fs::read_to_string(&json).unwrap();
+    let m: Value = serde_json::from_str(text.lines().next().unwrap()).unwrap();
+    assert_eq!(m["case"], "annotate");
+    assert_eq!(m["items"], 10);
+    assert_eq!(m["traces"], 10);
+    assert_eq!(m["unit"], "traces");
+    // Only what annotate wrote is counted: its tables, no frames.
+    assert_eq!(m["frames_bytes"], 0);
+    assert!(m["parquet_bytes"].as_u64().unwrap() > 0);
+    let (wall, cpu) = (m["wall_s"].as_f64().unwrap(), m["cpu_s"].as_f64().unwrap());
+    assert!(wall > 0.0 && cpu > 0.0);
+    assert!((m["wall_ms_per_item"].as_f64().unwrap() - wall * 100.0).abs() < 1e-6);
+    // The timed copy holds the annotate stage's output; the simulated input does not.
+    let count = |run: &str| {
+        t.run(&[
+            "query",
+            "SELECT count(*) AS n FROM traces",
+            "--run",
+            dir.join(run).to_str().unwrap(),
+            "--format",
+            "csv",
+        ])
+    };
+    count("annotate-input").ok().stdout_has("10");
+    t.run(&[
+        "query",
+        "SELECT count(DISTINCT trace_id) AS n FROM detector_calls",
+        "--run",
+        dir.join("annotate-t1").to_str().unwrap(),
+        "--format",
+        "csv",
+    ])
+    .ok()
+    .stdout_has("10");
 }
 
 #[test]
