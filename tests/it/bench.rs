@@ -6,24 +6,36 @@ use serde_json::Value;
 
 use crate::common::TestRun;
 
-#[test]
-fn a_case_is_measured_from_the_files_it_wrote_and_settings_compare_on_them() {
-    let t = TestRun::new();
-    let dir = t.path("b");
-    let json = t.path("b.jsonl");
-    let r = t.run(&[
+/// `annotrace bench --cases <case> --scale <scale> --threads 1`, keeping its run folders in `dir`
+/// and its JSON record in `json`.
+fn bench_one(
+    t: &TestRun,
+    case: &str,
+    scale: &str,
+    dir: &std::path::Path,
+    json: &std::path::Path,
+) -> crate::common::Ran {
+    t.run(&[
         "bench",
         "--cases",
-        "iphyre",
+        case,
         "--scale",
-        "0.04",
+        scale,
         "--threads",
         "1",
         "--dir",
         dir.to_str().unwrap(),
         "--json",
         json.to_str().unwrap(),
-    ]);
+    ])
+}
+
+#[test]
+fn a_case_is_measured_from_the_files_it_wrote_and_settings_compare_on_them() {
+    let t = TestRun::new();
+    let dir = t.path("b");
+    let json = t.path("b.jsonl");
+    let r = bench_one(&t, "iphyre", "0.04", &dir, &json);
     r.ok().stdout_has("| iphyre |");
     let text = std::fs::read_to_string(&json).unwrap();
     let m: Value = serde_json::from_str(text.lines().next().unwrap()).unwrap();
@@ -75,19 +87,7 @@ fn the_annotate_case_times_the_built_in_library_over_shots_it_simulated_first() 
     let t = TestRun::new();
     let dir = t.path("b");
     let json = t.path("b.jsonl");
-    let r = t.run(&[
-        "bench",
-        "--cases",
-        "annotate",
-        "--scale",
-        "0.005",
-        "--threads",
-        "1",
-        "--dir",
-        dir.to_str().unwrap(),
-        "--json",
-        json.to_str().unwrap(),
-    ]);
+    let r = bench_one(&t, "annotate", "0.005", &dir, &json);
     r.ok().stdout_has("| annotate |");
     // annotate's own per-label table stays out of the bench's.
     assert!(!r.stdout.contains("| label "), "{}", r.stdout);
