@@ -1,6 +1,7 @@
 //! Running one stage as a pipeline: what `simulate`, `import`, `annotate`, `accuracy` and `evolve` do
-//! on the command line. The command fills the stage kind's typed parameter struct from its flags; the
-//! stage then runs through the same runner (manifest, resumption, fingerprints) as in a pipeline file.
+//! on the command line. The command fills the stage kind's typed parameter struct from its flags
+//! ([`kebab`] reads a flag's kebab-case value into one of its enums); the stage then runs through the
+//! same runner (manifest, resumption, fingerprints) as in a pipeline file.
 
 use std::path::{Path, PathBuf};
 
@@ -112,4 +113,12 @@ fn flag_error(e: SpecError) -> CliError {
         None => rest.to_string(),
     };
     CliError::input(anyhow::anyhow!("{text}"))
+}
+
+/// The value of `--<flag>` as the parameter enum it names, in the kebab-case the stage parameters
+/// use (`--agent search`); an unknown value is an input error naming the flag and the accepted
+/// values.
+pub(crate) fn kebab<T: serde::de::DeserializeOwned>(flag: &str, v: &str) -> Result<T, CliError> {
+    serde_json::from_value(serde_json::Value::String(v.to_string()))
+        .map_err(|e| CliError::input(anyhow::anyhow!("--{flag}: {e}")))
 }

@@ -12,8 +12,8 @@ use annotrace::pipeline::stages::summarise::{
 use annotrace::trace::Env;
 
 use super::llm_args::LlmArgs;
-use super::one_stage::{OneStage, absolute, existing_run, params_id, summary};
-use super::worker_args::{WorkerArgs, kebab};
+use super::one_stage::{OneStage, absolute, existing_run, kebab, params_id, summary};
+use super::worker_args::WorkerArgs;
 use super::{CliError, CliResult};
 
 #[derive(clap::Args, Debug)]
