@@ -8,8 +8,15 @@ MERGE_S = 0.05
 
 
 def _clock(trace):
+    steps = trace.get("timesteps", [])
+    try:
+        # Every step has both (the usual case): two comprehensions, no call per step.
+        return [s["index"] for s in steps], [float(s["t"]) for s in steps]
+    except (KeyError, TypeError):
+        pass
+    # A step without its index (its position) or its time (0).
     idx, ts = [], []
-    for s in trace.get("timesteps", []):
+    for s in steps:
         idx.append(s.get("index", len(idx)))
         ts.append(float(s.get("t", 0.0)))
     return idx, ts

@@ -5,8 +5,15 @@ library.toml prepends it to the detectors that list it; it defines no find_patte
 
 def _clock(trace):
     """Timestep indices and times, in order."""
+    steps = trace.get("timesteps", [])
+    try:
+        # Every step has both (the usual case): two comprehensions, no call per step.
+        return [s["index"] for s in steps], [float(s["t"]) for s in steps]
+    except (KeyError, TypeError):
+        pass
+    # A step without its index (its position) or its time (0).
     idx, ts = [], []
-    for s in trace.get("timesteps", []):
+    for s in steps:
         idx.append(s.get("index", len(idx)))
         ts.append(float(s.get("t", 0.0)))
     return idx, ts
