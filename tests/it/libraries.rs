@@ -346,3 +346,50 @@ fn without_an_event_log_the_phyre_library_still_runs_clean() {
     // Ball contacts from geometry: a ball landing on the floor is found.
     assert!(count(&anns, "support relationship") > 0, "{anns:#?}");
 }
+
+/// The clock every built-in detector starts from (`_clock` of each library's `_common.py` prelude):
+/// indices and times by subscript when every step has both, else each step's own defaults (its
+/// position, time 0), with the errors the per-step loop raises on a bad time.
+#[test]
+fn the_preludes_clock_is_each_steps_index_and_time_with_defaults_for_missing_ones() {
+    const CHECK: &str = r#"
+cases = [
+    ({"timesteps": [{"index": 3, "t": 0.5}, {"index": 4, "t": 1}]}, ([3, 4], [0.5, 1.0])),
+    ({"timesteps": [{"t": 0.5}, {"index": 9, "t": 0.75}]}, ([0, 9], [0.5, 0.75])),
+    ({"timesteps": [{"index": 2}, {"index": 3, "t": 0.1}]}, ([2, 3], [0.0, 0.1])),
+    ({"timesteps": [{"index": 5, "t": 1}, {"t": 2}, {}]}, ([5, 1, 2], [1.0, 2.0, 0.0])),
+    ({"timesteps": ()}, ([], [])),
+    ({}, ([], [])),
+]
+for trace, want in cases:
+    got = _clock(trace)
+    assert got == want, (trace, got)
+    assert all(type(t) is float for t in got[1]), got
+for steps, error in (([{"index": 0, "t": None}], TypeError), ([{"t": "x"}], ValueError),
+                     ([{"index": 0, "t": 0}, [1, 2]], AttributeError)):
+    try:
+        _clock({"timesteps": steps})
+    except error:
+        pass
+    else:
+        raise AssertionError("no %s for %r" % (error.__name__, steps))
+print("ok")
+"#;
+    for env in ["pooltool", "phyre", "iphyre"] {
+        let prelude = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("data/libraries")
+            .join(env)
+            .join("_common.py");
+        let code = format!("{}\n{CHECK}", std::fs::read_to_string(&prelude).unwrap());
+        let out = std::process::Command::new("python3")
+            .args(["-c", &code])
+            .output()
+            .expect("python3 runs");
+        assert!(
+            out.status.success() && out.stdout == b"ok\n",
+            "{env}: {}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+}

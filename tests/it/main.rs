@@ -36,3 +36,4 @@ mod sql_guard;
 mod suggest_labels;
 mod summarise;
 mod survey;
+mod tools;
