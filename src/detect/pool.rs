@@ -1,8 +1,9 @@
 //! [`WorkerPool`]: long-lived sandboxed workers that run detectors over traces in parallel.
 //!
 //! [`WorkerPool::run`] hands traces to workers one at a time (one Rust thread drives each worker): the
-//! worker loads the trace once (kept in its cache of `trace_cache` traces), compiles each detector once
-//! (kept for the worker's life), and runs every detector on it. Every call is timed by the worker
+//! worker loads the trace once (kept in its cache of `trace_cache` traces; with 0, freed as soon as its
+//! detectors have run), compiles each detector once (kept for the worker's life), and runs every
+//! detector on it. Every call is timed by the worker
 //! (wall and CPU time of `find_pattern` itself) and by the pool (the round trip). A call past its time
 //! limit kills the worker, a fresh one takes its place, and the detector is marked `timeout` for that
 //! trace and `skipped` for the rest of the batch; the other detectors go on.
@@ -363,6 +364,19 @@ impl WorkerPool {
                 break;
             };
             pending = ready[settled..].to_vec();
+        }
+        if self.limits.trace_cache == 0 {
+            // Keep no trace: free this one now, while the worker's cache still holds its objects
+            // (about half the cost of freeing it cold, and the next load reuses warm memory).
+            if let Some(w) = slot.as_mut()
+                && let Some(at) = w.traces.iter().position(|k| k == job.key)
+            {
+                w.traces.remove(at);
+                w.evict.push(job.key.to_string());
+                if w.send_evictions().is_err() {
+                    *slot = None;
+                }
+            }
         }
         settle_prev();
         stats.decode_s += decode_s;
@@ -844,5 +858,55 @@ mod tests {
         assert_eq!(first.stats.traces_loaded, 6);
         assert_eq!(again.stats.traces_loaded, 4);
         assert_eq!(again.stats.restarts, 0);
+    }
+
+    #[test]
+    fn with_no_trace_cache_each_trace_is_freed_after_its_run_and_results_do_not_change() {
+        let pool = WorkerPool::new(SandboxLimits {
+            workers: 1,
+            trace_cache: 0,
+            ..SandboxLimits::default()
+        })
+        .unwrap();
+        let traces: Vec<Trace> = (0..5)
+            .map(|i| synthetic_trace(Env::Pooltool, i, 4 + i, 2))
+            .collect();
+        let last = Detector::new(
+            Env::Pooltool,
+            "x",
+            "def find_pattern(trace):\n    n = trace['timesteps'][-1]['index']\n    return [{'label': 'x', 'start_timestep': n, 'end_timestep': n, 'parameters': {'object_details': {}}}]\n",
+            "t",
+        );
+        let raises = Detector::new(
+            Env::Pooltool,
+            "y",
+            "def find_pattern(trace):\n    return [][1]\n",
+            "t",
+        );
+        let bad = Detector::new(Env::Pooltool, "z", "def find_pattern(trace:\n", "t");
+        // A trace whose only detector fails to compile is loaded and freed without a run request.
+        let r = pool.run(std::slice::from_ref(&bad), &traces[..2]);
+        assert!(r.results.iter().all(|c| c.status.as_str() == "syntax"));
+        let dets = [last.clone(), raises];
+        for _ in 0..2 {
+            let r = pool.run(&dets, &traces);
+            for (t, trace) in traces.iter().enumerate() {
+                let res = &r.results[2 * t];
+                assert_eq!((res.trace, res.detector), (t, 0));
+                assert_eq!(res.status, CandidateStatus::Ok, "{res:?}");
+                assert_eq!(
+                    res.patterns[0].end_step,
+                    trace.timesteps.last().unwrap().index
+                );
+                assert_eq!(r.results[2 * t + 1].status.as_str(), "runtime");
+            }
+            // Nothing is kept between runs: every trace is loaded each time, by the same worker.
+            assert_eq!(r.stats.traces_loaded, traces.len());
+            assert_eq!(r.stats.restarts, 0);
+        }
+        // Not even the last one (a cache of one trace would keep it).
+        let r = pool.run(&dets, &traces[4..]);
+        assert_eq!(r.results[0].patterns[0].end_step, 7);
+        assert_eq!(r.stats.traces_loaded, 1);
     }
 }

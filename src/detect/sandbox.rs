@@ -52,7 +52,11 @@ pub struct SandboxLimits {
     pub memory_bytes: u64,
     /// Open file descriptors (`RLIMIT_NOFILE`). Default 16: the worker needs its three pipes.
     pub max_open_files: u64,
-    /// Traces a worker keeps loaded (least recently used is evicted first). Default 16.
+    /// Traces a worker keeps loaded (least recently used is evicted first). Default 16. With 0 a
+    /// worker keeps none: each trace is freed right after its detectors have run, while the worker's
+    /// CPU caches still hold it (half the cost of freeing it traces later, measured in
+    /// `docs/performance.md`, "The workers' floor, replayed"); for callers that run every trace once
+    /// with all its detectors, as `annotate` and `accuracy` do.
     pub trace_cache: usize,
     /// Most patterns one call may return. Default 10 000.
     pub max_patterns: usize,

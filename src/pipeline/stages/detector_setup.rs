@@ -100,4 +100,15 @@ impl DetectorSetup {
     pub(crate) fn pool(&self) -> Result<WorkerPool, StageError> {
         WorkerPool::new(self.limits.clone()).map_err(StageError::Workers)
     }
+
+    /// Starts the worker pool of a stage that runs every trace once, with the whole library in one
+    /// call (`annotate`, `accuracy`): its workers keep no trace after its run
+    /// (`SandboxLimits::trace_cache` 0), so each is freed while it is still in the CPU's caches.
+    pub(crate) fn pool_each_trace_once(&self) -> Result<WorkerPool, StageError> {
+        WorkerPool::new(SandboxLimits {
+            trace_cache: 0,
+            ..self.limits.clone()
+        })
+        .map_err(StageError::Workers)
+    }
 }
