@@ -3,10 +3,10 @@
 //! [`WorkerPool::run`] hands traces to workers one at a time (one Rust thread drives each worker): the
 //! worker loads the trace once (kept in its cache of `trace_cache` traces; with 0, freed as soon as its
 //! detectors have run), compiles each detector once (kept for the worker's life), and runs every
-//! detector on it. Every call is timed by the worker
-//! (wall and CPU time of `find_pattern` itself) and by the pool (the round trip). A call past its time
-//! limit kills the worker, a fresh one takes its place, and the detector is marked `timeout` for that
-//! trace and `skipped` for the rest of the batch; the other detectors go on.
+//! detector on it. Every call is timed by the worker (wall and CPU time of `find_pattern` itself) and
+//! by the pool (the round trip). A call past its time limit kills the worker, a fresh one takes its
+//! place, and the detector is marked `timeout` for that trace and `skipped` for the rest of the batch;
+//! the other detectors go on.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
