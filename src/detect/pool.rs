@@ -828,6 +828,16 @@ mod tests {
         assert_eq!(r.stats.restarts, 0);
     }
 
+    /// Reports the trace's last step, so a wrong (evicted or stale) trace shows.
+    fn last_step_detector() -> Detector {
+        Detector::new(
+            Env::Pooltool,
+            "x",
+            "def find_pattern(trace):\n    n = trace['timesteps'][-1]['index']\n    return [{'label': 'x', 'start_timestep': n, 'end_timestep': n, 'parameters': {'object_details': {}}}]\n",
+            "t",
+        )
+    }
+
     #[test]
     fn a_small_trace_cache_evicts_and_reloads_without_changing_results() {
         let pool = WorkerPool::new(SandboxLimits {
@@ -839,13 +849,7 @@ mod tests {
         let traces: Vec<Trace> = (0..6)
             .map(|i| synthetic_trace(Env::Pooltool, i, 4 + i, 2))
             .collect();
-        // Reports the trace's last step, so a wrong (evicted or stale) trace shows.
-        let d = Detector::new(
-            Env::Pooltool,
-            "x",
-            "def find_pattern(trace):\n    n = trace['timesteps'][-1]['index']\n    return [{'label': 'x', 'start_timestep': n, 'end_timestep': n, 'parameters': {'object_details': {}}}]\n",
-            "t",
-        );
+        let d = last_step_detector();
         let first = pool.run(std::slice::from_ref(&d), &traces);
         let again = pool.run(std::slice::from_ref(&d), &traces);
         for r in [&first, &again] {
@@ -871,12 +875,6 @@ mod tests {
         let traces: Vec<Trace> = (0..5)
             .map(|i| synthetic_trace(Env::Pooltool, i, 4 + i, 2))
             .collect();
-        let last = Detector::new(
-            Env::Pooltool,
-            "x",
-            "def find_pattern(trace):\n    n = trace['timesteps'][-1]['index']\n    return [{'label': 'x', 'start_timestep': n, 'end_timestep': n, 'parameters': {'object_details': {}}}]\n",
-            "t",
-        );
         let raises = Detector::new(
             Env::Pooltool,
             "y",
@@ -887,7 +885,7 @@ mod tests {
         // A trace whose only detector fails to compile is loaded and freed without a run request.
         let r = pool.run(std::slice::from_ref(&bad), &traces[..2]);
         assert!(r.results.iter().all(|c| c.status.as_str() == "syntax"));
-        let dets = [last.clone(), raises];
+        let dets = [last_step_detector(), raises];
         for _ in 0..2 {
             let r = pool.run(&dets, &traces);
             for (t, trace) in traces.iter().enumerate() {
