@@ -22,6 +22,7 @@ The replay runs the worker in this process, not behind the sandbox: only replay 
 from detectors you trust (the detector code is in the stream)."""
 
 import argparse
+import gc
 import hashlib
 import json
 import os
@@ -36,7 +37,6 @@ import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 FRAME = struct.Struct("<I")
-MARSHAL_HEAD = struct.Struct("<ddI")  # worker.py's _MARSHAL_HEAD: wall, cpu, printed length
 
 
 def capture(args):
@@ -130,10 +130,11 @@ def load_worker(path):
     return ns
 
 
-def reply_digest(h, raw, err):
-    """Adds a call's reply (patterns or error) to the digest, without its wall and CPU times."""
+def reply_digest(h, raw, err, head):
+    """Adds a call's reply (patterns or error) to the digest, without its wall and CPU times (`head`:
+    the worker's `_MARSHAL_HEAD`, which holds them)."""
     if raw is not None and raw[:1] == b"M":
-        h.update(raw[1 + MARSHAL_HEAD.size:])  # printed text and marshalled patterns
+        h.update(raw[1 + head.size:])  # printed text and marshalled patterns
         return
     msg = json.loads(raw) if raw is not None else err
     for d in (msg, msg.get("error") or {}):
@@ -143,7 +144,6 @@ def reply_digest(h, raw, err):
 
 
 def one_pass(worker, frames):
-    import gc
     ns = load_worker(worker)
     clock = time.thread_time
     spent = {"load": 0.0, "evict": 0.0, "compile": 0.0, "run": 0.0}
@@ -181,7 +181,7 @@ def one_pass(worker, frames):
             spent["run"] += clock() - c0
             calls += len(out)
             for raw, err in out:
-                reply_digest(h, raw, err)
+                reply_digest(h, raw, err, ns["_MARSHAL_HEAD"])
         else:
             sys.exit("worker_replay: unknown request type %r" % kind)
     gc.unfreeze()
