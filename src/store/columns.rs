@@ -245,18 +245,49 @@ fn bit_packed(values: &[u32], width: u8, out: &mut Vec<u8>) {
     for part in values.chunks(63 * 8) {
         let groups = part.len().div_ceil(8);
         varint(((groups as u64) << 1) | 1, out);
-        let mut acc: u64 = 0;
-        let mut bits = 0u32;
-        for k in 0..groups * 8 {
-            let v = part.get(k).copied().unwrap_or(0) as u64;
-            acc |= v << bits;
-            bits += u32::from(width);
-            while bits >= 8 {
-                out.push(acc as u8);
-                acc >>= 8;
-                bits -= 8;
-            }
+        if width <= 8 {
+            pack_groups_narrow(part, width, out);
+        } else {
+            pack_groups(part, width, out);
         }
+    }
+}
+
+/// Packs `part` in groups of 8 at `width` bits, a value's bits after the previous value's, least
+/// significant first; the last group is padded with zeros.
+fn pack_groups(part: &[u32], width: u8, out: &mut Vec<u8>) {
+    let mut acc: u64 = 0;
+    let mut bits = 0u32;
+    for k in 0..part.len().div_ceil(8) * 8 {
+        let v = part.get(k).copied().unwrap_or(0) as u64;
+        acc |= v << bits;
+        bits += u32::from(width);
+        while bits >= 8 {
+            out.push(acc as u8);
+            acc >>= 8;
+            bits -= 8;
+        }
+    }
+}
+
+/// [`pack_groups`] for widths up to 8 bits, where a group of 8 values is `width` whole bytes: the
+/// group is assembled in one `u64` and written at once. (Dictionary indices of the frame tables are
+/// 2–4 bits wide; packing them a bit at a time was 5 % of a billiards `simulate`.)
+fn pack_groups_narrow(part: &[u32], width: u8, out: &mut Vec<u8>) {
+    debug_assert!(width <= 8);
+    let w = usize::from(width);
+    let group = |g: &[u32]| {
+        g.iter()
+            .enumerate()
+            .fold(0u64, |acc, (k, &v)| acc | (u64::from(v) << (k * w)))
+    };
+    let mut groups = part.chunks_exact(8);
+    for g in &mut groups {
+        out.extend_from_slice(&group(g).to_le_bytes()[..w]);
+    }
+    let rest = groups.remainder();
+    if !rest.is_empty() {
+        out.extend_from_slice(&group(rest).to_le_bytes()[..w]);
     }
 }
 
@@ -1346,5 +1377,33 @@ mod tests {
         out.clear();
         hybrid(&[1, 2, 3], 2, &mut out);
         assert_eq!(out, [3, 0b11_10_01, 0]);
+    }
+
+    #[test]
+    fn narrow_groups_pack_as_bit_by_bit() {
+        // Every width the one-word path takes, on group counts with and without a remainder, and
+        // values that fill their width; the bit-by-bit packer is the reference.
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        for width in 0..=8u8 {
+            for len in [0usize, 1, 7, 8, 9, 63 * 8, 63 * 8 + 5, 1000] {
+                let values: Vec<u32> = (0..len)
+                    .map(|_| {
+                        state ^= state << 13;
+                        state ^= state >> 7;
+                        state ^= state << 17;
+                        if width == 0 {
+                            0
+                        } else {
+                            (state >> 40) as u32 & ((1u32 << width) - 1)
+                        }
+                    })
+                    .collect();
+                let (mut fast, mut slow) = (Vec::new(), Vec::new());
+                pack_groups_narrow(&values, width, &mut fast);
+                pack_groups(&values, width, &mut slow);
+                assert_eq!(fast, slow, "width {width}, {len} values");
+                assert_eq!(fast.len(), len.div_ceil(8) * usize::from(width));
+            }
+        }
     }
 }
