@@ -326,7 +326,7 @@ impl AccuracyStage {
                 .collect(),
             None => {
                 if pool.is_none() {
-                    *pool = Some(self.setup.pool_each_trace_once()?);
+                    *pool = Some(self.setup.pool()?);
                 }
                 let pool = pool.as_ref().expect("just started");
                 let batch = if self.hide_events {

@@ -233,7 +233,7 @@ impl Stage for AnnotateStage {
                     continue;
                 }
                 if pool.is_none() {
-                    pool = Some(self.setup.pool_each_trace_once()?);
+                    pool = Some(self.setup.pool()?);
                 }
                 let pool = pool.as_ref().expect("just started");
                 let r0 = std::time::Instant::now();

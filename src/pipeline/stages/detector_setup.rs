@@ -96,15 +96,13 @@ impl DetectorSetup {
         })
     }
 
-    /// Starts the worker pool.
+    /// Starts the worker pool. Every stage that takes its detectors from a `DetectorSetup` runs
+    /// each trace once, with all the detectors it needs in one call (`annotate`, `accuracy`,
+    /// `summarise`, `benchmark`, `optimise`, `synthesise`, `suggest_labels`), so its workers keep no
+    /// trace after its run (`SandboxLimits::trace_cache` 0) and each is freed while it is still in
+    /// the CPU's caches. The stages that run many detectors over the same traces in turn (`evolve`,
+    /// `ensemble`) start their own pools with a cache that holds their trace sets.
     pub(crate) fn pool(&self) -> Result<WorkerPool, StageError> {
-        WorkerPool::new(self.limits.clone()).map_err(StageError::Workers)
-    }
-
-    /// Starts the worker pool of a stage that runs every trace once, with the whole library in one
-    /// call (`annotate`, `accuracy`): its workers keep no trace after its run
-    /// (`SandboxLimits::trace_cache` 0), so each is freed while it is still in the CPU's caches.
-    pub(crate) fn pool_each_trace_once(&self) -> Result<WorkerPool, StageError> {
         WorkerPool::new(SandboxLimits {
             trace_cache: 0,
             ..self.limits.clone()
