@@ -56,7 +56,8 @@ pub use self::parquet::{
     Codec, ParquetSettings, ParquetSink, ROW_GROUP_ROWS, Stats, read_batches, read_file,
     read_file_whole,
 };
-pub use self::traces::{ReadTraceError, read_trace, trace_ids};
+pub(crate) use self::traces::key_order;
+pub use self::traces::{ReadTraceError, read_trace, read_traces, trace_ids};
 pub use self::verify::Problem;
 use crate::trace::Env;
 

@@ -99,3 +99,55 @@ fn export_stages_write_csv_markdown_and_latex() {
         "{tex}"
     );
 }
+
+/// Traces read back together (`store::read_traces`) out of files of many traces and several row
+/// groups, where a trace's rows may straddle two groups, equal the same traces read one by one out
+/// of files of one trace each: the same 30 shots simulated with 15 and with 1 scene per file.
+#[test]
+fn traces_read_together_from_shared_row_groups_equal_traces_read_alone() {
+    use annotrace::store::{RunDir, read_trace, read_traces, trace_ids};
+    let t = TestRun::new();
+    for (run, per) in [("many", "15"), ("one", "1")] {
+        t.run(&[
+            "simulate",
+            "--env",
+            "pooltool",
+            "--scenes",
+            "30",
+            "--seed",
+            "9",
+            "--dt",
+            "0.01",
+            "--scenes-per-shard",
+            per,
+            "--run",
+            run,
+            "-q",
+        ])
+        .ok();
+    }
+    let (many, one) = (RunDir::new(t.path("many")), RunDir::new(t.path("one")));
+    // Two files of about 75,000 frame rows: two row groups each.
+    for f in std::fs::read_dir(t.path("many/frames/env=pooltool")).unwrap() {
+        use parquet::file::reader::FileReader;
+        let file = std::fs::File::open(f.unwrap().path()).unwrap();
+        let reader = parquet::file::reader::SerializedFileReader::new(file).unwrap();
+        assert!(reader.metadata().num_row_groups() >= 2);
+    }
+    let mut ids: Vec<String> = trace_ids(&many)
+        .unwrap()
+        .into_iter()
+        .map(|(_, id)| id)
+        .collect();
+    assert_eq!(ids.len(), 30);
+    ids.reverse();
+    let together = read_traces(&many, &ids).unwrap();
+    for (id, trace) in ids.iter().zip(&together) {
+        let alone = read_trace(&one, id).unwrap();
+        assert!(*trace == alone, "{id} differs");
+        assert!(
+            read_trace(&many, id).unwrap() == alone,
+            "{id} alone differs"
+        );
+    }
+}

@@ -216,3 +216,56 @@ fn accuracy_imports_and_scores_pooltools_traces_from_the_cli() {
         .unwrap();
     assert!(row.ends_with("| 1.000 |"), "{row}");
 }
+
+/// Traces read back by id (`store::read_traces`: what `summarise`, `suggest-labels`, `show` and
+/// `export` read) are the traces imported: the originals of two simulators in one run, asked for in
+/// a shuffled order across both partitions with one id twice, each equal to the importer's trace;
+/// one alone through `read_trace`; an unknown id among known ones is an error naming it.
+#[test]
+fn traces_read_back_by_id_are_the_imported_ones() {
+    use annotrace::store::{RunDir, read_trace, read_traces};
+    let run = TestRun::new();
+    for env in [Env::Pooltool, Env::Phyre] {
+        for (name, text) in files(env) {
+            run.write(&format!("in-{env}/{name}"), &text);
+        }
+        let input = format!("in-{env}");
+        run.run(&["import", "--env", env.as_str(), &input, "--run", "r"])
+            .ok();
+    }
+    let dir = RunDir::new(run.path("r"));
+    // The command names a trace after its file, without `.json`.
+    let truth: BTreeMap<String, Trace> = traces(Env::Pooltool)
+        .iter()
+        .chain(traces(Env::Phyre))
+        .map(|t| {
+            let id = t.trace_id.trim_end_matches(".json").to_string();
+            let t = Trace {
+                trace_id: id.clone(),
+                ..t.clone()
+            };
+            (id, t)
+        })
+        .collect();
+    assert_eq!(truth.len(), 40);
+    // Every id, shuffled (a fixed permutation), and one of them again.
+    let sorted: Vec<&str> = truth.keys().map(String::as_str).collect();
+    let mut ids: Vec<String> = (0..sorted.len())
+        .map(|i| sorted[(i * 17 + 5) % sorted.len()].to_string())
+        .collect();
+    ids.push(ids[3].clone());
+    let back = read_traces(&dir, &ids).unwrap();
+    assert_eq!(back.len(), ids.len());
+    for (id, t) in ids.iter().zip(&back) {
+        assert_eq!(&t.trace_id, id);
+        assert!(*t == truth[id], "{id} reads back otherwise");
+    }
+    assert!(read_trace(&dir, &ids[7]).unwrap() == truth[&ids[7]]);
+    let err = read_traces(&dir, &[ids[0].as_str(), "nope"])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("no trace \"nope\"") && err.contains("40 trace(s)"),
+        "{err}"
+    );
+}

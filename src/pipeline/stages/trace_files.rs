@@ -5,7 +5,7 @@
 //! Stages that write the trace tables (`import`, `simulate`) write one file per shard with the same name
 //! in `traces`, `timesteps`, `frames` and `events` (`<stage>.<shard>.parquet`). Reading such a set once,
 //! grouping each table by trace and slicing, rebuilds all of its traces at the cost of one read, where
-//! `store::read_trace` per trace would scan row groups once per trace. Those stages write each trace's
+//! `store::read_traces` would also pick out each trace's rows from every row group it reads. Those stages write each trace's
 //! rows together and in order, so a set's rows are checked to be grouped and are then taken as they
 //! are; rows in any other order (files from elsewhere) are sorted first.
 
@@ -18,7 +18,7 @@ use arrow::datatypes::DataType;
 use crate::digest::words_u64;
 use crate::pipeline::stage::StageError;
 use crate::rng::SplitMix64;
-use crate::store::{ReadTraceError, RunDir, read_file_whole, read_trace, trace_ids};
+use crate::store::{ReadTraceError, RunDir, key_order, read_file_whole, trace_ids};
 use crate::trace::schema::table_schema;
 use crate::trace::{Env, Trace, TraceRows, decode_trace};
 
@@ -120,46 +120,15 @@ fn sorted_rows(
 /// integer `keys` within each run, with no nulls: `Some(true)` if so, `Some(false)` if not, `None`
 /// when a key is not a 32- or 64-bit integer column (so the caller sorts).
 fn grouped_order(ids: &StringArray, keys: &[&ArrayRef]) -> Option<bool> {
-    use arrow::array::{AsArray, Int32Array, Int64Array};
-    /// A sort key's values.
-    enum Key<'a> {
-        I64(&'a Int64Array),
-        I32(&'a Int32Array),
-    }
-    let keys: Vec<Key<'_>> = keys
-        .iter()
-        .map(|k| {
-            if k.null_count() > 0 {
-                return None;
-            }
-            match k.data_type() {
-                DataType::Int64 => Some(Key::I64(k.as_primitive())),
-                DataType::Int32 => Some(Key::I32(k.as_primitive())),
-                _ => None,
-            }
-        })
-        .collect::<Option<_>>()?;
+    let order = key_order(keys)?;
     if ids.null_count() > 0 {
         return Some(false);
     }
-    // Row `i - 1` against row `i` by the keys in order.
-    let order = |i: usize| {
-        for k in &keys {
-            let o = match k {
-                Key::I64(a) => a.value(i - 1).cmp(&a.value(i)),
-                Key::I32(a) => a.value(i - 1).cmp(&a.value(i)),
-            };
-            if o != std::cmp::Ordering::Equal {
-                return o;
-            }
-        }
-        std::cmp::Ordering::Equal
-    };
     let mut seen = std::collections::HashSet::new();
     let mut start = 0;
     for i in 1..=ids.len() {
         if i < ids.len() && ids.value(i) == ids.value(start) {
-            if order(i) == std::cmp::Ordering::Greater {
+            if order(i - 1, i) == std::cmp::Ordering::Greater {
                 return Some(false);
             }
             continue;
@@ -258,16 +227,13 @@ pub(crate) fn pick_trace_ids(
     Ok(all)
 }
 
-/// Reads the traces `ids` from the run; a missing or damaged trace is an input error naming it.
+/// Reads the traces `ids` from the run (`store::read_traces`: each row group once for all of them);
+/// a missing or damaged trace is an input error naming it.
 pub(crate) fn read_traces_by_id(run: &RunDir, ids: &[String]) -> Result<Vec<Trace>, StageError> {
-    ids.iter()
-        .map(|id| {
-            read_trace(run, id).map_err(|e| match e {
-                ReadTraceError::Store(e) => StageError::Store(e),
-                other => StageError::Input(other.to_string()),
-            })
-        })
-        .collect()
+    crate::store::read_traces(run, ids).map_err(|e| match e {
+        ReadTraceError::Store(e) => StageError::Store(e),
+        other => StageError::Input(other.to_string()),
+    })
 }
 
 #[cfg(test)]
