@@ -177,24 +177,45 @@ fn table_rows(
     let dir = run.partition_dir(table, Some(env));
     let all = concat_batches(&schema, &batches).map_err(|e| arrow_err(&dir, e))?;
     drop(batches);
-    let ids = plain_ids(&dir, &all)?;
-    // Each trace's rows, in file order.
-    let mut rows: HashMap<&str, Vec<u32>> = HashMap::new();
-    for i in 0..ids.len() {
-        let row = u32::try_from(i).map_err(|_| {
-            arrow_err(
-                &dir,
-                arrow::error::ArrowError::ComputeError("over 2^32 rows".into()),
-            )
-        })?;
-        rows.entry(ids.value(i)).or_default().push(row);
+    by_trace(&dir, &all, sort_by)
+}
+
+/// `all`'s rows split by trace, each trace's sorted by `sort_by` (rows already in order, as a stage
+/// writes them, are sliced without a copy; `dir` names the partition in errors).
+fn by_trace(
+    dir: &Path,
+    all: &RecordBatch,
+    sort_by: &[&str],
+) -> Result<HashMap<String, RecordBatch>, StoreError> {
+    let ids = plain_ids(dir, all)?;
+    // Each trace's runs of rows (start, length), in file order: one run when a stage wrote it.
+    let mut runs: HashMap<&str, Vec<(usize, usize)>> = HashMap::new();
+    let mut start = 0;
+    for i in 1..=ids.len() {
+        if i == ids.len() || ids.value(i) != ids.value(start) {
+            runs.entry(ids.value(start))
+                .or_default()
+                .push((start, i - start));
+            start = i;
+        }
     }
-    let mut out = HashMap::with_capacity(rows.len());
-    for (id, idx) in rows {
-        let mine = if idx.len() == all.num_rows() {
-            all.clone()
+    let mut out = HashMap::with_capacity(runs.len());
+    for (id, runs) in runs {
+        let mine = if let [(start, len)] = runs[..] {
+            all.slice(start, len)
         } else {
-            take_record_batch(&all, &UInt32Array::from(idx)).map_err(|e| arrow_err(&dir, e))?
+            let idx = runs
+                .iter()
+                .flat_map(|&(s, n)| s..s + n)
+                .map(u32::try_from)
+                .collect::<Result<UInt32Array, _>>()
+                .map_err(|_| {
+                    arrow_err(
+                        dir,
+                        arrow::error::ArrowError::ComputeError("over 2^32 rows".into()),
+                    )
+                })?;
+            take_record_batch(all, &idx).map_err(|e| arrow_err(dir, e))?
         };
         let keys: Vec<&ArrayRef> = sort_by
             .iter()
@@ -210,8 +231,8 @@ fn table_rows(
                     options: None,
                 })
                 .collect();
-            let order = lexsort_to_indices(&columns, None).map_err(|e| arrow_err(&dir, e))?;
-            take_record_batch(&mine, &order).map_err(|e| arrow_err(&dir, e))?
+            let order = lexsort_to_indices(&columns, None).map_err(|e| arrow_err(dir, e))?;
+            take_record_batch(&mine, &order).map_err(|e| arrow_err(dir, e))?
         };
         out.insert(id.to_string(), sorted);
     }
@@ -221,7 +242,7 @@ fn table_rows(
 /// Whether rows are in non-decreasing order of the integer `keys` (compared in turn), with no nulls:
 /// `Some(true)` or `Some(false)`, or `None` when a key is not a 32- or 64-bit integer column without
 /// nulls (the caller then sorts). Rows a stage wrote for one trace are in order already.
-pub(crate) fn rows_ordered(keys: &[&ArrayRef]) -> Option<bool> {
+fn rows_ordered(keys: &[&ArrayRef]) -> Option<bool> {
     let order = key_order(keys)?;
     let n = keys.first().map_or(0, |k| k.len());
     Some((1..n).all(|i| order(i - 1, i) != std::cmp::Ordering::Greater))
@@ -362,4 +383,51 @@ pub fn trace_ids(run: &RunDir) -> Result<Vec<(Env, String)>, StoreError> {
     }
     out.sort();
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use arrow::array::{Float64Array, Int32Array, Int64Array};
+    use std::sync::Arc;
+
+    #[test]
+    fn rows_are_split_by_trace_and_sorted_only_when_out_of_order() {
+        // `timesteps` rows: trace a in order in one run; b out of order and in two runs around c.
+        let rows: [(&str, i64); 7] = [
+            ("a", 0),
+            ("a", 1),
+            ("b", 2),
+            ("c", 0),
+            ("b", 0),
+            ("b", 1),
+            ("a", 2),
+        ];
+        let schema = table_schema("timesteps").unwrap();
+        let ids: Vec<&str> = rows.iter().map(|r| r.0).collect();
+        let steps: Vec<i64> = rows.iter().map(|r| r.1).collect();
+        let ts: Vec<f64> = rows.iter().map(|r| r.1 as f64 / 10.0).collect();
+        let mut columns: Vec<ArrayRef> = vec![
+            cast(&StringArray::from(ids), schema.field(0).data_type()).unwrap(),
+            Arc::new(Int64Array::from(steps)),
+            Arc::new(Float64Array::from(ts)),
+            Arc::new(Int32Array::from(vec![1; 7])),
+        ];
+        columns.push(arrow::array::new_null_array(schema.field(4).data_type(), 7));
+        let all = RecordBatch::try_new(schema, columns).unwrap();
+        let split = by_trace(Path::new("timesteps"), &all, &["step"]).unwrap();
+        let steps_of = |id: &str| -> Vec<i64> {
+            let b = &split[id];
+            let s = b.column_by_name("step").unwrap().as_any();
+            s.downcast_ref::<Int64Array>().unwrap().values().to_vec()
+        };
+        assert_eq!(split.len(), 3);
+        assert_eq!(steps_of("a"), [0, 1, 2]);
+        assert_eq!(steps_of("b"), [0, 1, 2]);
+        assert_eq!(steps_of("c"), [0]);
+        // Each trace's times travel with its steps.
+        let t = split["b"].column_by_name("t").unwrap();
+        let t = t.as_any().downcast_ref::<Float64Array>().unwrap();
+        assert_eq!(t.values().to_vec(), [0.0, 0.1, 0.2]);
+    }
 }
