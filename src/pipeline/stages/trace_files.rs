@@ -4,10 +4,11 @@
 //!
 //! Stages that write the trace tables (`import`, `simulate`) write one file per shard with the same name
 //! in `traces`, `timesteps`, `frames` and `events` (`<stage>.<shard>.parquet`). Reading such a set once,
-//! grouping each table by trace and slicing, rebuilds all of its traces at the cost of one read, where
-//! `store::read_traces` would also pick out each trace's rows from every row group it reads. Those stages write each trace's
-//! rows together and in order, so a set's rows are checked to be grouped and are then taken as they
-//! are; rows in any other order (files from elsewhere) are sorted first.
+//! grouping each table by trace and slicing, rebuilds all of its traces at the cost of one read
+//! (`store::read_traces`, for traces chosen by id, also checks every row against the ids asked for).
+//! Those stages write each trace's rows together and in order, so a set's rows are checked to be
+//! grouped and are then taken as they are; rows in any other order (files from elsewhere) are sorted
+//! first.
 
 use arrow::array::{Array, ArrayRef, RecordBatch, StringArray};
 use arrow::compute::{
