@@ -56,7 +56,8 @@ pub struct SandboxLimits {
     /// worker keeps none: each trace is freed right after its detectors have run, while the worker's
     /// CPU caches still hold it (half the cost of freeing it traces later, measured in
     /// `docs/performance.md`, "The workers' floor, replayed"); for callers that run every trace once
-    /// with all its detectors, as `annotate` and `accuracy` do.
+    /// with all its detectors, as every stage with a `DetectorSetup` does (`annotate`, `summarise`,
+    /// `optimise`, …).
     pub trace_cache: usize,
     /// Most patterns one call may return. Default 10 000.
     pub max_patterns: usize,

@@ -1383,21 +1383,10 @@ mod tests {
     fn narrow_groups_pack_as_bit_by_bit() {
         // Every width the one-word path takes, on group counts with and without a remainder, and
         // values that fill their width; the bit-by-bit packer is the reference.
-        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut rng = crate::rng::SplitMix64::new(7);
         for width in 0..=8u8 {
             for len in [0usize, 1, 7, 8, 9, 63 * 8, 63 * 8 + 5, 1000] {
-                let values: Vec<u32> = (0..len)
-                    .map(|_| {
-                        state ^= state << 13;
-                        state ^= state >> 7;
-                        state ^= state << 17;
-                        if width == 0 {
-                            0
-                        } else {
-                            (state >> 40) as u32 & ((1u32 << width) - 1)
-                        }
-                    })
-                    .collect();
+                let values: Vec<u32> = (0..len).map(|_| rng.below(1 << width) as u32).collect();
                 let (mut fast, mut slow) = (Vec::new(), Vec::new());
                 pack_groups_narrow(&values, width, &mut fast);
                 pack_groups(&values, width, &mut slow);

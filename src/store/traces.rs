@@ -328,21 +328,22 @@ pub fn read_traces<S: AsRef<str>>(run: &RunDir, ids: &[S]) -> Result<Vec<Trace>,
         by_env.entry(*env).or_default().push(id);
     }
     let mut read: HashMap<&str, Trace> = HashMap::with_capacity(rows.len());
+    // A trace with no rows in a table (no events, say) decodes from that table's empty batch.
+    let empty = |table: &str| RecordBatch::new_empty(table_schema(table).expect("trace table"));
+    let (no_steps, no_frames, no_events) = (empty("timesteps"), empty("frames"), empty("events"));
     for (env, mut of_env) in by_env {
         of_env.sort_unstable();
         for chunk in of_env.chunks(CHUNK) {
             let steps = table_rows(run, "timesteps", env, chunk, &["step"])?;
             let frames = table_rows(run, "frames", env, chunk, &["step", "slot"])?;
             let events = table_rows(run, "events", env, chunk, &["seq"])?;
-            let empty =
-                |table: &str| RecordBatch::new_empty(table_schema(table).expect("trace table"));
             for &id in chunk {
                 let trace = decode_trace(&TraceRows {
                     env,
                     trace: &rows[id].1,
-                    timesteps: steps.get(id).unwrap_or(&empty("timesteps")),
-                    frames: frames.get(id).unwrap_or(&empty("frames")),
-                    events: events.get(id).unwrap_or(&empty("events")),
+                    timesteps: steps.get(id).unwrap_or(&no_steps),
+                    frames: frames.get(id).unwrap_or(&no_frames),
+                    events: events.get(id).unwrap_or(&no_events),
                 })?;
                 read.insert(id, trace);
             }
