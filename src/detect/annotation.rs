@@ -69,6 +69,30 @@ impl Annotation {
     }
 }
 
+/// The annotations of each of `traces`, in the order of `traces`, each trace's in the order they
+/// come in; annotations of traces not in `traces` are dropped, and a trace listed twice gets them at
+/// its first place only. One pass over `annotations` (a
+/// filter per trace would compare every annotation's trace id once per trace). `A` is an owned
+/// [`Annotation`] or a reference to one.
+pub fn by_trace<A: std::borrow::Borrow<Annotation>>(
+    traces: &[Trace],
+    annotations: impl IntoIterator<Item = A>,
+) -> Vec<Vec<A>> {
+    let index: std::collections::HashMap<&str, usize> = traces
+        .iter()
+        .enumerate()
+        .rev()
+        .map(|(i, t)| (t.trace_id.as_str(), i))
+        .collect();
+    let mut out: Vec<Vec<A>> = traces.iter().map(|_| Vec::new()).collect();
+    for a in annotations {
+        if let Some(&i) = index.get(a.borrow().trace_id.as_str()) {
+            out[i].push(a);
+        }
+    }
+    out
+}
+
 /// The sparse N×J annotation matrix of one trace: row n is the trace's n-th timestep, column j the
 /// j-th detector; a cell holds the activation of a pattern covering that step (the largest, when
 /// patterns of one detector overlap), and absent cells are 0.
@@ -161,5 +185,42 @@ mod tests {
             (0.0, 1.0, 1.0, 0.0)
         );
         assert_eq!((m.get(2, 1), m.get(4, 1), m.get(5, 1)), (0.5, 0.5, 0.0));
+    }
+    #[test]
+    fn annotations_are_grouped_by_trace_in_the_traces_order_keeping_their_own_order() {
+        let d = Detector::new(Env::Pooltool, "a", "x", "t");
+        let traces: Vec<Trace> = (0..3)
+            .map(|i| crate::testutil::synthetic_trace(Env::Pooltool, i, 4, 2))
+            .collect();
+        let p = |s| Pattern {
+            label: "a".into(),
+            start_step: s,
+            end_step: s,
+            parameters: Map::new(),
+            provenance: None,
+            metadata: None,
+        };
+        let stranger = crate::testutil::synthetic_trace(Env::Pooltool, 9, 4, 2);
+        // Interleaved, with a trace that is not asked for.
+        let anns = vec![
+            Annotation::new(&d, &traces[2], 0, p(3)),
+            Annotation::new(&d, &traces[0], 0, p(1)),
+            Annotation::new(&d, &stranger, 0, p(0)),
+            Annotation::new(&d, &traces[2], 1, p(0)),
+            Annotation::new(&d, &traces[0], 1, p(2)),
+        ];
+        let asked = [traces[2].clone(), traces[1].clone(), traces[0].clone(), traces[2].clone()];
+        let grouped = by_trace(&asked, &anns);
+        let filtered: Vec<Vec<&Annotation>> = asked
+            .iter()
+            .map(|t| anns.iter().filter(|a| a.trace_id == t.trace_id).collect())
+            .collect();
+        assert_eq!(grouped[..3], filtered[..3]);
+        assert_eq!(grouped[0].iter().map(|a| a.start_step).collect::<Vec<_>>(), [3, 0]);
+        assert!(grouped[1].is_empty() && grouped[3].is_empty());
+        // Owned annotations are moved into their groups.
+        let owned = by_trace(&traces, anns.clone());
+        assert_eq!(owned.iter().map(Vec::len).collect::<Vec<_>>(), [2, 0, 2]);
+        assert_eq!(owned[2], [anns[0].clone(), anns[3].clone()]);
     }
 }

@@ -30,7 +30,7 @@ mod text;
 mod validate;
 mod worker;
 
-pub use self::annotation::{Annotation, AnnotationMatrix};
+pub use self::annotation::{Annotation, AnnotationMatrix, by_trace};
 pub use self::detector::{Detector, DetectorId, EnsembleSettings, Membership, normalise_label};
 pub use self::error::{CandidateStatus, DetectError, DetectorError};
 pub use self::library::{Library, LibraryError};

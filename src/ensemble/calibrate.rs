@@ -69,10 +69,7 @@ impl<'a> HeldoutRho<'a> {
         bins: usize,
         dp: Dp,
     ) -> Self {
-        let by_trace = traces
-            .iter()
-            .map(|t| anns.iter().filter(|a| a.trace_id == t.trace_id).collect())
-            .collect();
+        let by_trace = crate::detect::by_trace(traces, anns);
         HeldoutRho {
             traces,
             by_trace,

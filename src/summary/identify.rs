@@ -123,6 +123,18 @@ pub fn identify(
     chooser: &dyn Chooser,
     params: &IdentifyParams,
 ) -> Result<Identification, SummaryError> {
+    let own = crate::detect::by_trace(traces, annotations.iter().cloned());
+    identify_grouped(traces, &own, summaries, chooser, params)
+}
+
+/// [`identify`] with each trace's own annotations (`own[i]` those of `traces[i]`).
+fn identify_grouped(
+    traces: &[Trace],
+    own: &[Vec<Annotation>],
+    summaries: &[String],
+    chooser: &dyn Chooser,
+    params: &IdentifyParams,
+) -> Result<Identification, SummaryError> {
     check(traces, params)?;
     if summaries.len() != traces.len() {
         return Err(SummaryError::Setup(format!(
@@ -132,15 +144,16 @@ pub fn identify(
         )));
     }
     let trials = (0..traces.len())
-        .map(|i| trial(traces, annotations, summaries, chooser, params, i))
+        .map(|i| trial(traces, &own[i], summaries, chooser, params, i))
         .collect::<Result<Vec<_>, _>>()?;
     Ok(score(trials, params.options))
 }
 
-/// Trial `i` of [`identify`] alone (the `summarise` stage runs trials one by one so that it can resume).
+/// Trial `i` of [`identify`] alone (the `summarise` stage runs trials one by one so that it can resume);
+/// `own` are the annotations of `traces[i]` (the chooser reads no other trace's).
 pub fn trial(
     traces: &[Trace],
-    annotations: &[Annotation],
+    own: &[Annotation],
     summaries: &[String],
     chooser: &dyn Chooser,
     params: &IdentifyParams,
@@ -159,7 +172,7 @@ pub fn trial(
     let texts: Vec<&str> = shown.iter().map(|&k| summaries[k].as_str()).collect();
     let choice = chooser.choose(
         trace,
-        annotations,
+        own,
         &texts,
         words_u64(&[params.seed, i as u64, 0x2D]),
     )?;
@@ -196,11 +209,13 @@ pub fn identification_accuracy(
     params: &IdentifyParams,
 ) -> Result<Identification, SummaryError> {
     check(traces, params)?;
+    let own = crate::detect::by_trace(traces, annotations.iter().cloned());
     let summaries = traces
         .iter()
-        .map(|t| summariser.summarise(t, annotations).map(|s| s.text))
+        .zip(&own)
+        .map(|(t, own)| summariser.summarise(t, own).map(|s| s.text))
         .collect::<Result<Vec<_>, _>>()?;
-    identify(traces, annotations, &summaries, chooser, params)
+    identify_grouped(traces, &own, &summaries, chooser, params)
 }
 
 #[cfg(test)]

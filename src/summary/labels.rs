@@ -421,11 +421,10 @@ fn mined_pairs(traces: &[Trace], annotations: &[Annotation], order: &[String]) -
         objects: BTreeMap<String, usize>,
     }
     let mut tally: BTreeMap<(String, String), Tally> = BTreeMap::new();
-    for t in traces {
-        let mut anns: Vec<&Annotation> = annotations
-            .iter()
-            .filter(|a| a.trace_id == t.trace_id)
-            .collect();
+    for (t, mut anns) in traces
+        .iter()
+        .zip(crate::detect::by_trace(traces, annotations))
+    {
         anns.sort_by(|a, b| {
             (a.start_step, a.end_step, &a.label, a.seq).cmp(&(
                 b.start_step,

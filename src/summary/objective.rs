@@ -36,10 +36,7 @@ impl<'a> IdentificationObjective<'a> {
         chooser: &'a dyn Chooser,
         params: IdentifyParams,
     ) -> Self {
-        let by_trace = traces
-            .iter()
-            .map(|t| anns.iter().filter(|a| a.trace_id == t.trace_id).collect())
-            .collect();
+        let by_trace = crate::detect::by_trace(traces, anns);
         IdentificationObjective {
             traces,
             by_trace,

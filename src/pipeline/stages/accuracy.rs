@@ -350,15 +350,11 @@ impl AccuracyStage {
         let mut scores: BTreeMap<String, LabelScore> = BTreeMap::new();
         let mut misses: Vec<Miss> = Vec::new();
         let mut unscored = 0u64;
-        for trace in &traces {
+        for (trace, mine) in traces.iter().zip(crate::detect::by_trace(&traces, &anns)) {
             if !scorable(self.setup.env, trace) {
                 unscored += 1;
                 continue;
             }
-            let mine: Vec<&Annotation> = anns
-                .iter()
-                .filter(|a| a.trace_id == trace.trace_id)
-                .collect();
             let truth = truth(self.setup.env, trace, self.merge);
             let found = score_trace_listing(
                 &trace.trace_id,

@@ -1000,14 +1000,13 @@ impl Stage for EnsembleStage {
                         {
                             continue;
                         }
+                        let own = crate::detect::by_trace(&test, of_label.iter().copied());
                         let hists: Vec<Vec<f64>> = test
                             .iter()
-                            .map(|t| trace_histogram(t, &of_label, bins))
+                            .zip(&own)
+                            .map(|(t, own)| trace_histogram(t, own, bins))
                             .collect();
-                        let fired = test
-                            .iter()
-                            .filter(|t| of_label.iter().any(|a| a.trace_id == t.trace_id))
-                            .count();
+                        let fired = own.iter().filter(|own| !own.is_empty()).count();
                         let f1 = label_f1(env, &test, &of_label, l);
                         out.push(EvaluationRow {
                             variant: variant.clone(),
@@ -1123,13 +1122,12 @@ fn label_f1(
         .find(|g| crate::detect::normalise_label(g) == norm)?;
     let mut scores = BTreeMap::new();
     let mut scored = false;
-    for t in traces.iter().filter(|t| scorable(env, t)) {
+    for (t, mine) in traces
+        .iter()
+        .zip(crate::detect::by_trace(traces, anns.iter().copied()))
+        .filter(|(t, _)| scorable(env, t))
+    {
         scored = true;
-        let mine: Vec<&crate::detect::Annotation> = anns
-            .iter()
-            .copied()
-            .filter(|a| a.trace_id == t.trace_id)
-            .collect();
         let events: Vec<_> = truth(env, t, 0.05)
             .into_iter()
             .filter(|e| e.label == g)

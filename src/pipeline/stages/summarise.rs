@@ -497,9 +497,13 @@ impl Stage for SummariseStage {
         }
         let seed = self.seed(ctx);
         let traces = self.traces(ctx)?;
-        let annotations: Vec<Annotation> = match &self.setup {
-            Some(s) => crate::reward::annotate::annotate(&s.pool()?, &self.detectors, &traces).0,
-            None => Vec::new(),
+        // Each trace's own annotations (summaries and trials read one trace's at a time).
+        let annotations: Vec<Vec<Annotation>> = match &self.setup {
+            Some(s) => crate::detect::by_trace(
+                &traces,
+                crate::reward::annotate::annotate(&s.pool()?, &self.detectors, &traces).0,
+            ),
+            None => traces.iter().map(|_| Vec::new()).collect(),
         };
         let model = self.model(ctx)?;
         let summariser: Box<dyn Summariser> = match (self.p.summariser, &model) {
@@ -555,7 +559,7 @@ impl Stage for SummariseStage {
             let record = match ctx.finished_shard(&shard)? {
                 Some(r) => r,
                 None => {
-                    let s = match summariser.summarise(trace, &annotations) {
+                    let s = match summariser.summarise(trace, &annotations[i]) {
                         Ok(s) => s,
                         Err(e) => {
                             flush()?;
@@ -615,7 +619,7 @@ impl Stage for SummariseStage {
                     None => {
                         let t = match crate::summary::identify_trial(
                             &traces,
-                            &annotations,
+                            &annotations[i],
                             &texts,
                             chooser.as_ref(),
                             &params,
