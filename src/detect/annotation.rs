@@ -209,14 +209,22 @@ mod tests {
             Annotation::new(&d, &traces[2], 1, p(0)),
             Annotation::new(&d, &traces[0], 1, p(2)),
         ];
-        let asked = [traces[2].clone(), traces[1].clone(), traces[0].clone(), traces[2].clone()];
+        let asked = [
+            traces[2].clone(),
+            traces[1].clone(),
+            traces[0].clone(),
+            traces[2].clone(),
+        ];
         let grouped = by_trace(&asked, &anns);
         let filtered: Vec<Vec<&Annotation>> = asked
             .iter()
             .map(|t| anns.iter().filter(|a| a.trace_id == t.trace_id).collect())
             .collect();
         assert_eq!(grouped[..3], filtered[..3]);
-        assert_eq!(grouped[0].iter().map(|a| a.start_step).collect::<Vec<_>>(), [3, 0]);
+        assert_eq!(
+            grouped[0].iter().map(|a| a.start_step).collect::<Vec<_>>(),
+            [3, 0]
+        );
         assert!(grouped[1].is_empty() && grouped[3].is_empty());
         // Owned annotations are moved into their groups.
         let owned = by_trace(&traces, anns.clone());

@@ -291,3 +291,63 @@ fn summaries_pipeline_runs_offline() {
     );
     assert!(t.path("out/exports/summary_cost.tex").is_file());
 }
+
+/// Offline, a shard holds a block of 64 summaries or trials: 70 traces make two of each. A kill or a
+/// failure after some blocks publishes nothing, and the stage run again (resumed after the kill) ends
+/// with an uninterrupted run's tables.
+#[test]
+fn offline_summaries_in_blocks_resume_to_the_same_tables() {
+    let t = TestRun::new();
+    let pipeline = "[pipeline]\nname = \"p\"\nseed = 4\n\n[[stage]]\nid = \"sim\"\nkind = \"simulate\"\n\
+                    scenes = 70\nshots = 1\ndt = 0.1\nscenes_per_shard = 35\n\n[[stage]]\nid = \"sum\"\n\
+                    kind = \"summarise\"\ntraces = 70\nworkers = 2\n";
+    t.write("pipelines/p.toml", pipeline);
+    t.run(&["run", "pipelines/p.toml", "--run-dir", "fresh"])
+        .ok();
+    let rows = |run: &str| {
+        (
+            t.csv(
+                run,
+                "SELECT * EXCLUDE (seconds) FROM summaries ORDER BY trace_id",
+            ),
+            t.csv(
+                run,
+                "SELECT * EXCLUDE (seconds) FROM identification ORDER BY trace_id",
+            ),
+        )
+    };
+    let expected = rows("fresh");
+    assert_eq!(expected.0.lines().count(), 71, "{}", expected.0);
+    assert_eq!(expected.1.lines().count(), 71, "{}", expected.1);
+    for table in ["summaries", "identification"] {
+        let files = std::fs::read_dir(t.path(&format!("fresh/{table}/env=pooltool")))
+            .unwrap()
+            .count();
+        assert_eq!(files, 2, "{table}: two blocks of traces");
+    }
+    // Shards finish in the order s00000, s00064, i00000, i00064.
+    for (dir, fault) in [
+        ("killed", "sum:after-shards=1"),
+        ("failed", "sum:after-shards=3:fail"),
+    ] {
+        let r = t.run_env(
+            &["run", "pipelines/p.toml", "--run-dir", dir],
+            &[("ANNOTRACE_FAULT", fault)],
+        );
+        assert_ne!(r.code, Some(0), "{fault}: the fault stops the run");
+        assert!(r.stderr.contains("injected fault"), "{fault}: {}", r.stderr);
+        for table in ["summaries", "identification"] {
+            assert!(
+                !t.path(&format!("{dir}/{table}")).exists(),
+                "{fault}: no partial {table} table is published"
+            );
+        }
+        let again = t.run(&["run", "pipelines/p.toml", "--run-dir", dir]);
+        again.ok();
+        if dir == "killed" {
+            // The first block's summaries are kept, not made again.
+            again.stderr_has("resuming: finished shards kept");
+        }
+        assert_eq!(rows(dir), expected, "{fault}");
+    }
+}
