@@ -89,7 +89,23 @@ pub fn options_for(n: usize, target: usize, options: usize, seed: u64) -> (Vec<u
     (shown, at)
 }
 
-fn check(traces: &[Trace], params: &IdentifyParams) -> Result<(), SummaryError> {
+/// Whether trials over `traces` can be run with `params`: at least 2 options, at least as many traces,
+/// no trace twice.
+pub fn check(traces: &[Trace], params: &IdentifyParams) -> Result<(), SummaryError> {
+    check_sizes(traces, params)?;
+    let mut ids: Vec<&str> = traces.iter().map(|t| t.trace_id.as_str()).collect();
+    ids.sort_unstable();
+    if let Some(w) = ids.windows(2).find(|w| w[0] == w[1]) {
+        return Err(SummaryError::Setup(format!(
+            "trace {} is given twice",
+            w[0]
+        )));
+    }
+    Ok(())
+}
+
+/// [`check`] without the duplicate check (which sorts every trace id).
+fn check_sizes(traces: &[Trace], params: &IdentifyParams) -> Result<(), SummaryError> {
     if params.options < 2 {
         return Err(SummaryError::Setup(format!(
             "options must be at least 2, found {}",
@@ -102,14 +118,6 @@ fn check(traces: &[Trace], params: &IdentifyParams) -> Result<(), SummaryError> 
             traces.len(),
             params.options,
             params.options
-        )));
-    }
-    let mut ids: Vec<&str> = traces.iter().map(|t| t.trace_id.as_str()).collect();
-    ids.sort_unstable();
-    if let Some(w) = ids.windows(2).find(|w| w[0] == w[1]) {
-        return Err(SummaryError::Setup(format!(
-            "trace {} is given twice",
-            w[0]
         )));
     }
     Ok(())
@@ -150,7 +158,8 @@ fn identify_grouped(
 }
 
 /// Trial `i` of [`identify`] alone (the `summarise` stage runs trials one by one so that it can resume);
-/// `own` are the annotations of `traces[i]` (the chooser reads no other trace's).
+/// `own` are the annotations of `traces[i]` (the chooser reads no other trace's). It does not look for
+/// a trace given twice: call [`check`] once before the trials.
 pub fn trial(
     traces: &[Trace],
     own: &[Annotation],
@@ -159,7 +168,7 @@ pub fn trial(
     params: &IdentifyParams,
     i: usize,
 ) -> Result<Trial, SummaryError> {
-    check(traces, params)?;
+    check_sizes(traces, params)?;
     if summaries.len() != traces.len() || i >= traces.len() {
         return Err(SummaryError::Setup(format!(
             "trial {i} of {} traces with {} summaries",

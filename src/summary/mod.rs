@@ -39,8 +39,8 @@ pub mod table;
 pub use self::choose::{Choice, Chooser, LlmChooser, OfflineChooser, parse_choice};
 pub use self::error::SummaryError;
 pub use self::identify::{
-    Identification, IdentifyParams, Trial, identification_accuracy, identify, options_for,
-    trial as identify_trial,
+    Identification, IdentifyParams, Trial, check as check_trials, identification_accuracy,
+    identify, options_for, trial as identify_trial,
 };
 pub use self::images::TraceImages;
 pub use self::labels::{

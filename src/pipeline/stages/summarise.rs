@@ -645,6 +645,7 @@ impl Stage for SummariseStage {
                 options: self.p.options as usize,
                 seed,
             };
+            crate::summary::check_trials(&traces, &params).map_err(summary_error)?;
             let texts: Vec<String> = summaries.iter().map(|s| s.text.clone()).collect();
             let block = shard_block(chooser_kind == ChooserKind::Offline);
             let mut right = 0u64;
