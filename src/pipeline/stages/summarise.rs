@@ -656,10 +656,10 @@ impl Stage for SummariseStage {
                     Some(r) => shard_records(&shard, r, end - start)?,
                     None => {
                         let mut trials = Vec::with_capacity(end - start);
-                        for i in start..end {
+                        for (i, own) in annotations.iter().enumerate().take(end).skip(start) {
                             match crate::summary::identify_trial(
                                 &traces,
-                                &annotations[i],
+                                own,
                                 &texts,
                                 chooser.as_ref(),
                                 &params,
