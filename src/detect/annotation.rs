@@ -71,9 +71,8 @@ impl Annotation {
 
 /// The annotations of each of `traces`, in the order of `traces`, each trace's in the order they
 /// come in; annotations of traces not in `traces` are dropped, and a trace listed twice gets them at
-/// its first place only. One pass over `annotations` (a
-/// filter per trace would compare every annotation's trace id once per trace). `A` is an owned
-/// [`Annotation`] or a reference to one.
+/// its first place only. One pass over `annotations` (a filter per trace would compare every
+/// annotation's trace id once per trace). `A` is an owned [`Annotation`] or a reference to one.
 pub fn by_trace<A: std::borrow::Borrow<Annotation>>(
     traces: &[Trace],
     annotations: impl IntoIterator<Item = A>,
@@ -186,6 +185,7 @@ mod tests {
         );
         assert_eq!((m.get(2, 1), m.get(4, 1), m.get(5, 1)), (0.5, 0.5, 0.0));
     }
+
     #[test]
     fn annotations_are_grouped_by_trace_in_the_traces_order_keeping_their_own_order() {
         let d = Detector::new(Env::Pooltool, "a", "x", "t");
