@@ -112,6 +112,21 @@ fn offline_summaries_and_identification() {
     t.run(&summarise_args("run", &["--labels", "no such label"]))
         .code(2)
         .stderr_has("no label");
+    // A trace given twice cannot be told apart from itself: the user's error, before any summary.
+    let ids = t.csv(
+        "run",
+        "SELECT trace_id FROM traces ORDER BY trace_id LIMIT 8",
+    );
+    let ids: Vec<&str> = ids.lines().skip(1).collect();
+    let mut twice = summarise_args("twice", &["--trace", ids[0]]);
+    for id in &ids {
+        twice.extend_from_slice(&["--trace", id]);
+    }
+    simulate(&t, "twice", "10");
+    t.run(&twice)
+        .code(2)
+        .stderr_has(&format!("trace {} is given twice", ids[0]));
+    assert!(!t.path("twice/summaries").exists(), "no summaries written");
 }
 
 /// A server that summarises and chooses: summaries name the request's position, choices are

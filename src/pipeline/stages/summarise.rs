@@ -526,6 +526,14 @@ impl Stage for SummariseStage {
         }
         let seed = self.seed(ctx);
         let traces = self.traces(ctx)?;
+        if chooser_kind != ChooserKind::None {
+            // Before any work: a trace given twice, or fewer traces than options, cannot make trials.
+            let params = IdentifyParams {
+                options: self.p.options as usize,
+                seed,
+            };
+            crate::summary::check_trials(&traces, &params).map_err(summary_error)?;
+        }
         // Each trace's own annotations (summaries and trials read one trace's at a time).
         let annotations: Vec<Vec<Annotation>> = match &self.setup {
             Some(s) => crate::detect::by_trace(
@@ -645,7 +653,6 @@ impl Stage for SummariseStage {
                 options: self.p.options as usize,
                 seed,
             };
-            crate::summary::check_trials(&traces, &params).map_err(summary_error)?;
             let texts: Vec<String> = summaries.iter().map(|s| s.text.clone()).collect();
             let block = shard_block(chooser_kind == ChooserKind::Offline);
             let mut right = 0u64;
