@@ -526,12 +526,12 @@ impl Stage for SummariseStage {
         }
         let seed = self.seed(ctx);
         let traces = self.traces(ctx)?;
+        let params = IdentifyParams {
+            options: self.p.options as usize,
+            seed,
+        };
         if chooser_kind != ChooserKind::None {
             // Before any work: a trace given twice, or fewer traces than options, cannot make trials.
-            let params = IdentifyParams {
-                options: self.p.options as usize,
-                seed,
-            };
             crate::summary::check_trials(&traces, &params).map_err(summary_error)?;
         }
         // Each trace's own annotations (summaries and trials read one trace's at a time).
@@ -649,10 +649,6 @@ impl Stage for SummariseStage {
         let mut rows = std::collections::BTreeMap::new();
         rows.insert(table::SUMMARIES.to_string(), traces.len() as u64);
         if let Some(chooser) = &chooser {
-            let params = IdentifyParams {
-                options: self.p.options as usize,
-                seed,
-            };
             let texts: Vec<String> = summaries.iter().map(|s| s.text.clone()).collect();
             let block = shard_block(chooser_kind == ChooserKind::Offline);
             let mut right = 0u64;
