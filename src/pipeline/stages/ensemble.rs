@@ -29,7 +29,7 @@ use serde_json::{Value, json};
 
 use super::detector_setup::{DetectorSetup, SandboxParams};
 use super::llm_setup::{resumable_client, stage_prompts};
-use super::trace_files::{read_traces, trace_file_sets};
+use super::trace_files::{HashSplit, env_trace_ids, read_traces_by_id, split_ids};
 use crate::detect::{Detector, Library, WorkerPool};
 use crate::ensemble::activation::{LabelEnsemble, Member, combine};
 use crate::ensemble::calibrate::{CalibrationSettings, HeldoutRho, calibrate};
@@ -426,10 +426,6 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     }))
 }
 
-fn hash_u64(seed: u64, s: &str) -> u64 {
-    crate::digest::sha256_u64(&[&seed.to_le_bytes(), s.as_bytes()])
-}
-
 /// A shard record's label entry: the representatives (code hashes, by cluster) and the -SP pick.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 struct LabelRecord {
@@ -547,30 +543,32 @@ impl EnsembleStage {
         ctx: &StageContext<'_>,
         seed: u64,
     ) -> Result<(Vec<Trace>, Vec<Trace>), StageError> {
-        let env = self.p.env;
-        let mut all = Vec::new();
-        for set in trace_file_sets(ctx.run(), env)? {
-            all.extend(read_traces(ctx.run(), &set)?);
-        }
-        all.sort_by_cached_key(|t| (hash_u64(seed, &t.trace_id), t.trace_id.clone()));
-        let cut = (self.p.test_fraction * u64::MAX as f64) as u64;
-        let (mut test, mut calib): (Vec<Trace>, Vec<Trace>) = all
-            .into_iter()
-            .partition(|t| hash_u64(seed ^ 0xE5E, &t.trace_id) < cut);
-        calib.truncate(self.p.calibration_traces as usize);
-        test.truncate(self.p.test_traces as usize);
+        let (calib, test) = split_ids(
+            env_trace_ids(ctx.run(), self.p.env)?,
+            HashSplit {
+                seed,
+                salt: 0xE5E,
+                aside: self.p.test_fraction,
+                max_kept: self.p.calibration_traces as usize,
+                max_aside: self.p.test_traces as usize,
+            },
+        );
         if calib.len() < self.p.signature_traces as usize || calib.len() < 3 || test.len() < 3 {
             return Err(StageError::TooFewTraces {
                 stage: "ensemble",
                 what: format!(
-                    "{env} calibration traces (≥ max(signature_traces, 3)) and 3 test traces"
+                    "{} calibration traces (≥ max(signature_traces, 3)) and 3 test traces",
+                    self.p.env
                 ),
                 needed: (self.p.signature_traces as usize).max(3) + 3,
                 found: calib.len() + test.len(),
                 hint: ": simulate more traces or lower signature_traces / test_fraction",
             });
         }
-        Ok((calib, test))
+        Ok((
+            read_traces_by_id(ctx.run(), &calib)?,
+            read_traces_by_id(ctx.run(), &test)?,
+        ))
     }
 }
 

@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use super::detector_setup::{DetectorSetup, SandboxParams};
-use super::trace_files::{read_traces, trace_file_sets};
+use super::trace_files::{HashSplit, env_trace_ids, read_traces_by_id, split_ids};
 use crate::fitness::table::{distances_batch, matrix_from_batches, set_id_with};
 use crate::fitness::{DistanceMatrix, Dp, Dx};
 use crate::llm::{LlmClient, LlmConfig, LlmSettings, Prompts};
@@ -497,28 +497,6 @@ fn build(def: &StageDef, spec: &PipelineSpec) -> Result<Box<dyn Stage>, BuildErr
     }))
 }
 
-fn hash_u64(seed: u64, s: &str) -> u64 {
-    crate::digest::sha256_u64(&[&seed.to_le_bytes(), s.as_bytes()])
-}
-
-/// Splits traces into (training, held-out): a trace is held out when the hash of (seed, id) falls in
-/// the held-out fraction; each side is ordered by that hash and cut to `max` traces.
-pub(crate) fn split(
-    mut traces: Vec<Trace>,
-    seed: u64,
-    holdout: f64,
-    max: usize,
-) -> (Vec<Trace>, Vec<Trace>) {
-    traces.sort_by_cached_key(|t| (hash_u64(seed, &t.trace_id), t.trace_id.clone()));
-    let cut = (holdout * u64::MAX as f64) as u64;
-    let (mut hold, mut train): (Vec<Trace>, Vec<Trace>) = traces
-        .into_iter()
-        .partition(|t| holdout > 0.0 && hash_u64(seed ^ 0x401D, &t.trace_id) < cut);
-    train.truncate(max);
-    hold.truncate(max);
-    (train, hold)
-}
-
 /// The files of a written library folder (the runner removes a stage's files before it reruns).
 fn library_files(dir: &std::path::Path) -> Vec<PathBuf> {
     let mut out: Vec<PathBuf> = std::fs::read_dir(dir)
@@ -634,27 +612,33 @@ impl EvolveStage {
     }
 
     /// The run's traces of `env`, split into training and held-out sets (at least 3 traces, 2 for
-    /// training).
+    /// training). The split is made on the ids; only the traces it keeps are read.
     fn load_split(
         &self,
         ctx: &StageContext<'_>,
         env: Env,
         seed: u64,
     ) -> Result<(Vec<Trace>, Vec<Trace>), StageError> {
-        let mut traces = Vec::new();
-        for set in trace_file_sets(ctx.run(), env)? {
-            traces.extend(read_traces(ctx.run(), &set)?);
-        }
-        if traces.len() < 3 {
+        let ids = env_trace_ids(ctx.run(), env)?;
+        if ids.len() < 3 {
             return Err(StageError::TooFewTraces {
                 stage: "evolve",
                 what: format!("{env} traces in the run"),
                 needed: 3,
-                found: traces.len(),
+                found: ids.len(),
                 hint: ": add a simulate or import stage as input",
             });
         }
-        let (train, holdout) = split(traces, seed, self.holdout, self.max_traces);
+        let (train, holdout) = split_ids(
+            ids,
+            HashSplit {
+                seed,
+                salt: 0x401D,
+                aside: self.holdout,
+                max_kept: self.max_traces,
+                max_aside: self.max_traces,
+            },
+        );
         if train.len() < 2 {
             return Err(StageError::TooFewTraces {
                 stage: "evolve",
@@ -664,7 +648,10 @@ impl EvolveStage {
                 hint: ": lower `holdout` or add traces",
             });
         }
-        Ok((train, holdout))
+        Ok((
+            read_traces_by_id(ctx.run(), &train)?,
+            read_traces_by_id(ctx.run(), &holdout)?,
+        ))
     }
 
     /// Writes the grown library (to `output`, default `exports/<stage>/library`) and returns its folder.

@@ -205,13 +205,7 @@ pub(crate) fn pick_trace_ids(
     seed: u64,
     salt: u64,
 ) -> Result<Vec<String>, StageError> {
-    let mut all: Vec<String> = trace_ids(run)?
-        .into_iter()
-        .filter(|(e, _)| *e == env)
-        .map(|(_, id)| id)
-        .collect();
-    all.sort();
-    all.dedup();
+    let mut all = env_trace_ids(run, env)?;
     if let Some(ids) = given {
         if let Some(bad) = ids.iter().find(|i| all.binary_search(i).is_err()) {
             return Err(StageError::Input(format!(
@@ -226,6 +220,51 @@ pub(crate) fn pick_trace_ids(
     }
     all.truncate(count);
     Ok(all)
+}
+
+/// The ids of the run's traces of `env`, sorted, each once (read from the `traces` table alone).
+pub(crate) fn env_trace_ids(run: &RunDir, env: Env) -> Result<Vec<String>, StageError> {
+    let mut all: Vec<String> = trace_ids(run)?
+        .into_iter()
+        .filter(|(e, _)| *e == env)
+        .map(|(_, id)| id)
+        .collect();
+    all.sort();
+    all.dedup();
+    Ok(all)
+}
+
+/// How [`split_ids`] divides a run's traces into kept and set-aside ones.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct HashSplit {
+    /// Seed of the order and of the draw.
+    pub seed: u64,
+    /// Mixed into the seed of the draw (so the draw is not the order).
+    pub salt: u64,
+    /// Share of the traces set aside (0: none).
+    pub aside: f64,
+    /// Kept traces at most.
+    pub max_kept: usize,
+    /// Set-aside traces at most.
+    pub max_aside: usize,
+}
+
+/// Splits `ids` into (kept, set aside): each side ordered by the hash of (seed, id), then by id; an
+/// id is set aside when the hash of (seed ^ salt, id) falls in the first `aside` share of the hash
+/// range; each side is then cut to its maximum. Depends only on the ids, so a stage picks its traces
+/// from the `traces` table and reads only those (`evolve`'s training and held-out traces,
+/// `ensemble`'s calibration and test traces).
+pub(crate) fn split_ids(mut ids: Vec<String>, s: HashSplit) -> (Vec<String>, Vec<String>) {
+    let hash =
+        |seed: u64, id: &str| crate::digest::sha256_u64(&[&seed.to_le_bytes(), id.as_bytes()]);
+    ids.sort_by_cached_key(|id| (hash(s.seed, id), id.clone()));
+    let cut = (s.aside * u64::MAX as f64) as u64;
+    let (mut aside, mut kept): (Vec<String>, Vec<String>) = ids
+        .into_iter()
+        .partition(|id| s.aside > 0.0 && hash(s.seed ^ s.salt, id) < cut);
+    kept.truncate(s.max_kept);
+    aside.truncate(s.max_aside);
+    (kept, aside)
 }
 
 /// Reads the traces `ids` from the run (`store::read_traces`: each row group once for all of them);
@@ -272,5 +311,48 @@ mod tests {
         let ids = StringArray::from(vec!["a"]);
         let t: ArrayRef = Arc::new(arrow::array::Float64Array::from(vec![0.0]));
         assert_eq!(grouped_order(&ids, &[&t]), None);
+    }
+
+    #[test]
+    fn a_split_depends_on_the_ids_alone_and_keeps_each_side_in_hash_order() {
+        let ids: Vec<String> = (0..40).map(|i| format!("t{i:02}")).collect();
+        let s = HashSplit {
+            seed: 7,
+            salt: 0x401D,
+            aside: 0.3,
+            max_kept: 100,
+            max_aside: 100,
+        };
+        let (kept, aside) = split_ids(ids.clone(), s);
+        // Every id once, on one side; the input's order does not matter.
+        let mut all: Vec<String> = kept.iter().chain(&aside).cloned().collect();
+        all.sort();
+        assert_eq!(all, ids);
+        let mut reversed = ids.clone();
+        reversed.reverse();
+        assert_eq!(split_ids(reversed, s), (kept.clone(), aside.clone()));
+        // Each side in the order of the seeded hash.
+        let h = |id: &String| crate::digest::sha256_u64(&[&7u64.to_le_bytes(), id.as_bytes()]);
+        for side in [&kept, &aside] {
+            assert!(side.windows(2).all(|w| h(&w[0]) <= h(&w[1])));
+        }
+        // About the share asked for.
+        assert!((8..=16).contains(&aside.len()), "{} set aside", aside.len());
+        // The cuts take the first of each side; nothing is set aside at 0.
+        let cut = split_ids(
+            ids.clone(),
+            HashSplit {
+                max_kept: 5,
+                max_aside: 2,
+                ..s
+            },
+        );
+        assert_eq!(cut, (kept[..5].to_vec(), aside[..2].to_vec()));
+        let (none_aside, empty) = split_ids(ids.clone(), HashSplit { aside: 0.0, ..s });
+        assert!(empty.is_empty());
+        assert_eq!(none_aside.len(), 40);
+        // Pinned: a changed split would change every evolve and ensemble result.
+        assert_eq!(kept[..3], ["t09", "t02", "t23"]);
+        assert_eq!(aside[..2], ["t01", "t35"]);
     }
 }
