@@ -15,10 +15,11 @@ use std::sync::Arc;
 
 use serde_json::json;
 
+use crate::bench::feedback::Image;
 use crate::detect::Annotation;
 use crate::llm::{ChatRequest, LlmClient, Prompts, strip_think};
 use crate::rng::SplitMix64;
-use crate::trace::Trace;
+use crate::trace::{Env, Trace};
 
 use super::SummaryError;
 use super::images::TraceImages;
@@ -41,21 +42,42 @@ pub struct Choice {
     pub call_id: String,
 }
 
+/// What a chooser reads of a trace in a trial, taken beforehand from the trace and its own
+/// annotations: the `summarise` stage reads traces a block at a time and keeps these, not the traces,
+/// until every summary is written and the trials can start.
+#[derive(Clone, Debug, PartialEq)]
+pub enum TrialView {
+    /// The evidence words of the trace's own annotations (the offline chooser).
+    Evidence(BTreeSet<String>),
+    /// The trace's environment and its keyframes, drawn (the LLM chooser).
+    Keyframes {
+        /// The environment (named in the prompt).
+        env: Env,
+        /// The keyframes, in time order.
+        images: Vec<Image>,
+    },
+}
+
 /// Something that picks the summary of a trace among `options`.
 pub trait Chooser: Sync {
     /// Its name in the `identification` table (`offline`, `llm`).
     fn name(&self) -> &str;
     /// The model behind it (empty offline).
     fn model(&self) -> String;
-    /// The option (0-based) that describes `trace`; `annotations` are the trace's own, `seed` the
-    /// trial's.
-    fn choose(
-        &self,
-        trace: &Trace,
-        annotations: &[Annotation],
-        options: &[&str],
-        seed: u64,
-    ) -> Result<Choice, SummaryError>;
+    /// What [`Chooser::choose`] reads of `trace`, whose own annotations are `annotations`.
+    fn view(&self, trace: &Trace, annotations: &[Annotation]) -> Result<TrialView, SummaryError>;
+    /// The option (0-based) that describes the trace seen as `view`; `seed` is the trial's.
+    fn choose(&self, view: &TrialView, options: &[&str], seed: u64)
+    -> Result<Choice, SummaryError>;
+}
+
+/// The error of a chooser given another chooser's view.
+fn wrong_view(chooser: &str, view: &TrialView) -> SummaryError {
+    let kind = match view {
+        TrialView::Evidence(_) => "evidence words",
+        TrialView::Keyframes { .. } => "keyframes",
+    };
+    SummaryError::Setup(format!("the {chooser} chooser was given {kind}"))
 }
 
 /// Lower-case words of `text`: runs of letters, digits, `.` and `-`, with trailing `.` removed.
@@ -91,15 +113,19 @@ impl Chooser for OfflineChooser {
     fn model(&self) -> String {
         String::new()
     }
+    fn view(&self, trace: &Trace, annotations: &[Annotation]) -> Result<TrialView, SummaryError> {
+        Ok(TrialView::Evidence(evidence(trace, annotations)))
+    }
     fn choose(
         &self,
-        trace: &Trace,
-        annotations: &[Annotation],
+        view: &TrialView,
         options: &[&str],
         seed: u64,
     ) -> Result<Choice, SummaryError> {
         let t0 = std::time::Instant::now();
-        let e = evidence(trace, annotations);
+        let TrialView::Evidence(e) = view else {
+            return Err(wrong_view(self.name(), view));
+        };
         let scores: Vec<f64> = options
             .iter()
             .map(|o| {
@@ -184,24 +210,26 @@ pub struct LlmChooser {
 }
 
 impl LlmChooser {
-    /// The request of one trial.
+    /// The request of one trial on the trace seen as `view` (the keyframes [`Chooser::view`] drew).
     pub fn request(
         &self,
-        trace: &Trace,
+        view: &TrialView,
         options: &[&str],
         seed: u64,
     ) -> Result<ChatRequest, SummaryError> {
-        let images = self.images.keyframes(trace, self.keyframes)?;
+        let TrialView::Keyframes { env, images } = view else {
+            return Err(wrong_view(self.name(), view));
+        };
         let text = self.prompts.render(
             "summary/identify.j2",
             json!({
-                "env": trace.env.as_str(),
+                "env": env.as_str(),
                 "images": images.iter().map(|i| i.caption.clone()).collect::<Vec<_>>(),
                 "options": options,
             }),
         )?;
         Ok(ChatRequest::new("identify")
-            .message(with_images(text, &images))
+            .message(with_images(text, images))
             .seed(seed))
     }
 }
@@ -213,14 +241,19 @@ impl Chooser for LlmChooser {
     fn model(&self) -> String {
         self.client.model().to_string()
     }
+    fn view(&self, trace: &Trace, _annotations: &[Annotation]) -> Result<TrialView, SummaryError> {
+        Ok(TrialView::Keyframes {
+            env: trace.env,
+            images: self.images.keyframes(trace, self.keyframes)?,
+        })
+    }
     fn choose(
         &self,
-        trace: &Trace,
-        _annotations: &[Annotation],
+        view: &TrialView,
         options: &[&str],
         seed: u64,
     ) -> Result<Choice, SummaryError> {
-        let reply = self.client.chat(&self.request(trace, options, seed)?)?;
+        let reply = self.client.chat(&self.request(view, options, seed)?)?;
         let (index, reason) = match parse_choice(&reply.content, options.len()) {
             Ok(i) => (Some(i), None),
             Err(why) => (None, Some(why)),
@@ -280,20 +313,32 @@ mod tests {
             "A cushion rebound of the cue ball at 1.50 s.",
             "Nothing happens.",
         ];
-        let c = OfflineChooser.choose(&t, &anns, &options, 1).unwrap();
+        let view = OfflineChooser.view(&t, &anns).unwrap();
+        let c = OfflineChooser.choose(&view, &options, 1).unwrap();
         assert_eq!(c.index, Some(1));
         // Without annotations every option ties: the seed decides, and different seeds differ.
+        let bare = OfflineChooser.view(&t, &[]).unwrap();
         let picks: BTreeSet<usize> = (0..40)
             .map(|s| {
                 OfflineChooser
-                    .choose(&t, &[], &options, s)
+                    .choose(&bare, &options, s)
                     .unwrap()
                     .index
                     .unwrap()
             })
             .collect();
         assert_eq!(picks.len(), 3, "{picks:?}");
-        let pick = |s| OfflineChooser.choose(&t, &[], &options, s).unwrap().index;
+        let pick = |s| OfflineChooser.choose(&bare, &options, s).unwrap().index;
         assert_eq!(pick(9), pick(9));
+        // Another chooser's view is refused, naming both.
+        let keyframes = TrialView::Keyframes {
+            env: t.env,
+            images: Vec::new(),
+        };
+        let e = OfflineChooser.choose(&keyframes, &options, 1).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "identification: the offline chooser was given keyframes"
+        );
     }
 }

@@ -10,7 +10,7 @@ use crate::digest::words_u64;
 use crate::rng::SplitMix64;
 use crate::trace::Trace;
 
-use super::choose::Chooser;
+use super::choose::{Chooser, TrialView};
 use super::{Summariser, SummaryError};
 
 /// How the task is posed.
@@ -89,11 +89,11 @@ pub fn options_for(n: usize, target: usize, options: usize, seed: u64) -> (Vec<u
     (shown, at)
 }
 
-/// Whether trials over `traces` can be run with `params`: at least 2 options, at least as many traces,
-/// no trace twice.
-pub fn check(traces: &[Trace], params: &IdentifyParams) -> Result<(), SummaryError> {
-    check_sizes(traces, params)?;
-    let mut ids: Vec<&str> = traces.iter().map(|t| t.trace_id.as_str()).collect();
+/// Whether trials over the traces `ids` can be run with `params`: at least 2 options, at least as
+/// many traces, no trace twice.
+pub fn check<S: AsRef<str>>(ids: &[S], params: &IdentifyParams) -> Result<(), SummaryError> {
+    check_sizes(ids.len(), params)?;
+    let mut ids: Vec<&str> = ids.iter().map(AsRef::as_ref).collect();
     ids.sort_unstable();
     if let Some(w) = ids.windows(2).find(|w| w[0] == w[1]) {
         return Err(SummaryError::Setup(format!(
@@ -104,23 +104,25 @@ pub fn check(traces: &[Trace], params: &IdentifyParams) -> Result<(), SummaryErr
     Ok(())
 }
 
-/// [`check`] without the duplicate check (which sorts every trace id).
-fn check_sizes(traces: &[Trace], params: &IdentifyParams) -> Result<(), SummaryError> {
+/// [`check`] without the duplicate check (which sorts every trace id), for `n` traces.
+fn check_sizes(n: usize, params: &IdentifyParams) -> Result<(), SummaryError> {
     if params.options < 2 {
         return Err(SummaryError::Setup(format!(
             "options must be at least 2, found {}",
             params.options
         )));
     }
-    if traces.len() < params.options {
+    if n < params.options {
         return Err(SummaryError::Setup(format!(
-            "{} trace(s) cannot give {} different summaries per trial; give at least {} traces",
-            traces.len(),
-            params.options,
-            params.options
+            "{n} trace(s) cannot give {} different summaries per trial; give at least {} traces",
+            params.options, params.options
         )));
     }
     Ok(())
+}
+
+fn ids_of(traces: &[Trace]) -> Vec<&str> {
+    traces.iter().map(|t| t.trace_id.as_str()).collect()
 }
 
 /// The trials over `traces` whose summaries are `summaries` (same order), with `chooser`.
@@ -143,7 +145,8 @@ fn identify_grouped(
     chooser: &dyn Chooser,
     params: &IdentifyParams,
 ) -> Result<Identification, SummaryError> {
-    check(traces, params)?;
+    let ids = ids_of(traces);
+    check(&ids, params)?;
     if summaries.len() != traces.len() {
         return Err(SummaryError::Setup(format!(
             "{} summaries for {} traces",
@@ -151,43 +154,44 @@ fn identify_grouped(
             traces.len()
         )));
     }
-    let trials = (0..traces.len())
-        .map(|i| trial(traces, &own[i], summaries, chooser, params, i))
+    let trials = traces
+        .iter()
+        .zip(own)
+        .enumerate()
+        .map(|(i, (t, own))| {
+            let view = chooser.view(t, own)?;
+            trial(&ids, &view, summaries, chooser, params, i)
+        })
         .collect::<Result<Vec<_>, _>>()?;
     Ok(score(trials, params.options))
 }
 
-/// Trial `i` of [`identify`] alone (the `summarise` stage runs trials one by one so that it can resume);
-/// `own` are the annotations of `traces[i]` (the chooser reads no other trace's). It does not look for
-/// a trace given twice: call [`check`] once before the trials.
-pub fn trial(
-    traces: &[Trace],
-    own: &[Annotation],
+/// Trial `i` of [`identify`] alone, over the traces `ids` (the `summarise` stage runs trials one by
+/// one so that it can resume, and holds the chooser's views rather than the traces); `view` is what
+/// `chooser` took of trace `ids[i]` ([`Chooser::view`]). It does not look for a trace given twice:
+/// call [`check`] once before the trials.
+pub fn trial<S: AsRef<str>>(
+    ids: &[S],
+    view: &TrialView,
     summaries: &[String],
     chooser: &dyn Chooser,
     params: &IdentifyParams,
     i: usize,
 ) -> Result<Trial, SummaryError> {
-    check_sizes(traces, params)?;
-    if summaries.len() != traces.len() || i >= traces.len() {
+    check_sizes(ids.len(), params)?;
+    if summaries.len() != ids.len() || i >= ids.len() {
         return Err(SummaryError::Setup(format!(
             "trial {i} of {} traces with {} summaries",
-            traces.len(),
+            ids.len(),
             summaries.len()
         )));
     }
-    let trace = &traces[i];
-    let (shown, correct) = options_for(traces.len(), i, params.options, params.seed);
+    let (shown, correct) = options_for(ids.len(), i, params.options, params.seed);
     let texts: Vec<&str> = shown.iter().map(|&k| summaries[k].as_str()).collect();
-    let choice = chooser.choose(
-        trace,
-        own,
-        &texts,
-        words_u64(&[params.seed, i as u64, 0x2D]),
-    )?;
+    let choice = chooser.choose(view, &texts, words_u64(&[params.seed, i as u64, 0x2D]))?;
     Ok(Trial {
-        trace_id: trace.trace_id.clone(),
-        shown: shown.iter().map(|&k| traces[k].trace_id.clone()).collect(),
+        trace_id: ids[i].as_ref().to_string(),
+        shown: shown.iter().map(|&k| ids[k].as_ref().to_string()).collect(),
         correct,
         chosen: choice.index,
         reason: choice.reason,
@@ -217,7 +221,7 @@ pub fn identification_accuracy(
     chooser: &dyn Chooser,
     params: &IdentifyParams,
 ) -> Result<Identification, SummaryError> {
-    check(traces, params)?;
+    check(&ids_of(traces), params)?;
     let own = crate::detect::by_trace(traces, annotations.iter().cloned());
     let summaries = traces
         .iter()

@@ -36,7 +36,7 @@ mod objective;
 mod offline;
 pub mod table;
 
-pub use self::choose::{Choice, Chooser, LlmChooser, OfflineChooser, parse_choice};
+pub use self::choose::{Choice, Chooser, LlmChooser, OfflineChooser, TrialView, parse_choice};
 pub use self::error::SummaryError;
 pub use self::identify::{
     Identification, IdentifyParams, Trial, check as check_trials, identification_accuracy,

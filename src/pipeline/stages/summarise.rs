@@ -3,10 +3,13 @@
 //!
 //! The summariser is `offline` (deterministic, from the annotations, no model), `frames` (an LLM shown
 //! keyframes only: the baseline) or `annotations` (an LLM shown the initial image and the annotated
-//! trace: the paper's). Identification is part of this stage rather than a stage of its own because a
-//! trial needs the summaries of all sampled traces together with the traces and their annotations,
-//! which the stage already holds; a separate stage would read them back and annotate again. `identify`
-//! picks the chooser: `offline` (the annotation-overlap baseline), `llm` (keyframes as images), `none`.
+//! trace: the paper's). `identify` picks the chooser: `offline` (the annotation-overlap baseline),
+//! `llm` (keyframes as images), `none`. Identification is part of this stage rather than a stage of
+//! its own because a trial needs the summaries of all sampled traces together with its own trace and
+//! annotations: the stage reads and annotates a block of 256 traces at a time, summarises them, and
+//! keeps of each trace only its summary and what its trial needs (the chooser's [`TrialView`]:
+//! evidence words offline, the drawn keyframes with a model), so the sample is never in memory at
+//! once; a separate stage would read the traces back and annotate them again.
 //!
 //! With a model, one shard per summary and one per trial: a killed run, or an endpoint that went
 //! down, resumes at the first unfinished one, and the LLM client serves the answers this run already
@@ -32,9 +35,9 @@ use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
 use crate::summary::table::{self, Setting, SummaryRow};
 use crate::summary::{
     Chooser, IdentifyParams, LlmChooser, LlmMode, LlmSummariser, OfflineChooser, OfflineSummariser,
-    Summariser, Summary, SummaryError, TraceImages, add_templates,
+    Summariser, Summary, SummaryError, TraceImages, TrialView, add_templates,
 };
-use crate::trace::{Env, Trace};
+use crate::trace::Env;
 
 /// Who writes the summaries.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
@@ -406,8 +409,8 @@ impl SummariseStage {
         self.p.seed.unwrap_or(ctx.seed())
     }
 
-    /// The traces: the given ids, or a seeded sample of the run's traces of `env` (sorted by id).
-    fn traces(&self, ctx: &StageContext<'_>) -> Result<Vec<Trace>, StageError> {
+    /// The ids of the traces: the given ones, or a seeded sample of the run's traces of `env` (sorted).
+    fn trace_ids(&self, ctx: &StageContext<'_>) -> Result<Vec<String>, StageError> {
         let mut ids = pick_trace_ids(
             ctx.run(),
             self.p.env,
@@ -433,7 +436,7 @@ impl SummariseStage {
                 hint: ": simulate or import more, or lower `options`",
             });
         }
-        read_traces_by_id(ctx.run(), &ids)
+        Ok(ids)
     }
 
     fn model(&self, ctx: &StageContext<'_>) -> Result<Option<Model>, StageError> {
@@ -465,6 +468,11 @@ fn shard_block(offline: bool) -> usize {
 
 /// Traces per shard of the offline summariser and chooser.
 const OFFLINE_BLOCK: usize = 64;
+
+/// Traces read (and annotated) at a time: a whole number of shards of either size, so that the
+/// stage holds a block's traces, not the sample's (the bench's billiards shots take 1.6 MB each),
+/// and keeps of each trace only its summary and what its trial needs ([`TrialView`]).
+const READ_BLOCK: usize = 4 * OFFLINE_BLOCK;
 
 /// The per-trace records of the finished shard `shard`, which covers `n` traces (a shard of one
 /// trace written by an earlier version holds its record alone).
@@ -525,23 +533,15 @@ impl Stage for SummariseStage {
             });
         }
         let seed = self.seed(ctx);
-        let traces = self.traces(ctx)?;
+        let ids = self.trace_ids(ctx)?;
         let params = IdentifyParams {
             options: self.p.options as usize,
             seed,
         };
         if chooser_kind != ChooserKind::None {
             // Before any work: a trace given twice, or fewer traces than options, cannot make trials.
-            crate::summary::check_trials(&traces, &params).map_err(summary_error)?;
+            crate::summary::check_trials(&ids, &params).map_err(summary_error)?;
         }
-        // Each trace's own annotations (summaries and trials read one trace's at a time).
-        let annotations: Vec<Vec<Annotation>> = match &self.setup {
-            Some(s) => crate::detect::by_trace(
-                &traces,
-                crate::reward::annotate::annotate(&s.pool()?, &self.detectors, &traces).0,
-            ),
-            None => traces.iter().map(|_| Vec::new()).collect(),
-        };
         let model = self.model(ctx)?;
         let summariser: Box<dyn Summariser> = match (self.p.summariser, &model) {
             (SummariserKind::Offline, _) => Box::new(OfflineSummariser),
@@ -559,6 +559,17 @@ impl Stage for SummariseStage {
                 seed,
             }),
             (_, None) => return Err(StageError::Internal("no LLM client".into())),
+        };
+        let chooser: Option<Box<dyn Chooser>> = match (chooser_kind, &model) {
+            (ChooserKind::None, _) => None,
+            (ChooserKind::Offline, _) => Some(Box::new(OfflineChooser)),
+            (ChooserKind::Llm, Some(m)) => Some(Box::new(LlmChooser {
+                client: m.client.clone(),
+                prompts: m.prompts.clone(),
+                images: m.images.clone(),
+                keyframes: self.p.keyframes as usize,
+            })),
+            (ChooserKind::Llm, None) => return Err(StageError::Internal("no LLM client".into())),
         };
         let reads_annotations = self.p.summariser != SummariserKind::Frames;
         let setting = Setting {
@@ -581,99 +592,139 @@ impl Stage for SummariseStage {
             }
             Ok(())
         };
-        let trials = if chooser_kind == ChooserKind::None {
-            0
-        } else {
-            traces.len() as u64
+        let failed = |e: SummaryError| -> StageError {
+            match flush() {
+                Ok(()) => summary_error(e),
+                Err(f) => f,
+            }
         };
-        ctx.progress()
-            .set_total(ctx.stage_id(), traces.len() as u64 + trials);
-        // Summaries, a block of traces per shard.
-        let block = shard_block(self.p.summariser == SummariserKind::Offline);
-        let mut summaries = Vec::with_capacity(traces.len());
+        let n = ids.len();
+        let trials = if chooser.is_some() { n as u64 } else { 0 };
+        ctx.progress().set_total(ctx.stage_id(), n as u64 + trials);
+        // Summaries, and what each trial will need of its trace, a block of traces read at a time.
+        let summary_block = shard_block(self.p.summariser == SummariserKind::Offline);
+        let trial_block = shard_block(chooser_kind == ChooserKind::Offline);
+        let mut pool = None;
+        let mut summaries = Vec::with_capacity(n);
+        let mut views: Vec<Option<TrialView>> = vec![None; n];
         let mut now = 0u64;
-        for start in (0..traces.len()).step_by(block) {
-            let end = (start + block).min(traces.len());
-            let shard = format!("s{start:05}");
-            let records = match ctx.finished_shard(&shard)? {
-                Some(r) => shard_records(&shard, r, end - start)?,
-                None => {
-                    let mut rows = Vec::with_capacity(end - start);
-                    let mut records = Vec::with_capacity(end - start);
-                    for (trace, own) in traces[start..end].iter().zip(&annotations[start..end]) {
-                        let s = match summariser.summarise(trace, own) {
-                            Ok(s) => s,
-                            Err(e) => {
-                                flush()?;
-                                return Err(summary_error(e));
-                            }
-                        };
-                        records.push(json!({
-                            "trace": trace.trace_id, "text": s.text, "prompt_tokens": s.tokens_in,
-                            "completion_tokens": s.tokens_out, "usage_estimated": s.usage_estimated,
-                            "seconds": s.seconds, "images": s.images, "call_id": s.call_id,
-                        }));
-                        rows.push(SummaryRow {
-                            trace_id: trace.trace_id.clone(),
-                            summary: s,
-                        });
+        for start in (0..n).step_by(READ_BLOCK) {
+            let end = (start + READ_BLOCK).min(n);
+            // The shards of this block an earlier, interrupted run finished.
+            let mut summary_shards = Vec::new();
+            for at in (start..end).step_by(summary_block) {
+                let to = (at + summary_block).min(end);
+                let shard = format!("s{at:05}");
+                let done = match ctx.finished_shard(&shard)? {
+                    Some(r) => Some(shard_records(&shard, r, to - at)?),
+                    None => None,
+                };
+                summary_shards.push((at, to, shard, done));
+            }
+            let mut open_trials = Vec::new();
+            if chooser.is_some() {
+                for at in (start..end).step_by(trial_block) {
+                    if ctx.finished_shard(&format!("i{at:05}"))?.is_none() {
+                        open_trials.extend(at..(at + trial_block).min(end));
                     }
-                    ctx.write_batch(
-                        table::SUMMARIES,
-                        env,
-                        &shard,
-                        &table::summaries_batch(&setting, &rows)?,
-                    )?;
-                    flush()?;
-                    ctx.finish_shard(&shard, &Value::Array(records.clone()))?;
-                    now += rows.len() as u64;
-                    records
                 }
+            }
+            let summarise_now = summary_shards.iter().any(|s| s.3.is_none());
+            let (traces, annotations) = if summarise_now || !open_trials.is_empty() {
+                let traces = read_traces_by_id(ctx.run(), &ids[start..end])?;
+                // Each trace's own annotations (summaries and trials read one trace's at a time).
+                let annotations: Vec<Vec<Annotation>> = match &self.setup {
+                    Some(s) => {
+                        let pool = match &mut pool {
+                            Some(p) => p,
+                            None => pool.insert(s.pool()?),
+                        };
+                        crate::detect::by_trace(
+                            &traces,
+                            crate::reward::annotate::annotate(pool, &self.detectors, &traces).0,
+                        )
+                    }
+                    None => traces.iter().map(|_| Vec::new()).collect(),
+                };
+                (traces, annotations)
+            } else {
+                (Vec::new(), Vec::new())
             };
-            summaries.extend(records.iter().map(summary_of));
-            ctx.progress().advance(ctx.stage_id(), (end - start) as u64);
+            for (at, to, shard, done) in summary_shards {
+                let records = match done {
+                    Some(r) => r,
+                    None => {
+                        let mut rows = Vec::with_capacity(to - at);
+                        let mut records = Vec::with_capacity(to - at);
+                        for k in at - start..to - start {
+                            let trace = &traces[k];
+                            let s = summariser
+                                .summarise(trace, &annotations[k])
+                                .map_err(failed)?;
+                            records.push(json!({
+                                "trace": trace.trace_id, "text": s.text, "prompt_tokens": s.tokens_in,
+                                "completion_tokens": s.tokens_out, "usage_estimated": s.usage_estimated,
+                                "seconds": s.seconds, "images": s.images, "call_id": s.call_id,
+                            }));
+                            rows.push(SummaryRow {
+                                trace_id: trace.trace_id.clone(),
+                                summary: s,
+                            });
+                        }
+                        ctx.write_batch(
+                            table::SUMMARIES,
+                            env,
+                            &shard,
+                            &table::summaries_batch(&setting, &rows)?,
+                        )?;
+                        flush()?;
+                        ctx.finish_shard(&shard, &Value::Array(records.clone()))?;
+                        now += rows.len() as u64;
+                        records
+                    }
+                };
+                summaries.extend(records.iter().map(summary_of));
+                ctx.progress().advance(ctx.stage_id(), (to - at) as u64);
+            }
+            if let Some(chooser) = &chooser {
+                for i in open_trials {
+                    let k = i - start;
+                    views[i] = Some(chooser.view(&traces[k], &annotations[k]).map_err(failed)?);
+                }
+            }
         }
+        drop(pool);
         // The identification task, a block of trials per shard.
-        let chooser: Option<Box<dyn Chooser>> = match (chooser_kind, &model) {
-            (ChooserKind::None, _) => None,
-            (ChooserKind::Offline, _) => Some(Box::new(OfflineChooser)),
-            (ChooserKind::Llm, Some(m)) => Some(Box::new(LlmChooser {
-                client: m.client.clone(),
-                prompts: m.prompts.clone(),
-                images: m.images.clone(),
-                keyframes: self.p.keyframes as usize,
-            })),
-            (ChooserKind::Llm, None) => return Err(StageError::Internal("no LLM client".into())),
-        };
         let (mut accuracy, mut chance) = (None, None);
         let mut rows = std::collections::BTreeMap::new();
-        rows.insert(table::SUMMARIES.to_string(), traces.len() as u64);
+        rows.insert(table::SUMMARIES.to_string(), n as u64);
         if let Some(chooser) = &chooser {
             let texts: Vec<String> = summaries.iter().map(|s| s.text.clone()).collect();
-            let block = shard_block(chooser_kind == ChooserKind::Offline);
             let mut right = 0u64;
-            for start in (0..traces.len()).step_by(block) {
-                let end = (start + block).min(traces.len());
+            for start in (0..n).step_by(trial_block) {
+                let end = (start + trial_block).min(n);
                 let shard = format!("i{start:05}");
                 let records = match ctx.finished_shard(&shard)? {
                     Some(r) => shard_records(&shard, r, end - start)?,
                     None => {
                         let mut trials = Vec::with_capacity(end - start);
-                        for (i, own) in annotations.iter().enumerate().take(end).skip(start) {
-                            match crate::summary::identify_trial(
-                                &traces,
-                                own,
-                                &texts,
-                                chooser.as_ref(),
-                                &params,
-                                i,
-                            ) {
-                                Ok(t) => trials.push(t),
-                                Err(e) => {
-                                    flush()?;
-                                    return Err(summary_error(e));
-                                }
-                            }
+                        for (i, view) in views.iter_mut().enumerate().take(end).skip(start) {
+                            let view = view.take().ok_or_else(|| {
+                                StageError::Internal(format!(
+                                    "trial {i} has no view of its trace: its shard {shard} was finished while the stage ran"
+                                ))
+                            })?;
+                            trials.push(
+                                crate::summary::identify_trial(
+                                    &ids,
+                                    &view,
+                                    &texts,
+                                    chooser.as_ref(),
+                                    &params,
+                                    i,
+                                )
+                                .map_err(failed)?,
+                            );
                         }
                         ctx.write_batch(
                             table::IDENTIFICATION,
@@ -700,9 +751,9 @@ impl Stage for SummariseStage {
                     .count() as u64;
                 ctx.progress().advance(ctx.stage_id(), (end - start) as u64);
             }
-            accuracy = Some(right as f64 / traces.len().max(1) as f64);
+            accuracy = Some(right as f64 / n.max(1) as f64);
             chance = Some(1.0 / self.p.options as f64);
-            rows.insert(table::IDENTIFICATION.to_string(), traces.len() as u64);
+            rows.insert(table::IDENTIFICATION.to_string(), n as u64);
         }
         flush()?;
         let n = summaries.len().max(1) as f64;
@@ -712,7 +763,7 @@ impl Stage for SummariseStage {
             model: setting.model.clone(),
             library: setting.library.clone(),
             patterns: setting.patterns as u64,
-            traces: traces.len() as u64,
+            traces: n as u64,
             summarised_now: now,
             mean_seconds: summaries.iter().map(|s| s.seconds).sum::<f64>() / n,
             mean_prompt_tokens: summaries.iter().map(|s| s.tokens_in as f64).sum::<f64>() / n,
