@@ -200,6 +200,16 @@ pub fn read_annotations(
     env: Env,
     trace: Option<&str>,
 ) -> Result<Vec<Annotation>, StoreError> {
+    read_annotations_where(run, env, |id| trace.is_none_or(|t| t == id))
+}
+
+/// The annotations of the run's traces of `env` whose trace id `keep` accepts, in file order (only
+/// those rows are decoded).
+pub fn read_annotations_where(
+    run: &crate::store::RunDir,
+    env: Env,
+    keep: impl Fn(&str) -> bool,
+) -> Result<Vec<Annotation>, StoreError> {
     use arrow::array::{Array, AsArray};
     use arrow::datatypes::{Float64Type, Int32Type, Int64Type};
     let mut out = Vec::new();
@@ -243,7 +253,7 @@ pub fn read_annotations(
                     .then(|| serde_json::from_str(a.value(i)).unwrap_or(serde_json::Value::Null))
             };
             for i in 0..b.num_rows() {
-                if trace.is_some_and(|t| t != tr.value(i)) {
+                if !keep(tr.value(i)) {
                     continue;
                 }
                 let objs = objects.value(i);

@@ -354,3 +354,53 @@ fn a_run_without_traces_is_refused_and_leaves_no_report() {
         .code(2)
         .stderr_has("no such run folder");
 }
+
+#[test]
+fn the_trace_filters_pick_in_the_sets_order_and_show_what_the_full_report_shows() {
+    let t = TestRun::new();
+    // Two simulate stages: two trace file sets.
+    for (scenes, seed) in [("3", "3"), ("2", "4")] {
+        t.run(&[
+            "simulate", "--scenes", scenes, "--seed", seed, "--dt", "0.05", "--run", "r", "-q",
+        ])
+        .ok();
+    }
+    t.run(&["annotate", "--run", "r", "-q"]).ok();
+    t.run(&["report", "--run", "r", "--out", "all"]).ok();
+    let all = index(&t.path("all"));
+    let rows = all["traces"].as_array().unwrap();
+    assert_eq!(rows.len(), 5);
+    let id = |row: &Value| row["trace_id"].as_str().unwrap().to_string();
+    // The payload of a trace in a report, with its position in that report left out.
+    let shown = |site: &str, trace: &str| {
+        let idx = index(&t.path(site));
+        let row = idx["traces"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["trace_id"] == trace)
+            .unwrap_or_else(|| panic!("{trace} is not in {site}"))
+            .clone();
+        let mut row = row.as_object().unwrap().clone();
+        let n = row.remove("index").unwrap().as_u64().unwrap();
+        let mut p = payload(&t.path(site), n);
+        assert_eq!(p.as_object_mut().unwrap().remove("index"), Some(n.into()));
+        (Value::Object(row), p)
+    };
+    // A rerun of the stage replaces its earlier output, so each report is read before the next.
+    let (second, last) = (id(&rows[1]), id(&rows[4]));
+    let (all_second, all_last) = (shown("all", &second), shown("all", &last));
+    // The first two, in the order of the sets and of their `traces` files.
+    t.run(&["report", "--run", "r", "--out", "two", "--max-traces", "2"])
+        .ok()
+        .stdout_has("report of 2 trace(s)");
+    let two = index(&t.path("two"));
+    let two: Vec<String> = two["traces"].as_array().unwrap().iter().map(id).collect();
+    assert_eq!(two, [id(&rows[0]), second.clone()]);
+    assert_eq!(shown("two", &second), all_second);
+    // One trace by id, the last of the full report: the same row and payload (annotations, text).
+    t.run(&["report", "--run", "r", "--out", "one", "--trace", &last])
+        .ok()
+        .stdout_has("report of 1 trace(s)");
+    assert_eq!(shown("one", &last), all_last);
+}

@@ -2,13 +2,15 @@
 //! player with its pattern timeline, and each trace's annotated text, in a folder that opens from the
 //! file system.
 //!
-//! The stage reads every trace file set of the run (`trace_files`), the annotations of each environment
-//! (grouped into libraries through the `detectors` table; a detector in several libraries counts for
-//! each, duplicate rows once), and, for environments with an `accuracy` table, the simulator's ground
-//! truth of each scorable trace (`detect::accuracy::truth`). The text is `detect::annotated_text` of
-//! all the trace's annotations in file order, exactly what `annotrace show` prints.
+//! The stage picks the traces shown from each trace file set's `traces` file alone (`trace_files`;
+//! the `traces` and `max_traces` filters), then reads whole only the sets that hold one of them, and
+//! only their annotations (grouped into libraries through the `detectors` table; a detector in several
+//! libraries counts for each, duplicate rows once), and, for environments with an `accuracy` table,
+//! the simulator's ground truth of each scorable trace (`detect::accuracy::truth`). The text is
+//! `detect::annotated_text` of all the trace's annotations in file order, exactly what `annotrace
+//! show` prints.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use std::path::PathBuf;
 
 use arrow::array::{Array, AsArray};
@@ -16,9 +18,9 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
-use super::trace_files::{read_traces, trace_file_sets};
+use super::trace_files::{read_traces, set_trace_ids, trace_file_sets};
 use crate::detect::accuracy::{scorable, truth};
-use crate::detect::tables::read_annotations;
+use crate::detect::tables::read_annotations_where;
 use crate::detect::{Annotation, annotated_text, count_tokens};
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
@@ -212,30 +214,51 @@ impl Stage for ReportStage {
             sets.extend(trace_file_sets(run, env)?);
         }
         ctx.progress().set_total(stage, sets.len() as u64);
-        let mut writer = SiteWriter::create(&folder)?;
+        // The traces shown, chosen from each set's `traces` file alone (in set order, after the
+        // `traces` and `max_traces` filters), so that only sets holding one are read whole and only
+        // their annotations are read.
         let mut counts: BTreeMap<String, u64> = BTreeMap::new();
+        let mut picked: Vec<HashSet<String>> = Vec::with_capacity(sets.len());
+        let mut wanted: HashMap<Env, HashSet<String>> = HashMap::new();
+        for set in &sets {
+            let mut keep = HashSet::new();
+            for id in set_trace_ids(run, set)? {
+                if !self.traces.is_empty() && !self.traces.contains(&id) {
+                    continue;
+                }
+                let n = counts.entry(set.env.as_str().to_string()).or_default();
+                if self.max_traces.is_some_and(|m| *n >= m) {
+                    continue;
+                }
+                *n += 1;
+                wanted.entry(set.env).or_default().insert(id.clone());
+                keep.insert(id);
+            }
+            picked.push(keep);
+        }
+        let mut writer = SiteWriter::create(&folder)?;
         let mut all_libraries: BTreeSet<String> = BTreeSet::new();
         let mut truth_envs: BTreeSet<String> = BTreeSet::new();
         let mut annotations: HashMap<Env, HashMap<String, Vec<Annotation>>> = HashMap::new();
-        for set in &sets {
+        for (set, keep) in sets.iter().zip(&picked) {
             let env = set.env;
+            if keep.is_empty() {
+                ctx.progress().advance(stage, 1);
+                continue;
+            }
             if let std::collections::hash_map::Entry::Vacant(slot) = annotations.entry(env) {
                 let mut per: HashMap<String, Vec<Annotation>> = HashMap::new();
-                for a in read_annotations(run, env, None)? {
+                let of_env = &wanted[&env];
+                for a in read_annotations_where(run, env, |id| of_env.contains(id))? {
                     per.entry(a.trace_id.clone()).or_default().push(a);
                 }
                 slot.insert(per);
             }
             let with_truth = accuracy.files.iter().any(|f| f.env == Some(env));
             for trace in read_traces(run, set)? {
-                if !self.traces.is_empty() && !self.traces.contains(&trace.trace_id) {
+                if !keep.contains(&trace.trace_id) {
                     continue;
                 }
-                let n = counts.entry(env.as_str().to_string()).or_default();
-                if self.max_traces.is_some_and(|m| *n >= m) {
-                    continue;
-                }
-                *n += 1;
                 let anns: Vec<Annotation> = annotations
                     .get(&env)
                     .and_then(|m| m.get(&trace.trace_id))

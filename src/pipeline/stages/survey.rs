@@ -19,7 +19,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
-use super::trace_files::{read_traces, trace_file_sets};
+use super::trace_files::{env_trace_ids, read_traces_by_id};
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
@@ -408,6 +408,9 @@ impl SurveyStage {
     }
 }
 
+/// Items whose traces are read from the run at once.
+const ITEMS_READ_AT_ONCE: usize = 64;
+
 impl Stage for SurveyStage {
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
         let run = ctx.run();
@@ -429,39 +432,50 @@ impl Stage for SurveyStage {
             Videos::new(self.video).map_err(|e| StageError::Internal(e.to_string()))?;
         let mut counts: BTreeMap<String, u64> = BTreeMap::new();
         let (mut media_bytes, mut frames) = (0u64, 0u64);
-        // Traces are read file by file; each item's animation is written when its trace comes by.
-        let mut want: BTreeMap<(String, String), usize> = BTreeMap::new();
-        for (k, it) in survey.items.iter().enumerate() {
-            want.insert((it.env.clone(), it.trace_id.clone()), k);
-        }
-        let envs: BTreeSet<Env> = survey
-            .items
-            .iter()
-            .filter_map(|i| i.env.parse::<Env>().ok())
-            .collect();
-        let mut done = 0usize;
-        for env in envs {
-            for set in trace_file_sets(run, env)? {
-                for trace in read_traces(run, &set)? {
-                    let Some(k) = want.remove(&(env.as_str().to_string(), trace.trace_id.clone()))
-                    else {
-                        continue;
-                    };
-                    let anim = videos.animation(&trace)?;
-                    frames += anim.frames.len() as u64;
-                    let bytes = anim.encode().map_err(SurveyError::from)?;
-                    media_bytes += bytes.len() as u64;
-                    writer.add_video(k, &bytes)?;
-                    *counts.entry(env.as_str().to_string()).or_default() += 1;
-                    done += 1;
-                    ctx.progress().advance(stage, 1);
+        // Every item's trace must be in the run (checked before any animation is drawn).
+        let mut known: BTreeMap<String, Vec<String>> = BTreeMap::new();
+        for it in &survey.items {
+            let ids = match known.entry(it.env.clone()) {
+                std::collections::btree_map::Entry::Occupied(o) => o.into_mut(),
+                std::collections::btree_map::Entry::Vacant(v) => {
+                    v.insert(match it.env.parse::<Env>() {
+                        Ok(env) => env_trace_ids(run, env)?,
+                        Err(_) => Vec::new(),
+                    })
                 }
+            };
+            if ids.binary_search(&it.trace_id).is_err() {
+                return Err(StageError::Input(format!(
+                    "survey: trace {} ({}) has summaries but is not in the run's trace tables",
+                    it.trace_id, it.env
+                )));
             }
         }
-        if let Some(((env, id), _)) = want.into_iter().next() {
-            return Err(StageError::Input(format!(
-                "survey: trace {id} ({env}) has summaries but is not in the run's trace tables"
-            )));
+        // The items' traces, read by id a block at a time (the run's other traces are not read); each
+        // item's animation is written as its trace is read, in the items' order.
+        let mut done = 0usize;
+        for (block, start) in survey
+            .items
+            .chunks(ITEMS_READ_AT_ONCE)
+            .zip((0..).step_by(ITEMS_READ_AT_ONCE))
+        {
+            let ids: Vec<String> = block.iter().map(|i| i.trace_id.clone()).collect();
+            for (k, (it, trace)) in block.iter().zip(read_traces_by_id(run, &ids)?).enumerate() {
+                if trace.env.as_str() != it.env {
+                    return Err(StageError::Input(format!(
+                        "survey: trace {} is a trace of {} in the run's trace tables, not of {}",
+                        it.trace_id, trace.env, it.env
+                    )));
+                }
+                let anim = videos.animation(&trace)?;
+                frames += anim.frames.len() as u64;
+                let bytes = anim.encode().map_err(SurveyError::from)?;
+                media_bytes += bytes.len() as u64;
+                writer.add_video(start + k, &bytes)?;
+                *counts.entry(it.env.clone()).or_default() += 1;
+                done += 1;
+                ctx.progress().advance(stage, 1);
+            }
         }
         debug_assert_eq!(done, survey.items.len());
         let batch = survey.items_batch()?;

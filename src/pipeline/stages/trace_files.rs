@@ -156,6 +156,25 @@ fn ranges(ids: &StringArray) -> std::collections::HashMap<String, (usize, usize)
     out
 }
 
+/// The trace ids of a file set, in the order of its `traces` file (only that file is read).
+pub(crate) fn set_trace_ids(run: &RunDir, set: &TraceFileSet) -> Result<Vec<String>, StageError> {
+    let path = run.partition_dir("traces", Some(set.env)).join(&set.name);
+    let mut out = Vec::new();
+    for b in read_file_whole(&path)? {
+        let ids = b
+            .column_by_name("trace_id")
+            .and_then(|c| c.as_any().downcast_ref::<StringArray>())
+            .ok_or_else(|| {
+                StageError::Internal(format!(
+                    "{}: trace_id is not a string column",
+                    path.display()
+                ))
+            })?;
+        out.extend(ids.iter().map(|id| id.unwrap_or_default().to_string()));
+    }
+    Ok(out)
+}
+
 /// Reads every trace of a file set, in the order of the `traces` file.
 pub(crate) fn read_traces(run: &RunDir, set: &TraceFileSet) -> Result<Vec<Trace>, StageError> {
     let schema = table_schema("traces")
