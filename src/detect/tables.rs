@@ -194,6 +194,36 @@ pub fn annotations_batch(rows: &[Annotation]) -> Result<RecordBatch, ArrowError>
     )
 }
 
+/// The trace of the first `annotations` row of `env` in the run, in file order (`None` when there is
+/// none); only up to the first non-empty batch is read.
+pub fn first_annotated_trace(
+    run: &crate::store::RunDir,
+    env: Env,
+) -> Result<Option<String>, StoreError> {
+    use arrow::array::{Array, AsArray};
+    for f in run.table("annotations")?.files {
+        if f.env != Some(env) {
+            continue;
+        }
+        for b in crate::store::read_file(&f.path)? {
+            if b.num_rows() == 0 {
+                continue;
+            }
+            let ids = b
+                .column_by_name("trace_id")
+                .ok_or_else(|| StoreError::Schema {
+                    path: f.path.clone(),
+                    message: "no column trace_id".into(),
+                })?;
+            let ids = ids.as_string::<i32>();
+            if ids.is_valid(0) {
+                return Ok(Some(ids.value(0).to_string()));
+            }
+        }
+    }
+    Ok(None)
+}
+
 /// Reads the `annotations` rows of `env` in the run (of one trace when `trace` is given), in file order.
 pub fn read_annotations(
     run: &crate::store::RunDir,

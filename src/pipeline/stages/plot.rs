@@ -10,7 +10,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
-use crate::detect::tables::read_annotations;
+use crate::detect::tables::{first_annotated_trace, read_annotations};
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
@@ -154,8 +154,8 @@ impl PlotStage {
     /// The first trace of the run with annotations, in file order.
     fn first_annotated(&self, ctx: &StageContext<'_>) -> Result<String, StageError> {
         for env in Env::ALL {
-            if let Some(a) = read_annotations(ctx.run(), env, None)?.into_iter().next() {
-                return Ok(a.trace_id);
+            if let Some(id) = first_annotated_trace(ctx.run(), env)? {
+                return Ok(id);
             }
         }
         Err(StageError::Input(
