@@ -56,8 +56,8 @@ pub use self::parquet::{
     Codec, ParquetSettings, ParquetSink, ROW_GROUP_ROWS, Stats, read_batches, read_file,
     read_file_whole,
 };
-pub(crate) use self::traces::key_order;
 pub use self::traces::{ReadTraceError, read_trace, read_traces, trace_ids};
+pub(crate) use self::traces::{file_trace_ids, key_order};
 pub use self::verify::Problem;
 use crate::trace::Env;
 

@@ -368,6 +368,16 @@ pub fn read_traces<S: AsRef<str>>(run: &RunDir, ids: &[S]) -> Result<Vec<Trace>,
     Ok(out)
 }
 
+/// The trace ids of one `traces` file, in its row order (a null id reads as empty).
+pub(crate) fn file_trace_ids(file: &Path) -> Result<Vec<String>, StoreError> {
+    let mut out = Vec::new();
+    for b in super::read_file(file)? {
+        let ids = plain_ids(file, &b)?;
+        out.extend(ids.iter().map(|id| id.unwrap_or_default().to_string()));
+    }
+    Ok(out)
+}
+
 /// The ids of every trace in the run, with their environment, sorted.
 pub fn trace_ids(run: &RunDir) -> Result<Vec<(Env, String)>, StoreError> {
     let mut out = Vec::new();

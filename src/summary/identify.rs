@@ -133,11 +133,13 @@ pub fn identify(
     chooser: &dyn Chooser,
     params: &IdentifyParams,
 ) -> Result<Identification, SummaryError> {
+    check(&ids_of(traces), params)?;
     let own = crate::detect::by_trace(traces, annotations.iter().cloned());
     identify_grouped(traces, &own, summaries, chooser, params)
 }
 
-/// [`identify`] with each trace's own annotations (`own[i]` those of `traces[i]`).
+/// [`identify`] with each trace's own annotations (`own[i]` those of `traces[i]`), once [`check`]
+/// has passed.
 fn identify_grouped(
     traces: &[Trace],
     own: &[Vec<Annotation>],
@@ -146,7 +148,6 @@ fn identify_grouped(
     params: &IdentifyParams,
 ) -> Result<Identification, SummaryError> {
     let ids = ids_of(traces);
-    check(&ids, params)?;
     if summaries.len() != traces.len() {
         return Err(SummaryError::Setup(format!(
             "{} summaries for {} traces",

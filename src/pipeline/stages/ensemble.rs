@@ -29,7 +29,7 @@ use serde_json::{Value, json};
 
 use super::detector_setup::{DetectorSetup, SandboxParams};
 use super::llm_setup::{resumable_client, stage_prompts};
-use super::trace_files::{HashSplit, env_trace_ids, read_traces_by_id, split_ids};
+use super::trace_files::{HashSplit, env_trace_ids, read_split, split_ids};
 use crate::detect::{Detector, Library, WorkerPool};
 use crate::ensemble::activation::{LabelEnsemble, Member, combine};
 use crate::ensemble::calibrate::{CalibrationSettings, HeldoutRho, calibrate};
@@ -565,10 +565,7 @@ impl EnsembleStage {
                 hint: ": simulate more traces or lower signature_traces / test_fraction",
             });
         }
-        Ok((
-            read_traces_by_id(ctx.run(), &calib)?,
-            read_traces_by_id(ctx.run(), &test)?,
-        ))
+        read_split(ctx.run(), (calib, test))
     }
 }
 

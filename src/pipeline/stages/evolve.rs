@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use super::detector_setup::{DetectorSetup, SandboxParams};
-use super::trace_files::{HashSplit, env_trace_ids, read_traces_by_id, split_ids};
+use super::trace_files::{HashSplit, env_trace_ids, read_split, split_ids};
 use crate::fitness::table::{distances_batch, matrix_from_batches, set_id_with};
 use crate::fitness::{DistanceMatrix, Dp, Dx};
 use crate::llm::{LlmClient, LlmConfig, LlmSettings, Prompts};
@@ -648,10 +648,7 @@ impl EvolveStage {
                 hint: ": lower `holdout` or add traces",
             });
         }
-        Ok((
-            read_traces_by_id(ctx.run(), &train)?,
-            read_traces_by_id(ctx.run(), &holdout)?,
-        ))
+        read_split(ctx.run(), (train, holdout))
     }
 
     /// Writes the grown library (to `output`, default `exports/<stage>/library`) and returns its folder.

@@ -159,20 +159,7 @@ fn ranges(ids: &StringArray) -> std::collections::HashMap<String, (usize, usize)
 /// The trace ids of a file set, in the order of its `traces` file (only that file is read).
 pub(crate) fn set_trace_ids(run: &RunDir, set: &TraceFileSet) -> Result<Vec<String>, StageError> {
     let path = run.partition_dir("traces", Some(set.env)).join(&set.name);
-    let mut out = Vec::new();
-    for b in read_file_whole(&path)? {
-        let ids = b
-            .column_by_name("trace_id")
-            .and_then(|c| c.as_any().downcast_ref::<StringArray>())
-            .ok_or_else(|| {
-                StageError::Internal(format!(
-                    "{}: trace_id is not a string column",
-                    path.display()
-                ))
-            })?;
-        out.extend(ids.iter().map(|id| id.unwrap_or_default().to_string()));
-    }
-    Ok(out)
+    Ok(crate::store::file_trace_ids(&path)?)
 }
 
 /// Reads every trace of a file set, in the order of the `traces` file.
@@ -284,6 +271,17 @@ pub(crate) fn split_ids(mut ids: Vec<String>, s: HashSplit) -> (Vec<String>, Vec
     kept.truncate(s.max_kept);
     aside.truncate(s.max_aside);
     (kept, aside)
+}
+
+/// Reads the two sides of a [`split_ids`] in one pass over the run's tables.
+pub(crate) fn read_split(
+    run: &RunDir,
+    (kept, aside): (Vec<String>, Vec<String>),
+) -> Result<(Vec<Trace>, Vec<Trace>), StageError> {
+    let n = kept.len();
+    let mut kept = read_traces_by_id(run, &[kept, aside].concat())?;
+    let aside = kept.split_off(n);
+    Ok((kept, aside))
 }
 
 /// Reads the traces `ids` from the run (`store::read_traces`: each row group once for all of them);
