@@ -230,86 +230,110 @@ pub fn read_annotations(
     env: Env,
     trace: Option<&str>,
 ) -> Result<Vec<Annotation>, StoreError> {
-    read_annotations_where(run, env, |id| trace.is_none_or(|t| t == id))
-}
-
-/// The annotations of the run's traces of `env` whose trace id `keep` accepts, in file order (only
-/// those rows are decoded).
-pub fn read_annotations_where(
-    run: &crate::store::RunDir,
-    env: Env,
-    keep: impl Fn(&str) -> bool,
-) -> Result<Vec<Annotation>, StoreError> {
-    use arrow::array::{Array, AsArray};
-    use arrow::datatypes::{Float64Type, Int32Type, Int64Type};
+    if let Some(t) = trace {
+        return read_annotations_of(run, env, &[t]);
+    }
     let mut out = Vec::new();
     for f in run.table("annotations")?.files {
         if f.env != Some(env) {
             continue;
         }
         for b in crate::store::read_file(&f.path)? {
-            let col = |n: &str| {
-                b.column_by_name(n)
-                    .cloned()
-                    .ok_or_else(|| StoreError::Schema {
-                        path: f.path.clone(),
-                        message: format!("no column {n}"),
-                    })
-            };
-            let (det, tr, label) = (col("detector_id")?, col("trace_id")?, col("label")?);
-            let (det, tr, label) = (
-                det.as_string::<i32>(),
-                tr.as_string::<i32>(),
-                label.as_string::<i32>(),
-            );
-            let (seq, s0, s1) = (col("seq")?, col("start_step")?, col("end_step")?);
-            let seq = seq.as_primitive::<Int32Type>();
-            let (s0, s1) = (
-                s0.as_primitive::<Int64Type>(),
-                s1.as_primitive::<Int64Type>(),
-            );
-            let (t0, t1) = (col("t_start")?, col("t_end")?);
-            let (t0, t1) = (
-                t0.as_primitive::<Float64Type>(),
-                t1.as_primitive::<Float64Type>(),
-            );
-            let (objects, params) = (col("objects")?, col("parameters")?);
-            let (objects, params) = (objects.as_list::<i32>(), params.as_string::<i32>());
-            let (prov, meta, act) = (col("provenance")?, col("metadata")?, col("activation")?);
-            let (prov, meta) = (prov.as_string::<i32>(), meta.as_string::<i32>());
-            let act = act.as_primitive::<Float64Type>();
-            let json = |a: &arrow::array::StringArray, i: usize| {
-                (!a.is_null(i))
-                    .then(|| serde_json::from_str(a.value(i)).unwrap_or(serde_json::Value::Null))
-            };
-            for i in 0..b.num_rows() {
-                if !keep(tr.value(i)) {
-                    continue;
-                }
-                let objs = objects.value(i);
-                let objs = objs.as_string::<i32>();
-                out.push(Annotation {
-                    detector_id: super::DetectorId(det.value(i).to_string()),
-                    trace_id: tr.value(i).to_string(),
-                    label: label.value(i).to_string(),
-                    seq: seq.value(i).max(0) as usize,
-                    start_step: s0.value(i),
-                    end_step: s1.value(i),
-                    t_start: if t0.is_null(i) { f64::NAN } else { t0.value(i) },
-                    t_end: if t1.is_null(i) { f64::NAN } else { t1.value(i) },
-                    objects: (0..objs.len()).map(|k| objs.value(k).to_string()).collect(),
-                    parameters: match serde_json::from_str(params.value(i)) {
-                        Ok(serde_json::Value::Object(m)) => m,
-                        _ => Default::default(),
-                    },
-                    provenance: json(prov, i),
-                    metadata: json(meta, i),
-                    activation: act.value(i),
-                });
-            }
+            decode_annotations(&f.path, &b, &mut out)?;
         }
     }
     Ok(out)
+}
+
+/// The annotations of the traces `wanted` (sorted) of `env`, in file order. Only the row groups
+/// whose `trace_id` statistics can hold one of them are read (an `annotate` stage writes a file per
+/// trace file set, so a set's annotations come from its own file): a stage that works a set at a
+/// time holds that set's annotations, not the run's.
+pub fn read_annotations_of(
+    run: &crate::store::RunDir,
+    env: Env,
+    wanted: &[&str],
+) -> Result<Vec<Annotation>, StoreError> {
+    debug_assert!(wanted.is_sorted(), "wanted ids must be sorted");
+    let mut out = Vec::new();
+    if wanted.is_empty() {
+        return Ok(out);
+    }
+    for f in run.table("annotations")?.files {
+        if f.env != Some(env) {
+            continue;
+        }
+        for b in crate::store::rows_of(&f.path, wanted)? {
+            decode_annotations(&f.path, &b, &mut out)?;
+        }
+    }
+    Ok(out)
+}
+
+/// Appends the rows of an `annotations` batch read from `path`.
+fn decode_annotations(
+    path: &std::path::Path,
+    b: &RecordBatch,
+    out: &mut Vec<Annotation>,
+) -> Result<(), StoreError> {
+    use arrow::array::{Array, AsArray};
+    use arrow::datatypes::{Float64Type, Int32Type, Int64Type};
+    let col = |n: &str| {
+        b.column_by_name(n)
+            .cloned()
+            .ok_or_else(|| StoreError::Schema {
+                path: path.to_path_buf(),
+                message: format!("no column {n}"),
+            })
+    };
+    let (det, tr, label) = (col("detector_id")?, col("trace_id")?, col("label")?);
+    let (det, tr, label) = (
+        det.as_string::<i32>(),
+        tr.as_string::<i32>(),
+        label.as_string::<i32>(),
+    );
+    let (seq, s0, s1) = (col("seq")?, col("start_step")?, col("end_step")?);
+    let seq = seq.as_primitive::<Int32Type>();
+    let (s0, s1) = (
+        s0.as_primitive::<Int64Type>(),
+        s1.as_primitive::<Int64Type>(),
+    );
+    let (t0, t1) = (col("t_start")?, col("t_end")?);
+    let (t0, t1) = (
+        t0.as_primitive::<Float64Type>(),
+        t1.as_primitive::<Float64Type>(),
+    );
+    let (objects, params) = (col("objects")?, col("parameters")?);
+    let (objects, params) = (objects.as_list::<i32>(), params.as_string::<i32>());
+    let (prov, meta, act) = (col("provenance")?, col("metadata")?, col("activation")?);
+    let (prov, meta) = (prov.as_string::<i32>(), meta.as_string::<i32>());
+    let act = act.as_primitive::<Float64Type>();
+    let json = |a: &StringArray, i: usize| {
+        (!a.is_null(i)).then(|| serde_json::from_str(a.value(i)).unwrap_or(serde_json::Value::Null))
+    };
+    for i in 0..b.num_rows() {
+        let objs = objects.value(i);
+        let objs = objs.as_string::<i32>();
+        out.push(Annotation {
+            detector_id: super::DetectorId(det.value(i).to_string()),
+            trace_id: tr.value(i).to_string(),
+            label: label.value(i).to_string(),
+            seq: seq.value(i).max(0) as usize,
+            start_step: s0.value(i),
+            end_step: s1.value(i),
+            t_start: if t0.is_null(i) { f64::NAN } else { t0.value(i) },
+            t_end: if t1.is_null(i) { f64::NAN } else { t1.value(i) },
+            objects: (0..objs.len()).map(|k| objs.value(k).to_string()).collect(),
+            parameters: match serde_json::from_str(params.value(i)) {
+                Ok(serde_json::Value::Object(m)) => m,
+                _ => Default::default(),
+            },
+            provenance: json(prov, i),
+            metadata: json(meta, i),
+            activation: act.value(i),
+        });
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -57,7 +57,7 @@ pub use self::parquet::{
     read_file_whole,
 };
 pub use self::traces::{ReadTraceError, read_trace, read_traces, trace_ids};
-pub(crate) use self::traces::{file_trace_ids, key_order};
+pub(crate) use self::traces::{file_trace_ids, key_order, rows_of};
 pub use self::verify::Problem;
 use crate::trace::Env;
 

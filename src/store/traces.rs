@@ -93,8 +93,9 @@ fn any_within(wanted: &[&str], lo: &[u8], hi: &[u8]) -> bool {
 }
 
 /// The rows of `file` whose `trace_id` is one of `wanted` (sorted), reading only the row groups
-/// whose `trace_id` statistics can hold one of them, each once.
-fn rows_of(file: &Path, wanted: &[&str]) -> Result<Vec<RecordBatch>, StoreError> {
+/// whose `trace_id` statistics can hold one of them, each once. Any table with a `trace_id` column
+/// (the trace tables, `annotations`) reads this way.
+pub(crate) fn rows_of(file: &Path, wanted: &[&str]) -> Result<Vec<RecordBatch>, StoreError> {
     let f = File::open(file).map_err(|e| StoreError::io(file, e))?;
     let builder =
         ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| StoreError::parquet(file, e))?;

@@ -411,3 +411,56 @@ fn a_killed_or_failed_annotate_stage_resumes_to_the_same_tables() {
         assert_eq!(annotate_rows(&t, dir), expected, "{fault}");
     }
 }
+
+/// `accuracy` with `use_annotations` scores each trace file set from that set's stored annotations
+/// (read by trace id, not the run's whole table): over three sets it gives the table that running the
+/// detectors again gives.
+#[test]
+fn accuracy_from_stored_annotations_equals_accuracy_from_running_the_detectors() {
+    let t = TestRun::new();
+    let pipeline = |stored: bool| {
+        format!(
+            r#"[pipeline]
+name = "acc"
+seed = 5
+
+[[stage]]
+id = "sim"
+kind = "simulate"
+env = "pooltool"
+scenes = 6
+shots = 1
+dt = 0.05
+scenes_per_shard = 2
+
+[[stage]]
+id = "ann"
+kind = "annotate"
+env = "pooltool"
+inputs = ["sim"]
+
+[[stage]]
+id = "acc"
+kind = "accuracy"
+env = "pooltool"
+inputs = ["sim", "ann"]
+use_annotations = {stored}
+"#
+        )
+    };
+    let sql = "SELECT * FROM accuracy ORDER BY label";
+    let mut tables = Vec::new();
+    for stored in [true, false] {
+        let file = format!("pipelines/acc-{stored}.toml");
+        let run = format!("runs/{stored}");
+        t.write(&file, &pipeline(stored));
+        t.run(&["run", &file, "--run-dir", &run, "-q"]).ok();
+        tables.push(t.csv(&run, sql));
+    }
+    assert_eq!(
+        t.csv("runs/true", "SELECT count(*) AS n FROM traces"),
+        "n\n6\n"
+    );
+    assert!(tables[0].contains("cue strike,6,6,6,"), "{}", tables[0]);
+    assert_eq!(tables[0], tables[1]);
+}

@@ -371,6 +371,17 @@ fn the_trace_filters_pick_in_the_sets_order_and_show_what_the_full_report_shows(
     let rows = all["traces"].as_array().unwrap();
     assert_eq!(rows.len(), 5);
     let id = |row: &Value| row["trace_id"].as_str().unwrap().to_string();
+    // Each trace shows every annotation the table holds for it (read per set, by trace id).
+    for row in rows {
+        let n = t.csv(
+            "r",
+            &format!(
+                "SELECT count(*) AS n FROM annotations WHERE trace_id = '{}'",
+                id(row)
+            ),
+        );
+        assert_eq!(n, format!("n\n{}\n", row["annotations"]), "{row}");
+    }
     // The payload of a trace in a report, with its position in that report left out.
     let shown = |site: &str, trace: &str| {
         let idx = index(&t.path(site));

@@ -18,7 +18,7 @@ use super::trace_files::{read_traces, trace_file_sets};
 use crate::detect::accuracy::{
     LabelScore, Miss, grounded, markdown, scorable, score_trace_listing, truth,
 };
-use crate::detect::tables::read_annotations;
+use crate::detect::tables::{first_annotated_trace, read_annotations_of};
 use crate::detect::{Annotation, WorkerPool};
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
@@ -221,11 +221,13 @@ impl Stage for AccuracyStage {
         ctx.progress().set_total(ctx.stage_id(), sets.len() as u64);
         let mut pool: Option<WorkerPool> = None;
         // A run without annotations is an error even when it has no traces to score.
-        let mut stored = if self.use_annotations && sets.is_empty() {
-            Some(stored_annotations(ctx, self.setup.env, lib)?)
-        } else {
-            None
-        };
+        if self.use_annotations && first_annotated_trace(ctx.run(), self.setup.env)?.is_none() {
+            return Err(StageError::Input(
+                "use_annotations is set but the run has no annotations for this environment \
+                 (list the annotate stage in `inputs`)"
+                    .into(),
+            ));
+        }
         let mut scores: BTreeMap<String, LabelScore> = BTreeMap::new();
         let mut statuses: BTreeMap<String, u64> = BTreeMap::new();
         let mut misses: Vec<Miss> = Vec::new();
@@ -240,10 +242,7 @@ impl Stage for AccuracyStage {
             let record = match ctx.finished_shard(&unit)? {
                 Some(r) => r,
                 None => {
-                    if self.use_annotations && stored.is_none() {
-                        stored = Some(stored_annotations(ctx, self.setup.env, lib)?);
-                    }
-                    let r = self.score_set(ctx, set, stored.as_mut(), &mut pool)?;
+                    let r = self.score_set(ctx, set, &mut pool)?;
                     ctx.finish_shard(&unit, &r)?;
                     r
                 }
@@ -313,18 +312,14 @@ impl AccuracyStage {
         &self,
         ctx: &StageContext<'_>,
         set: &super::trace_files::TraceFileSet,
-        stored: Option<&mut std::collections::HashMap<String, Vec<Annotation>>>,
         pool: &mut Option<WorkerPool>,
     ) -> Result<Value, StageError> {
         let lib = &self.setup.library;
         let traces = read_traces(ctx.run(), set)?;
         let mut statuses: BTreeMap<String, u64> = BTreeMap::new();
-        let anns = match stored {
-            Some(all) => traces
-                .iter()
-                .flat_map(|t| all.remove(&t.trace_id).unwrap_or_default())
-                .collect(),
-            None => {
+        let anns = match self.use_annotations {
+            true => stored_annotations(ctx, &traces, lib)?,
+            false => {
                 if pool.is_none() {
                     *pool = Some(self.setup.pool()?);
                 }
@@ -431,29 +426,30 @@ fn add_unit(
     Ok(())
 }
 
-/// The run's `annotations` rows of `env` written by `lib`'s detectors, by trace.
+/// The run's `annotations` rows of `traces` written by `lib`'s detectors, in the traces' order (only
+/// these traces' rows are read), each with its detector's weight as its activation.
 fn stored_annotations(
     ctx: &StageContext<'_>,
-    env: Env,
+    traces: &[Trace],
     lib: &crate::detect::Library,
-) -> Result<std::collections::HashMap<String, Vec<Annotation>>, StageError> {
-    let rows = read_annotations(ctx.run(), env, None)?;
-    if rows.is_empty() {
-        return Err(StageError::Input(
-            "use_annotations is set but the run has no annotations for this environment \
-             (list the annotate stage in `inputs`)"
-                .into(),
-        ));
-    }
-    let mut out: std::collections::HashMap<String, Vec<Annotation>> = Default::default();
-    for a in rows {
+) -> Result<Vec<Annotation>, StageError> {
+    let Some(env) = traces.first().map(|t| t.env) else {
+        return Ok(Vec::new());
+    };
+    let mut ids: Vec<&str> = traces.iter().map(|t| t.trace_id.as_str()).collect();
+    ids.sort_unstable();
+    let mut by_trace: std::collections::HashMap<String, Vec<Annotation>> = Default::default();
+    for a in read_annotations_of(ctx.run(), env, &ids)? {
         if let Some(d) = lib.detectors.iter().find(|d| d.id == a.detector_id) {
             let a = Annotation {
                 activation: d.weight,
                 ..a
             };
-            out.entry(a.trace_id.clone()).or_default().push(a);
+            by_trace.entry(a.trace_id.clone()).or_default().push(a);
         }
     }
-    Ok(out)
+    Ok(traces
+        .iter()
+        .flat_map(|t| by_trace.remove(&t.trace_id).unwrap_or_default())
+        .collect())
 }

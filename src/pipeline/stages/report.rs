@@ -20,7 +20,7 @@ use serde_json::{Value, json};
 
 use super::trace_files::{read_traces, set_trace_ids, trace_file_sets};
 use crate::detect::accuracy::{scorable, truth};
-use crate::detect::tables::read_annotations_where;
+use crate::detect::tables::read_annotations_of;
 use crate::detect::{Annotation, annotated_text, count_tokens};
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
@@ -219,7 +219,6 @@ impl Stage for ReportStage {
         // their annotations are read.
         let mut counts: BTreeMap<String, u64> = BTreeMap::new();
         let mut picked: Vec<HashSet<String>> = Vec::with_capacity(sets.len());
-        let mut wanted: HashMap<Env, HashSet<String>> = HashMap::new();
         for set in &sets {
             let mut keep = HashSet::new();
             for id in set_trace_ids(run, set)? {
@@ -231,7 +230,6 @@ impl Stage for ReportStage {
                     continue;
                 }
                 *n += 1;
-                wanted.entry(set.env).or_default().insert(id.clone());
                 keep.insert(id);
             }
             picked.push(keep);
@@ -239,20 +237,18 @@ impl Stage for ReportStage {
         let mut writer = SiteWriter::create(&folder)?;
         let mut all_libraries: BTreeSet<String> = BTreeSet::new();
         let mut truth_envs: BTreeSet<String> = BTreeSet::new();
-        let mut annotations: HashMap<Env, HashMap<String, Vec<Annotation>>> = HashMap::new();
         for (set, keep) in sets.iter().zip(&picked) {
             let env = set.env;
             if keep.is_empty() {
                 ctx.progress().advance(stage, 1);
                 continue;
             }
-            if let std::collections::hash_map::Entry::Vacant(slot) = annotations.entry(env) {
-                let mut per: HashMap<String, Vec<Annotation>> = HashMap::new();
-                let of_env = &wanted[&env];
-                for a in read_annotations_where(run, env, |id| of_env.contains(id))? {
-                    per.entry(a.trace_id.clone()).or_default().push(a);
-                }
-                slot.insert(per);
+            // This set's shown traces' annotations only: the run's are never held at once.
+            let mut ids: Vec<&str> = keep.iter().map(String::as_str).collect();
+            ids.sort_unstable();
+            let mut annotations: HashMap<String, Vec<Annotation>> = HashMap::new();
+            for a in read_annotations_of(run, env, &ids)? {
+                annotations.entry(a.trace_id.clone()).or_default().push(a);
             }
             let with_truth = accuracy.files.iter().any(|f| f.env == Some(env));
             for trace in read_traces(run, set)? {
@@ -260,8 +256,7 @@ impl Stage for ReportStage {
                     continue;
                 }
                 let anns: Vec<Annotation> = annotations
-                    .get(&env)
-                    .and_then(|m| m.get(&trace.trace_id))
+                    .get(&trace.trace_id)
                     .cloned()
                     .unwrap_or_default();
                 let text = annotated_text(&trace, &anns);
