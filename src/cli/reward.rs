@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use annotrace::builtin::Location;
-use annotrace::detect::tables::read_annotations;
+use annotrace::detect::tables::{parameter_keys, read_annotations};
 use annotrace::detect::{Annotation, Library, SandboxLimits, WorkerPool};
 use annotrace::envs::Environment;
 use annotrace::envs::pool::{PoolEnv, Scene, Shot};
@@ -181,18 +181,22 @@ fn eval(a: EvalArgs) -> CliResult {
             trace.env
         )));
     }
-    // The run's annotations of this library (all traces: they teach the parameter keys).
+    // This trace's annotations by the library, if the run holds them; the parameter keys are
+    // learned from every trace's (read a file at a time, no row kept).
+    let ours = |d: &str| lib.detectors.iter().any(|x| x.id.0 == d);
     let stored: Vec<Annotation> = match run.table("annotations") {
-        Ok(_) => read_annotations(&run, trace.env, None)
+        Ok(_) => read_annotations(&run, trace.env, Some(&trace.trace_id))
             .map_err(|e| CliError::of(e).context("reading annotations"))?
             .into_iter()
-            .filter(|x| lib.detectors.iter().any(|d| d.id == x.detector_id))
+            .filter(|x| ours(&x.detector_id.0))
             .collect(),
         Err(_) => Vec::new(),
     };
     let mut schema = Schema::from_library(&lib);
-    let (annotations, source) = if stored.iter().any(|x| x.trace_id == trace.trace_id) {
-        schema.learn_keys(&stored);
+    let (annotations, source) = if !stored.is_empty() {
+        let keys = parameter_keys(&run, trace.env, ours)
+            .map_err(|e| CliError::of(e).context("reading annotations"))?;
+        schema.learn_label_keys(keys);
         (stored, "the run's annotations table")
     } else {
         let pool = pool()?;

@@ -245,6 +245,52 @@ pub fn read_annotations(
     Ok(out)
 }
 
+/// Per label, the top-level parameter keys of the `annotations` rows of `env` whose detector `keep`
+/// accepts: what a reward program may filter each label's patterns by. Reads a file at a time and
+/// keeps no row, so it costs the memory of one file whatever the run's size.
+pub fn parameter_keys(
+    run: &crate::store::RunDir,
+    env: Env,
+    keep: impl Fn(&str) -> bool,
+) -> Result<std::collections::BTreeMap<String, std::collections::BTreeSet<String>>, StoreError> {
+    use arrow::array::AsArray;
+    let mut out: std::collections::BTreeMap<String, std::collections::BTreeSet<String>> =
+        Default::default();
+    for f in run.table("annotations")?.files {
+        if f.env != Some(env) {
+            continue;
+        }
+        for b in crate::store::read_file(&f.path)? {
+            let col = |n: &str| {
+                b.column_by_name(n)
+                    .cloned()
+                    .ok_or_else(|| StoreError::Schema {
+                        path: f.path.clone(),
+                        message: format!("no column {n}"),
+                    })
+            };
+            let (det, label, params) = (col("detector_id")?, col("label")?, col("parameters")?);
+            let (det, label, params) = (
+                det.as_string::<i32>(),
+                label.as_string::<i32>(),
+                params.as_string::<i32>(),
+            );
+            for i in 0..b.num_rows() {
+                if !keep(det.value(i)) {
+                    continue;
+                }
+                let keys = out.entry(label.value(i).to_string()).or_default();
+                if let Ok(serde_json::Value::Object(m)) =
+                    serde_json::from_str::<serde_json::Value>(params.value(i))
+                {
+                    keys.extend(m.into_iter().map(|(k, _)| k));
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
 /// The annotations of the traces `wanted` (sorted) of `env`, in file order. Only the row groups
 /// whose `trace_id` statistics can hold one of them are read (an `annotate` stage writes a file per
 /// trace file set, so a set's annotations come from its own file): a stage that works a set at a

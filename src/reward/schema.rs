@@ -58,13 +58,21 @@ impl Schema {
     pub fn learn_keys(&mut self, annotations: &[Annotation]) {
         let mut seen: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
         for a in annotations {
-            let keys = seen.entry(normalise_label(&a.label)).or_default();
-            keys.extend(
-                a.parameters
-                    .keys()
-                    .filter(|k| k.as_str() != "object_details")
-                    .cloned(),
-            );
+            seen.entry(a.label.clone())
+                .or_default()
+                .extend(a.parameters.keys().cloned());
+        }
+        self.learn_label_keys(seen);
+    }
+
+    /// Adds parameter keys, given per label as annotations spelled it (`object_details` is left out;
+    /// labels match as [`normalise_label`] spells them).
+    pub fn learn_label_keys(&mut self, keys: BTreeMap<String, BTreeSet<String>>) {
+        let mut seen: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+        for (label, k) in keys {
+            seen.entry(normalise_label(&label))
+                .or_default()
+                .extend(k.into_iter().filter(|k| k.as_str() != "object_details"));
         }
         for info in &mut self.labels {
             if let Some(k) = seen.remove(&normalise_label(&info.label)) {

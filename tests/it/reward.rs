@@ -895,6 +895,55 @@ fn cli_eval_prints_clauses_and_score() {
         .stdout_has("score: 0.");
 }
 
+/// `eval` on a trace of an annotated run: its own annotations from the table, the parameter keys from
+/// every trace's, so a key seen only on another trace is known and an unknown one is an error.
+#[test]
+fn cli_eval_learns_parameter_keys_from_the_whole_run() {
+    let t = TestRun::new();
+    t.run(&[
+        "simulate", "--scenes", "6", "--seed", "5", "--dt", "0.05", "--run", "r", "-q",
+    ])
+    .ok();
+    t.run(&["annotate", "--run", "r", "-q"]).ok();
+    let pocketed = |op: &str| {
+        let csv = t.csv(
+            "r",
+            &format!(
+                "SELECT trace_id FROM traces WHERE trace_id {op} \
+                 (SELECT trace_id FROM annotations WHERE label = 'ball pocketed') ORDER BY trace_id"
+            ),
+        );
+        csv.lines().nth(1).expect("such a trace").to_string()
+    };
+    // A shot that pocketed nothing: `pocket` is learned from the shots that did.
+    let (none, some) = (pocketed("NOT IN"), pocketed("IN"));
+    assert_ne!(none, some);
+    t.run(&[
+        "reward",
+        "eval",
+        "--run",
+        "r",
+        "--trace",
+        &none,
+        r#"AND(PATTERN("cue strike"), PATTERN("ball pocketed", pocket="lb"))"#,
+    ])
+    .ok()
+    .stdout_has("annotations from the run's annotations table")
+    .stdout_has("clause  1  true   1.000  PATTERN(\"cue strike\")")
+    .stdout_has("success: false");
+    t.run(&[
+        "reward",
+        "eval",
+        "--run",
+        "r",
+        "--trace",
+        &none,
+        r#"PATTERN("ball pocketed", nonsense=1)"#,
+    ])
+    .code(2)
+    .stderr_has("patterns of \"ball pocketed\" have no parameter `nonsense` (they have: pocket");
+}
+
 mod synthesis {
     use annotrace::llm::{LlmClient, LlmConfig, read_calls};
     use annotrace::reward::synth::{SynthRequest, synthesise};
