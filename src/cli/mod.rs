@@ -235,7 +235,7 @@ pub fn main() -> ExitCode {
             if is_broken_pipe(&e.error) {
                 return ExitCode::SUCCESS;
             }
-            eprintln!("error: {:#}", e.error);
+            eprintln!("error: {}", error_text(&e.error));
             ExitCode::from(exit_code(e.category))
         }
     }
@@ -258,6 +258,24 @@ fn quiet_on_closed_pipe() {
         }
         default(info);
     }));
+}
+
+/// The error and its causes joined by `: ` (as `{:#}` joins them), leaving out a cause whose text
+/// the line already ends with: several library errors (Parquet's, Arrow's) print their source in
+/// their own message and return it as their source too, which `{:#}` would print twice.
+fn error_text(e: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if line.ends_with(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line
 }
 
 fn is_broken_pipe(e: &anyhow::Error) -> bool {
@@ -316,4 +334,32 @@ pub(crate) fn fault_from_env() -> Result<Option<annotrace::pipeline::FaultPlan>,
 /// A runner error, with its category.
 pub(crate) fn run_error(e: annotrace::pipeline::RunError) -> CliError {
     CliError::of(e)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::error_text;
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("External: {0}")]
+    struct Echoes(#[source] Inner);
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("data corruption detected")]
+    struct Inner;
+
+    #[test]
+    fn a_cause_already_printed_by_its_parent_is_printed_once() {
+        let e = anyhow::Error::new(Echoes(Inner)).context("f.parquet");
+        assert_eq!(
+            error_text(&e),
+            "f.parquet: External: data corruption detected"
+        );
+        assert_eq!(
+            format!("{e:#}"),
+            "f.parquet: External: data corruption detected: data corruption detected"
+        );
+        let plain = anyhow::anyhow!("no column x").context("reading t.parquet");
+        assert_eq!(error_text(&plain), "reading t.parquet: no column x");
+    }
 }
