@@ -260,22 +260,9 @@ fn quiet_on_closed_pipe() {
     }));
 }
 
-/// The error and its causes joined by `: ` (as `{:#}` joins them), leaving out a cause whose text
-/// the line already ends with: several library errors (Parquet's, Arrow's) print their source in
-/// their own message and return it as their source too, which `{:#}` would print twice.
+/// The error and its causes on one line (a cause its parent already printed is left out).
 fn error_text(e: &anyhow::Error) -> String {
-    let mut line = String::new();
-    for cause in e.chain() {
-        let text = cause.to_string();
-        if line.ends_with(&text) {
-            continue;
-        }
-        if !line.is_empty() {
-            line.push_str(": ");
-        }
-        line.push_str(&text);
-    }
-    line
+    annotrace::pipeline::error_chain(e.as_ref())
 }
 
 fn is_broken_pipe(e: &anyhow::Error) -> bool {

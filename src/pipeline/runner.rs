@@ -234,13 +234,18 @@ pub struct RunReport {
     pub stages: Vec<StageReport>,
 }
 
-/// An error and its causes on one line, as `{:#}` prints them.
-pub fn error_chain(e: &dyn std::error::Error) -> String {
+/// An error and its causes on one line, joined by `: ` as `{:#}` joins them, leaving out a cause whose
+/// text the line already ends with: several library errors (Parquet's, Arrow's, DataFusion's) print
+/// their source in their own message and return it as their source too.
+pub fn error_chain(e: &(dyn std::error::Error + 'static)) -> String {
     let mut out = e.to_string();
     let mut cur = e.source();
     while let Some(s) = cur {
-        out.push_str(": ");
-        out.push_str(&s.to_string());
+        let text = s.to_string();
+        if !out.ends_with(&text) {
+            out.push_str(": ");
+            out.push_str(&text);
+        }
         cur = s.source();
     }
     out

@@ -44,6 +44,7 @@ use datafusion::prelude::{SessionConfig, SessionContext};
 
 use super::engine::Engine;
 use super::{QueryError, read_only};
+use crate::pipeline::error_chain;
 use crate::store::{TableDir, TableFile};
 use crate::trace::schema::ENV_COLUMN;
 
@@ -276,19 +277,4 @@ fn conform(batch: &RecordBatch, expected: &SchemaRef) -> Result<RecordBatch, Dat
         })
         .collect::<Result<Vec<_>, _>>()?;
     Ok(RecordBatch::try_new(expected.clone(), columns)?)
-}
-
-/// An error and its causes on one line.
-fn error_chain(e: &dyn std::error::Error) -> String {
-    let mut out = e.to_string();
-    let mut source = e.source();
-    while let Some(s) = source {
-        let text = s.to_string();
-        if !out.contains(&text) {
-            out.push_str(": ");
-            out.push_str(&text);
-        }
-        source = s.source();
-    }
-    out
 }
