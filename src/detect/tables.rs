@@ -209,12 +209,7 @@ pub fn first_annotated_trace(
             if b.num_rows() == 0 {
                 continue;
             }
-            let ids = b
-                .column_by_name("trace_id")
-                .ok_or_else(|| StoreError::Schema {
-                    path: f.path.clone(),
-                    message: "no column trace_id".into(),
-                })?;
+            let ids = column(&f.path, &b, "trace_id")?;
             let ids = ids.as_string::<i32>();
             if ids.is_valid(0) {
                 return Ok(Some(ids.value(0).to_string()));
@@ -261,14 +256,7 @@ pub fn parameter_keys(
             continue;
         }
         for b in crate::store::read_file(&f.path)? {
-            let col = |n: &str| {
-                b.column_by_name(n)
-                    .cloned()
-                    .ok_or_else(|| StoreError::Schema {
-                        path: f.path.clone(),
-                        message: format!("no column {n}"),
-                    })
-            };
+            let col = |n: &str| column(&f.path, &b, n);
             let (det, label, params) = (col("detector_id")?, col("label")?, col("parameters")?);
             let (det, label, params) = (
                 det.as_string::<i32>(),
@@ -316,6 +304,16 @@ pub fn read_annotations_of(
     Ok(out)
 }
 
+/// Column `name` of a batch read from `path`, or an error naming both.
+fn column(path: &std::path::Path, b: &RecordBatch, name: &str) -> Result<ArrayRef, StoreError> {
+    b.column_by_name(name)
+        .cloned()
+        .ok_or_else(|| StoreError::Schema {
+            path: path.to_path_buf(),
+            message: format!("no column {name}"),
+        })
+}
+
 /// Appends the rows of an `annotations` batch read from `path`.
 fn decode_annotations(
     path: &std::path::Path,
@@ -324,14 +322,7 @@ fn decode_annotations(
 ) -> Result<(), StoreError> {
     use arrow::array::{Array, AsArray};
     use arrow::datatypes::{Float64Type, Int32Type, Int64Type};
-    let col = |n: &str| {
-        b.column_by_name(n)
-            .cloned()
-            .ok_or_else(|| StoreError::Schema {
-                path: path.to_path_buf(),
-                message: format!("no column {n}"),
-            })
-    };
+    let col = |n: &str| column(path, b, n);
     let (det, tr, label) = (col("detector_id")?, col("trace_id")?, col("label")?);
     let (det, tr, label) = (
         det.as_string::<i32>(),
