@@ -20,7 +20,7 @@ mod site;
 
 use std::path::PathBuf;
 
-pub use payload::{LibraryAnnotations, TraceViews, index_row, trace_payload};
+pub use payload::{LibraryAnnotations, TracePayload, TraceViews, index_row, trace_payload};
 pub use scene::{Scene, SceneError, SceneObject, scene};
 pub(crate) use site::swap_in;
 pub use site::{SiteWriter, trace_file};

@@ -6,6 +6,7 @@
 
 use std::collections::BTreeMap;
 
+use serde::Serialize;
 use serde_json::{Value, json};
 
 use super::scene::{Scene, r4};
@@ -124,8 +125,31 @@ fn library_section(trace: &Trace, lib: &LibraryAnnotations) -> Value {
     section(&lib.library, "library", rows)
 }
 
+/// What the viewer loads for one trace, serialised in this field order (the scene is written straight
+/// from its struct, not through a JSON value tree).
+#[derive(Debug, Serialize)]
+pub struct TracePayload<'a> {
+    index: usize,
+    id: &'a str,
+    env: &'a str,
+    task: &'a str,
+    success: bool,
+    status: &'a str,
+    t0: f64,
+    t1: f64,
+    scene: &'a Scene,
+    sections: Vec<Value>,
+    text: &'a str,
+    tokens: usize,
+}
+
 /// The payload of trace number `index` of the report.
-pub fn trace_payload(index: usize, trace: &Trace, scene: &Scene, views: &TraceViews) -> Value {
+pub fn trace_payload<'a>(
+    index: usize,
+    trace: &'a Trace,
+    scene: &'a Scene,
+    views: &'a TraceViews,
+) -> TracePayload<'a> {
     let mut sections: Vec<Value> = views
         .libraries
         .iter()
@@ -163,20 +187,20 @@ pub fn trace_payload(index: usize, trace: &Trace, scene: &Scene, views: &TraceVi
         (Some(a), Some(b)) => (a.t, b.t),
         _ => (0.0, 0.0),
     };
-    json!({
-        "index": index,
-        "id": trace.trace_id,
-        "env": trace.env.as_str(),
-        "task": trace.task_id,
-        "success": trace.outcome.success,
-        "status": trace.outcome.terminal_status,
-        "t0": r4(t0),
-        "t1": r4(t1),
-        "scene": scene,
-        "sections": sections,
-        "text": views.text,
-        "tokens": views.tokens,
-    })
+    TracePayload {
+        index,
+        id: &trace.trace_id,
+        env: trace.env.as_str(),
+        task: &trace.task_id,
+        success: trace.outcome.success,
+        status: &trace.outcome.terminal_status,
+        t0: r4(t0),
+        t1: r4(t1),
+        scene,
+        sections,
+        text: &views.text,
+        tokens: views.tokens,
+    }
 }
 
 /// The trace list's row for trace number `index`: the columns the list filters on.

@@ -146,20 +146,27 @@ where
 {
     let mut ids: Vec<String> = Vec::new();
     let mut index: BTreeMap<String, usize> = BTreeMap::new();
+    // Each object's position in `ids`, step by step in trace order: every id is made once.
+    let mut slots: Vec<usize> = Vec::new();
     for ts in &trace.timesteps {
         for o in &ts.objects {
             let id = id_of(&o.body)?;
-            if !index.contains_key(&id) {
-                index.insert(id.clone(), ids.len());
-                ids.push(id);
-            }
+            let i = match index.get(&id) {
+                Some(&i) => i,
+                None => {
+                    index.insert(id.clone(), ids.len());
+                    ids.push(id);
+                    ids.len() - 1
+                }
+            };
+            slots.push(i);
         }
     }
+    let mut slots = slots.into_iter();
     let mut poses = Vec::with_capacity(trace.timesteps.len());
     for ts in &trace.timesteps {
         let mut row = vec![None; ids.len()];
-        for o in &ts.objects {
-            let i = index[&id_of(&o.body)?];
+        for (o, i) in ts.objects.iter().zip(slots.by_ref()) {
             row[i] = pose(i, &o.body).map(|p| [r4(p[0]), r4(p[1]), r4(p[2])]);
         }
         poses.push(row);
@@ -266,18 +273,6 @@ fn pool_scene(trace: &Trace, config: &PoolConfig) -> Result<Scene, String> {
     let rail_right = ox + (table.w + OUTER) * scale;
     let tray_x = (rail_right + (size - rail_right) / 2.0 - ox) / scale;
     let mut radius: BTreeMap<usize, f64> = BTreeMap::new();
-    let mut tray_slot: BTreeMap<(usize, usize), usize> = BTreeMap::new();
-    for (k, ts) in trace.timesteps.iter().enumerate() {
-        let mut n = 0;
-        for (j, o) in ts.objects.iter().enumerate() {
-            if let Body::Pool(b) = &o.body
-                && b.motion_state_code == 4
-            {
-                tray_slot.insert((k, j), n);
-                n += 1;
-            }
-        }
-    }
     let (ids, mut poses) = collect(
         trace,
         |b| match b {
@@ -291,18 +286,22 @@ fn pool_scene(trace: &Trace, config: &PoolConfig) -> Result<Scene, String> {
             (b.motion_state_code != 4).then_some([b.position[0], b.position[1], 0.0])
         },
     )?;
-    // The tray positions of pocketed balls.
+    // The tray positions of pocketed balls: the n-th pocketed ball of a timestep in its n-th slot.
     let index: BTreeMap<&str, usize> = ids
         .iter()
         .enumerate()
         .map(|(i, s)| (s.as_str(), i))
         .collect();
     for (k, ts) in trace.timesteps.iter().enumerate() {
-        for (j, o) in ts.objects.iter().enumerate() {
-            if let (Body::Pool(b), Some(n)) = (&o.body, tray_slot.get(&(k, j))) {
-                let py = size * 0.2 + *n as f64 * 2.6 * r_px;
+        let mut n = 0;
+        for o in &ts.objects {
+            if let Body::Pool(b) = &o.body
+                && b.motion_state_code == 4
+            {
+                let py = size * 0.2 + n as f64 * 2.6 * r_px;
                 let y = (oy - py) / scale;
                 poses[k][index[b.ball_id.as_str()]] = Some([r4(tray_x), r4(y), 0.0]);
+                n += 1;
             }
         }
     }

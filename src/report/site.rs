@@ -88,11 +88,11 @@ impl SiteWriter {
         let payload = trace_payload(index, trace, &scene, views);
         let rel = trace_file(index);
         let path = self.tmp.join(&rel);
-        let body = format!(
-            "annotraceLoaded({});\n",
-            serde_json::to_string(&payload).map_err(|e| ReportError::Internal(e.to_string()))?
-        );
-        write(&path, body.as_bytes())?;
+        let mut body = b"annotraceLoaded(".to_vec();
+        serde_json::to_writer(&mut body, &payload)
+            .map_err(|e| ReportError::Internal(e.to_string()))?;
+        body.extend_from_slice(b");\n");
+        write(&path, &body)?;
         self.files.push(PathBuf::from(rel));
         self.rows.push(index_row(index, trace, views));
         Ok(())
