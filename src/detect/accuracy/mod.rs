@@ -271,17 +271,22 @@ pub fn score_trace_listing(
         .iter()
         .map(|a| normalise_label(&a.label))
         .collect();
+    // Each label's annotations, in order: an event looks only at its own label's.
+    let mut of_label: std::collections::HashMap<&str, Vec<usize>> = Default::default();
+    for (i, l) in labels.iter().enumerate() {
+        of_label.entry(l.as_str()).or_default().push(i);
+    }
     let mut used = vec![false; annotations.len()];
     for ev in truth {
         let s = scores.get_mut(ev.label).expect("inserted above");
         s.events += 1;
         let want = normalise_label(ev.label);
-        let best = annotations
+        let candidates = of_label.get(want.as_str()).map_or(&[][..], Vec::as_slice);
+        let best = candidates
             .iter()
-            .enumerate()
+            .map(|&i| (i, annotations[i]))
             .filter(|(i, a)| {
                 !used[*i]
-                    && labels[*i] == want
                     && a.t_start - tolerance <= ev.t
                     && ev.t <= a.t_end + tolerance
                     && ev.balls.iter().all(|b| a.objects.contains(b))
