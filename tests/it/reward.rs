@@ -918,30 +918,17 @@ fn cli_eval_learns_parameter_keys_from_the_whole_run() {
     // A shot that pocketed nothing: `pocket` is learned from the shots that did.
     let (none, some) = (pocketed("NOT IN"), pocketed("IN"));
     assert_ne!(none, some);
-    t.run(&[
-        "reward",
-        "eval",
-        "--run",
-        "r",
-        "--trace",
-        &none,
-        r#"AND(PATTERN("cue strike"), PATTERN("ball pocketed", pocket="lb"))"#,
-    ])
-    .ok()
-    .stdout_has("annotations from the run's annotations table")
-    .stdout_has("clause  1  true   1.000  PATTERN(\"cue strike\")")
-    .stdout_has("success: false");
-    t.run(&[
-        "reward",
-        "eval",
-        "--run",
-        "r",
-        "--trace",
-        &none,
-        r#"PATTERN("ball pocketed", nonsense=1)"#,
-    ])
-    .code(2)
-    .stderr_has("patterns of \"ball pocketed\" have no parameter `nonsense` (they have: pocket");
+    let eval = |program: &str| t.run(&["reward", "eval", "--run", "r", "--trace", &none, program]);
+    eval(r#"AND(PATTERN("cue strike"), PATTERN("ball pocketed", pocket="lb"))"#)
+        .ok()
+        .stdout_has("annotations from the run's annotations table")
+        .stdout_has("clause  1  true   1.000  PATTERN(\"cue strike\")")
+        .stdout_has("success: false");
+    eval(r#"PATTERN("ball pocketed", nonsense=1)"#)
+        .code(2)
+        .stderr_has(
+            "patterns of \"ball pocketed\" have no parameter `nonsense` (they have: pocket",
+        );
 }
 
 mod synthesis {
