@@ -30,7 +30,8 @@ pub struct Args {
     /// Import the valid traces and print a table of the invalid ones (exit code 1 if any).
     #[arg(long)]
     skip_invalid: bool,
-    /// Traces per output file (a resumed import redoes at most one shard per input file).
+    /// Traces per output file (consecutive input files under 128 MiB share shards; a resumed import
+    /// redoes at most the unfinished shard of each group).
     #[arg(long, default_value_t = 1000)]
     traces_per_shard: u64,
 }

@@ -469,3 +469,26 @@ fn sweep_json_import(seed: u64, per_form: u64, until: Option<std::time::Instant>
     }
     (cases, accepted)
 }
+
+/// A folder of one-trace files (as the originals' recorders write them) is imported into shards of
+/// many traces, not a file set per trace: small consecutive files share shards.
+#[test]
+fn a_folder_of_one_trace_files_makes_one_file_set() {
+    let t = TestRun::new();
+    for i in 0..6 {
+        let v = annotrace::trace::json::to_value(&synthetic_trace(Env::Pooltool, i, 4, 2));
+        t.write(&format!("shots/shot{i}.json"), &v.to_string());
+    }
+    t.run(&["import", "--run", "r", "--env", "pooltool", "shots"])
+        .ok()
+        .stdout_has("imported 6 pooltool trace(s)");
+    let tables = t.run(&["tables", "--run", "r"]);
+    tables
+        .ok()
+        .stdout_has("traces: 6 rows in 1 file(s)")
+        .stdout_has("frames: 48 rows in 1 file(s)");
+    assert_eq!(
+        t.csv("r", "SELECT trace_id FROM traces ORDER BY trace_id"),
+        "trace_id\npooltool-000000\npooltool-000001\npooltool-000002\npooltool-000003\npooltool-000004\npooltool-000005\n"
+    );
+}

@@ -1,8 +1,10 @@
 //! `import`: reads traces in the paper's JSON format into the trace tables, streaming and sharded.
 //!
-//! Each input file is read once, a trace at a time; every `traces_per_shard` traces of a file make one
-//! shard, written as one Parquet file per table and marked done, so a killed import resumes at the
-//! first unfinished shard. Trace ids come from a trace's `trace_id` field, else from the file name
+//! Each input file is read once, a trace at a time. Consecutive input files of less than
+//! [`GROUP_BYTES`] together form a group (a larger file is a group of its own), and every
+//! `traces_per_shard` traces of a group make one shard, written as one Parquet file per table and
+//! marked done, so a killed import resumes at the first unfinished shard. A folder of one-trace files
+//! (what the originals' recorders write) thus gives shards of many traces, not a file set per trace. Trace ids come from a trace's `trace_id` field, else from the file name
 //! (`<stem>`, `<stem>-L<line>` for JSON Lines, `<stem>-<position>` for arrays); a duplicate id, within
 //! the import or against traces already in the run, rejects the trace. Without `skip_invalid` the first
 //! invalid trace fails the stage and nothing is written; with it, invalid traces are listed in the
@@ -53,7 +55,9 @@ pub struct ImportParams {
     /// Import the valid traces and list the invalid ones instead of failing.
     #[serde(default)]
     pub skip_invalid: bool,
-    /// Traces per output file; a resumed import redoes at most one shard per input file.
+    /// Traces per output file; consecutive input files under 128 MiB together share shards, so a
+    /// folder of one-trace files makes files of many traces. A resumed import redoes at most the
+    /// unfinished shard of each group.
     #[serde(default = "ImportParams::default_traces_per_shard")]
     pub traces_per_shard: u64,
     /// Frame rows of one trace kept in memory before the rest is spilled to a scratch file.
@@ -167,7 +171,14 @@ impl Stage for ImportStage {
         let mut trace_ids = string_column(ctx, "traces", "trace_id")?;
         let mut scene_ids = string_column(ctx, "scenes", "scene_id")?;
         let mut totals = Totals::default();
+        let groups = file_groups(&files)?;
+        // The open shard, carried from a file to the next one of its group.
+        let mut carried: Option<OpenShard> = None;
+        let mut offset = 0;
         for (fi, file) in files.iter().enumerate() {
+            if fi == 0 || groups[fi] != groups[fi - 1] {
+                offset = 0;
+            }
             let stem = file
                 .file_stem()
                 .and_then(|s| s.to_str())
@@ -177,6 +188,8 @@ impl Stage for ImportStage {
                 ctx,
                 stage: self,
                 file_index: fi,
+                group: groups[fi],
+                offset,
                 file,
                 stem,
                 builder: TraceBatchBuilder::new(),
@@ -184,7 +197,7 @@ impl Stage for ImportStage {
                 spills: 0,
                 first_step: None,
                 next_ordinal: 0,
-                shard: None,
+                shard: carried.take(),
                 trace_ids: &mut trace_ids,
                 scene_ids: &mut scene_ids,
                 totals: &mut totals,
@@ -194,7 +207,12 @@ impl Stage for ImportStage {
             if let Some(err) = consumer.failure.take() {
                 return Err(err);
             }
-            consumer.close_shard()?;
+            offset += consumer.next_ordinal;
+            if groups.get(fi + 1) == Some(&groups[fi]) {
+                carried = consumer.shard.take();
+            } else {
+                consumer.close_shard()?;
+            }
             ctx.progress().advance(ctx.stage_id(), 1);
         }
         let line = format!(
@@ -222,6 +240,34 @@ impl Stage for ImportStage {
             line,
         })
     }
+}
+
+/// Input files of less than this many bytes share shards with their neighbours (about 100 billiard
+/// shots of the paper's JSON at dt 0.01; thousands of PHYRE or I-PHYRE traces): enough traces per
+/// file set for the stages that work a set at a time, while a resumed import reads again at most
+/// this much of what an earlier attempt finished.
+pub const GROUP_BYTES: u64 = 128 << 20;
+
+/// For each input file, the index of the first file of its group: consecutive files whose sizes
+/// add up to at most [`GROUP_BYTES`] (a larger file stands alone).
+fn file_groups(files: &[PathBuf]) -> Result<Vec<usize>, StageError> {
+    let mut out = Vec::with_capacity(files.len());
+    let (mut start, mut bytes) = (0usize, 0u64);
+    for (i, f) in files.iter().enumerate() {
+        let size = std::fs::metadata(f)
+            .map_err(|source| json::SourceError {
+                path: f.clone(),
+                source,
+            })?
+            .len();
+        if i == 0 || bytes.saturating_add(size) > GROUP_BYTES {
+            start = i;
+            bytes = 0;
+        }
+        bytes = bytes.saturating_add(size);
+        out.push(start);
+    }
+    Ok(out)
 }
 
 /// The values of a string column over the run's published files and this stage's finished shards.
@@ -308,6 +354,10 @@ struct Importer<'a, 'c> {
     ctx: &'a StageContext<'c>,
     stage: &'a ImportStage,
     file_index: usize,
+    /// The index of the first file of this file's group (names its shards).
+    group: usize,
+    /// Traces in the group's earlier files.
+    offset: usize,
     file: &'a Path,
     stem: String,
     builder: TraceBatchBuilder,
@@ -325,7 +375,7 @@ struct Importer<'a, 'c> {
 
 impl Importer<'_, '_> {
     fn shard_name(&self, chunk: usize) -> String {
-        format!("{:05}-{chunk:05}", self.file_index)
+        format!("{:05}-{chunk:05}", self.group)
     }
 
     /// Makes `chunk` the open shard, closing the previous one.
@@ -522,7 +572,7 @@ impl TraceConsumer for Importer<'_, '_> {
         if self.failure.is_some() {
             return;
         }
-        let chunk = self.next_ordinal / self.stage.per_shard;
+        let chunk = (self.offset + self.next_ordinal) / self.stage.per_shard;
         if let Err(e) = self.enter_chunk(chunk) {
             self.failure = Some(e);
             return;
@@ -552,7 +602,7 @@ impl TraceConsumer for Importer<'_, '_> {
             return ControlFlow::Break(());
         }
         let outcome = (|| {
-            self.enter_chunk(loc.ordinal / self.stage.per_shard)?;
+            self.enter_chunk((self.offset + loc.ordinal) / self.stage.per_shard)?;
             if self.shard.as_ref().is_some_and(|s| s.done) {
                 self.builder.discard();
                 return Ok(());
