@@ -141,7 +141,9 @@ pub struct ImportStage {
 }
 
 impl Stage for ImportStage {
-    /// The files behind the paths, with their sizes and modification times: editing an input reruns.
+    /// The files behind the paths, with their sizes and modification times (editing an input reruns),
+    /// and how files are grouped into shards (so that a resumed import never takes the finished shards
+    /// of another grouping, such as the one shard per file of earlier versions, for its own).
     fn fingerprint_extra(&self) -> Result<Value, StageError> {
         let files = expand_paths(&self.paths)?;
         let mut out = Vec::with_capacity(files.len());
@@ -162,7 +164,7 @@ impl Stage for ImportStage {
                 .into_owned();
             out.push(json!({"path": shown, "bytes": meta.len(), "mtime_ns": mtime.to_string()}));
         }
-        Ok(Value::Array(out))
+        Ok(json!({"files": out, "group_bytes": GROUP_BYTES}))
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> Result<StageOutput, StageError> {
