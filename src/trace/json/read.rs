@@ -1,8 +1,10 @@
 //! Streaming reader of the paper's JSON trace format: one trace per file, an array of traces, or JSON Lines.
 //!
-//! The reader never holds a whole file or a whole trace as JSON: it walks the top level with serde, parses
-//! one timestep at a time, converts it to the typed model and hands it to a [`TraceConsumer`] at once.
-//! Memory is bounded by one timestep of JSON plus whatever the consumer keeps.
+//! The reader never holds a whole trace as JSON values: it walks the top level with serde, parses one
+//! timestep at a time, converts it to the typed model and hands it to a [`TraceConsumer`] at once. A
+//! `.json` file of at most 64 MiB is read into memory first (serde parses a slice faster than a
+//! stream); larger files and JSON Lines stream. Memory is bounded by that, one timestep of JSON and
+//! whatever the consumer keeps.
 //!
 //! Every fault names the file, the trace (its line in JSON Lines, its position otherwise, and its
 //! `task_id` when known) and the JSON path of the faulty value. A syntax error in a JSON Lines file
@@ -153,15 +155,29 @@ pub fn read_file(
         source,
     };
     let file = File::open(path).map_err(err)?;
-    let reader = BufReader::with_capacity(1 << 16, file);
+    let size = file.metadata().map_err(err)?.len();
+    let mut reader = BufReader::with_capacity(1 << 16, file);
     match SourceKind::of(path) {
         SourceKind::JsonLines => read_lines(path, reader, env, consumer).map_err(err),
+        // A file of at most `WHOLE_JSON_BYTES` is parsed from memory (serde's slice reader is
+        // faster than its byte-at-a-time reader); a larger one streams, with bounded memory.
+        SourceKind::Json if size <= WHOLE_JSON_BYTES => {
+            let mut bytes = Vec::with_capacity(usize::try_from(size).unwrap_or(0));
+            io::Read::read_to_end(&mut reader, &mut bytes).map_err(err)?;
+            let de = serde_json::Deserializer::from_slice(&bytes);
+            read_json(path, de, env, consumer, &|n| nth_line(path, n));
+            Ok(())
+        }
         SourceKind::Json => {
-            read_json(path, reader, env, consumer, &|n| nth_line(path, n));
+            let de = serde_json::Deserializer::from_reader(reader);
+            read_json(path, de, env, consumer, &|n| nth_line(path, n));
             Ok(())
         }
     }
 }
+
+/// `.json` files up to this size are read whole and parsed from memory; larger ones stream.
+const WHOLE_JSON_BYTES: u64 = 64 << 20;
 
 /// Reads traces from an in-memory JSON text (one trace or an array) into complete [`Trace`] values.
 /// `name` stands for the file in error messages; trace ids default to `name` (or `name-N` in arrays).
@@ -187,7 +203,8 @@ pub fn read_bytes(
                 let line = bytes.split(|b| *b == b'\n').nth(n.checked_sub(1)?)?;
                 Some(String::from_utf8_lossy(line).into_owned())
             };
-            read_json(path, bytes, env, &mut collect, &text_at);
+            let de = serde_json::Deserializer::from_slice(bytes);
+            read_json(path, de, env, &mut collect, &text_at);
         }
         // Reading from memory cannot fail.
         SourceKind::JsonLines => {
@@ -413,9 +430,9 @@ fn read_lines(
 }
 
 /// Reads a `.json` text; `text_at(n)` gives its line `n` (1-based) for error messages.
-fn read_json(
+fn read_json<'de, R: serde_json::de::Read<'de>>(
     path: &Path,
-    reader: impl io::Read,
+    mut de: serde_json::Deserializer<R>,
     env: Env,
     consumer: &mut dyn TraceConsumer,
     text_at: &dyn Fn(usize) -> Option<String>,
@@ -431,7 +448,6 @@ fn read_json(
         current: None,
         stopped: false,
     };
-    let mut de = serde_json::Deserializer::from_reader(reader);
     let res = FileSeed { st: &mut st }
         .deserialize(&mut de)
         .and_then(|()| de.end());
