@@ -279,7 +279,7 @@ pub fn parameter_keys(
     Ok(out)
 }
 
-/// The annotations of the traces `wanted` (sorted) of `env`, in file order. Only the row groups
+/// The annotations of the traces `wanted` (any order) of `env`, in file order. Only the row groups
 /// whose `trace_id` statistics can hold one of them are read (an `annotate` stage writes a file per
 /// trace file set, so a set's annotations come from its own file): a stage that works a set at a
 /// time holds that set's annotations, not the run's.
@@ -288,16 +288,18 @@ pub fn read_annotations_of(
     env: Env,
     wanted: &[&str],
 ) -> Result<Vec<Annotation>, StoreError> {
-    debug_assert!(wanted.is_sorted(), "wanted ids must be sorted");
     let mut out = Vec::new();
     if wanted.is_empty() {
         return Ok(out);
     }
+    // `rows_of` looks ids up by binary search.
+    let mut wanted = wanted.to_vec();
+    wanted.sort_unstable();
     for f in run.table("annotations")?.files {
         if f.env != Some(env) {
             continue;
         }
-        for b in crate::store::rows_of(&f.path, wanted)? {
+        for b in crate::store::rows_of(&f.path, &wanted)? {
             decode_annotations(&f.path, &b, &mut out)?;
         }
     }

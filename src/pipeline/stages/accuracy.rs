@@ -436,8 +436,7 @@ fn stored_annotations(
     let Some(env) = traces.first().map(|t| t.env) else {
         return Ok(Vec::new());
     };
-    let mut ids: Vec<&str> = traces.iter().map(|t| t.trace_id.as_str()).collect();
-    ids.sort_unstable();
+    let ids: Vec<&str> = traces.iter().map(|t| t.trace_id.as_str()).collect();
     let mut by_trace: std::collections::HashMap<String, Vec<Annotation>> = Default::default();
     for a in read_annotations_of(ctx.run(), env, &ids)? {
         if let Some(d) = lib.detectors.iter().find(|d| d.id == a.detector_id) {

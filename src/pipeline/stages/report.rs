@@ -244,8 +244,7 @@ impl Stage for ReportStage {
                 continue;
             }
             // This set's shown traces' annotations only: the run's are never held at once.
-            let mut ids: Vec<&str> = keep.iter().map(String::as_str).collect();
-            ids.sort_unstable();
+            let ids: Vec<&str> = keep.iter().map(String::as_str).collect();
             let mut annotations: HashMap<String, Vec<Annotation>> = HashMap::new();
             for a in read_annotations_of(run, env, &ids)? {
                 annotations.entry(a.trace_id.clone()).or_default().push(a);
