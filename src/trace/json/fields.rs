@@ -1,14 +1,49 @@
 //! Typed access to the fields of one JSON object, with errors that carry the JSON path of the fault.
 
+use std::borrow::Cow;
+
 use serde_json::Value;
 
 use super::error::{Fault, FaultKind};
 use crate::trace::model::JsonMap;
 
+/// Where an object's fields are looked up: a whole JSON map, or the fields of a known layout that the
+/// streaming reader kept (`read::Slots`) without building a map.
+pub(crate) trait Lookup {
+    /// The value of field `key`, if the object has it.
+    fn field(&self, key: &str) -> Option<&Value>;
+}
+
+impl Lookup for JsonMap {
+    fn field(&self, key: &str) -> Option<&Value> {
+        self.get(key)
+    }
+}
+
+/// The JSON path of an object, made into text only when a fault needs it: the reader walks about
+/// ten thousand objects per billiard shot and names none of them unless one is faulty.
+#[derive(Clone, Copy)]
+pub(crate) enum ObjectPath<'a> {
+    /// A path given whole (`$.outcome`).
+    Whole(&'a str),
+    /// Element `.1` of the array at path `.0` (`$.timesteps[3].objects` and 1).
+    Item(&'a str, usize),
+}
+
+impl<'a> ObjectPath<'a> {
+    /// The path as text.
+    pub(crate) fn text(self) -> Cow<'a, str> {
+        match self {
+            ObjectPath::Whole(p) => Cow::Borrowed(p),
+            ObjectPath::Item(p, i) => Cow::Owned(format!("{p}[{i}]")),
+        }
+    }
+}
+
 /// A JSON object being read field by field; `path` is its JSON path (`$.timesteps[3].objects[1]`).
-pub(crate) struct Fields<'a> {
-    obj: &'a JsonMap,
-    path: &'a str,
+pub(crate) struct Fields<'a, M: Lookup + ?Sized = JsonMap> {
+    obj: &'a M,
+    path: ObjectPath<'a>,
 }
 
 /// A short, printable description of a JSON value for error messages.
@@ -36,22 +71,46 @@ impl<'a> Fields<'a> {
     /// Reads `value` as an object, or fails with a type fault at `path`.
     pub(crate) fn of(value: &'a Value, path: &'a str, what: &str) -> Result<Self, Fault> {
         match value {
-            Value::Object(obj) => Ok(Fields { obj, path }),
-            other => Err(Fault::new(
-                path,
-                FaultKind::Type,
-                format!("expected {what} (a JSON object), found {}", describe(other)),
-            )),
+            Value::Object(obj) => Ok(Fields {
+                obj,
+                path: ObjectPath::Whole(path),
+            }),
+            other => Err(not_an_object(path, what, other)),
         }
+    }
+
+    /// The fields whose names are not in `known`, in input order.
+    pub(crate) fn rest(&self, known: &[&str]) -> JsonMap {
+        self.obj
+            .iter()
+            .filter(|(k, _)| !known.contains(&k.as_str()))
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect()
+    }
+}
+
+/// The fault for a value that should have been an object (`what` names it: "a timestep").
+pub(crate) fn not_an_object(path: &str, what: &str, found: &Value) -> Fault {
+    Fault::new(
+        path,
+        FaultKind::Type,
+        format!("expected {what} (a JSON object), found {}", describe(found)),
+    )
+}
+
+impl<'a, M: Lookup + ?Sized> Fields<'a, M> {
+    /// Reads the fields of `obj`, an object at `path`.
+    pub(crate) fn new(obj: &'a M, path: ObjectPath<'a>) -> Self {
+        Fields { obj, path }
     }
 
     /// The JSON path of `key` inside this object.
     pub(crate) fn path_of(&self, key: &str) -> String {
-        child_path(self.path, key)
+        child_path(&self.path.text(), key)
     }
 
     fn required(&self, key: &str) -> Result<&'a Value, Fault> {
-        self.obj.get(key).ok_or_else(|| {
+        self.obj.field(key).ok_or_else(|| {
             Fault::new(
                 self.path_of(key),
                 FaultKind::Missing,
@@ -62,14 +121,14 @@ impl<'a> Fields<'a> {
 
     /// A required finite number.
     pub(crate) fn f64(&self, key: &str) -> Result<f64, Fault> {
-        number(self.required(key)?, &self.path_of(key))
+        number(self.required(key)?, || self.path_of(key))
     }
 
     /// An optional finite number (absent or null gives `None`).
     pub(crate) fn opt_f64(&self, key: &str) -> Result<Option<f64>, Fault> {
-        match self.obj.get(key) {
+        match self.obj.field(key) {
             None | Some(Value::Null) => Ok(None),
-            Some(v) => number(v, &self.path_of(key)).map(Some),
+            Some(v) => number(v, || self.path_of(key)).map(Some),
         }
     }
 
@@ -111,25 +170,24 @@ impl<'a> Fields<'a> {
 
     /// A required array of exactly three finite numbers.
     pub(crate) fn vec3(&self, key: &str) -> Result<[f64; 3], Fault> {
-        let path = self.path_of(key);
         let v = self.required(key)?;
         let items = v.as_array().filter(|a| a.len() == 3).ok_or_else(|| {
             Fault::new(
-                &path,
+                self.path_of(key),
                 FaultKind::Type,
                 format!("expected an array of 3 numbers, found {}", describe(v)),
             )
         })?;
         let mut out = [0.0; 3];
         for (i, item) in items.iter().enumerate() {
-            out[i] = number(item, &format!("{path}[{i}]"))?;
+            out[i] = number(item, || format!("{}[{i}]", self.path_of(key)))?;
         }
         Ok(out)
     }
 
     /// An optional JSON object (absent gives `None`).
     pub(crate) fn opt_object(&self, key: &str) -> Result<Option<JsonMap>, Fault> {
-        match self.obj.get(key) {
+        match self.obj.field(key) {
             None => Ok(None),
             Some(Value::Object(m)) => Ok(Some(m.clone())),
             Some(v) => Err(Fault::new(
@@ -139,28 +197,20 @@ impl<'a> Fields<'a> {
             )),
         }
     }
-
-    /// The fields whose names are not in `known`, in input order.
-    pub(crate) fn rest(&self, known: &[&str]) -> JsonMap {
-        self.obj
-            .iter()
-            .filter(|(k, _)| !known.contains(&k.as_str()))
-            .map(|(k, v)| (k.clone(), v.clone()))
-            .collect()
-    }
 }
 
-/// Reads a finite number; integers are accepted where a float is expected.
-pub(crate) fn number(v: &Value, path: &str) -> Result<f64, Fault> {
+/// Reads a finite number; integers are accepted where a float is expected. `path` makes the
+/// value's JSON path, only for a fault.
+pub(crate) fn number(v: &Value, path: impl FnOnce() -> String) -> Result<f64, Fault> {
     match v.as_f64() {
         Some(x) if x.is_finite() => Ok(x),
         Some(x) => Err(Fault::new(
-            path,
+            path(),
             FaultKind::NonFinite,
             format!("expected a finite number, found {x}"),
         )),
         None => Err(Fault::new(
-            path,
+            path(),
             FaultKind::Type,
             format!("expected a number, found {}", describe(v)),
         )),

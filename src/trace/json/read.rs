@@ -1,7 +1,8 @@
 //! Streaming reader of the paper's JSON trace format: one trace per file, an array of traces, or JSON Lines.
 //!
-//! The reader never holds a whole trace as JSON values: it walks the top level with serde, parses one
-//! timestep at a time, converts it to the typed model and hands it to a [`TraceConsumer`] at once. A
+//! The reader never holds a whole trace as JSON values: it walks the top level with serde, reads one
+//! timestep at a time straight into the typed model (each object's known fields into the slots of its
+//! environment's layout, not into a JSON map) and hands it to a [`TraceConsumer`] at once. A
 //! `.json` file of at most 64 MiB is read into memory first (serde parses a slice faster than a
 //! stream); larger files and JSON Lines stream. Memory is bounded by that, one timestep of JSON and
 //! whatever the consumer keeps.
@@ -16,11 +17,13 @@ use std::io::{self, BufRead, BufReader};
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
+use serde::Deserialize;
+use serde::de::value::{MapAccessDeserializer, SeqAccessDeserializer};
 use serde::de::{DeserializeSeed, Error as _, IgnoredAny, MapAccess, SeqAccess, Visitor};
 use serde_json::Value;
 
 use super::error::{Fault, FaultKind, TraceError, TraceLocation};
-use super::fields::{Fields, describe, number};
+use super::fields::{Fields, Lookup, ObjectPath, child_path, describe, not_an_object, number};
 use crate::trace::Env;
 use crate::trace::model::{
     Body, Event, IphyreObject, JsonMap, Object, Outcome, PhyreObject, PoolBall, Timestep, Trace,
@@ -743,10 +746,10 @@ impl<'de> Visitor<'de> for TimestepsSeed<'_, '_, '_> {
                     break;
                 }
             } else {
-                let Some(v) = seq.next_element::<Value>()? else {
+                let Some(step) = seq.next_element_seed(TimestepSeed { path: &path, env })? else {
                     break;
                 };
-                match parse_timestep(&v, &path, env, self.p.last_step) {
+                match step.and_then(|raw| raw.finish(&path, self.p.last_step)) {
                     Ok(ts) => {
                         self.p.last_step = Some((ts.index, ts.t));
                         self.st.consumer.timestep(ts);
@@ -812,76 +815,349 @@ impl TimestepsSeed<'_, '_, '_> {
 
 const TIMESTEP_KEYS: &[&str] = &["index", "t", "objects"];
 
-/// Converts one timestep, checking that `index` and `t` increase and that object ids are unique.
-fn parse_timestep(
-    v: &Value,
-    path: &str,
-    env: Env,
-    last: Option<(i64, f64)>,
-) -> Result<Timestep, Fault> {
-    let f = Fields::of(v, path, "a timestep")?;
-    let index = f.i64("index")?;
-    let t = f.f64("t")?;
-    if let Some((prev_index, prev_t)) = last {
-        if index <= prev_index {
-            return Err(Fault::new(
-                f.path_of("index"),
-                FaultKind::Order,
-                format!(
-                    "timestep index {index} does not increase (previous timestep has index {prev_index})"
-                ),
-            ));
+/// A visitor's scalar cases, each handed to its `found` method as a JSON value (a field of the
+/// wrong JSON type is described in its fault as it was written).
+macro_rules! scalars_to_found {
+    () => {
+        fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Self::Value, E> {
+            Ok(self.found(Value::String(v.to_owned())))
         }
-        if t <= prev_t {
-            return Err(Fault::new(
-                f.path_of("t"),
-                FaultKind::Order,
-                format!("time t = {t} does not increase (previous timestep has t = {prev_t})"),
-            ));
+        fn visit_bool<E: serde::de::Error>(self, v: bool) -> Result<Self::Value, E> {
+            Ok(self.found(Value::Bool(v)))
         }
-    }
-    let objects_path = f.path_of("objects");
-    let objects = match v.get("objects") {
-        None => {
-            return Err(Fault::new(
-                &objects_path,
-                FaultKind::Missing,
-                "missing required field `objects`",
-            ));
+        fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Self::Value, E> {
+            Ok(self.found(Value::from(v)))
         }
-        Some(Value::Array(items)) => items,
-        Some(other) => {
-            return Err(Fault::new(
-                &objects_path,
-                FaultKind::Type,
-                format!("expected an array of objects, found {}", describe(other)),
-            ));
+        fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Self::Value, E> {
+            Ok(self.found(Value::from(v)))
+        }
+        fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Self::Value, E> {
+            Ok(self.found(Value::from(v)))
+        }
+        fn visit_unit<E: serde::de::Error>(self) -> Result<Self::Value, E> {
+            Ok(self.found(Value::Null))
         }
     };
-    let mut out = Vec::with_capacity(objects.len());
-    let mut ids: Vec<String> = Vec::with_capacity(objects.len());
-    for (j, o) in objects.iter().enumerate() {
-        let opath = format!("{objects_path}[{j}]");
-        let obj = parse_object(o, &opath, env)?;
-        let id = obj.object_id();
-        if let Some(first) = ids.iter().position(|x| *x == id) {
-            return Err(Fault::new(
-                opath,
-                FaultKind::DuplicateObject,
-                format!(
-                    "object id {id:?} appears twice in this timestep (also at objects[{first}])"
-                ),
-            ));
+}
+
+/// One element of `timesteps`, parsed straight into the model: the objects' fields go into slots
+/// of their environment's layout ([`Slots`]) instead of a JSON map per object, and nothing is
+/// checked until the element has been read, so the faults are those (and in the order) of reading
+/// the element as a JSON value first and then field by field (`docs/trace-format.md`).
+struct TimestepSeed<'a> {
+    path: &'a str,
+    env: Env,
+}
+
+/// A timestep as read, before its `index`, `t` and `objects` are checked.
+#[derive(Default)]
+struct RawTimestep {
+    index: Option<Value>,
+    t: Option<Value>,
+    objects: Option<ObjectsRead>,
+    extra: JsonMap,
+}
+
+/// What the `objects` field held.
+enum ObjectsRead {
+    /// An array: its objects up to the first faulty one, or that fault.
+    Array(Result<Vec<Object>, Fault>),
+    /// Anything else (a type fault).
+    Other(Value),
+}
+
+impl Lookup for RawTimestep {
+    fn field(&self, key: &str) -> Option<&Value> {
+        match key {
+            "index" => self.index.as_ref(),
+            "t" => self.t.as_ref(),
+            _ => None,
         }
-        ids.push(id);
-        out.push(obj);
     }
-    Ok(Timestep {
-        index,
-        t,
-        objects: out,
-        extra: f.rest(TIMESTEP_KEYS),
-    })
+}
+
+impl RawTimestep {
+    /// Checks the timestep in the order the faults are documented: `index`, `t`, their order
+    /// against the previous timestep, then `objects`.
+    fn finish(self, path: &str, last: Option<(i64, f64)>) -> Result<Timestep, Fault> {
+        let f = Fields::new(&self, ObjectPath::Whole(path));
+        let index = f.i64("index")?;
+        let t = f.f64("t")?;
+        if let Some((prev_index, prev_t)) = last {
+            if index <= prev_index {
+                return Err(Fault::new(
+                    f.path_of("index"),
+                    FaultKind::Order,
+                    format!(
+                        "timestep index {index} does not increase (previous timestep has index {prev_index})"
+                    ),
+                ));
+            }
+            if t <= prev_t {
+                return Err(Fault::new(
+                    f.path_of("t"),
+                    FaultKind::Order,
+                    format!("time t = {t} does not increase (previous timestep has t = {prev_t})"),
+                ));
+            }
+        }
+        let objects = match self.objects {
+            None => {
+                return Err(Fault::new(
+                    child_path(path, "objects"),
+                    FaultKind::Missing,
+                    "missing required field `objects`",
+                ));
+            }
+            Some(ObjectsRead::Other(other)) => {
+                return Err(Fault::new(
+                    child_path(path, "objects"),
+                    FaultKind::Type,
+                    format!("expected an array of objects, found {}", describe(&other)),
+                ));
+            }
+            Some(ObjectsRead::Array(objects)) => objects?,
+        };
+        Ok(Timestep {
+            index,
+            t,
+            objects,
+            extra: self.extra,
+        })
+    }
+}
+
+impl<'de> DeserializeSeed<'de> for TimestepSeed<'_> {
+    type Value = Result<RawTimestep, Fault>;
+    fn deserialize<D: serde::Deserializer<'de>>(self, d: D) -> Result<Self::Value, D::Error> {
+        d.deserialize_any(self)
+    }
+}
+
+impl<'de> Visitor<'de> for TimestepSeed<'_> {
+    type Value = Result<RawTimestep, Fault>;
+
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str("a timestep")
+    }
+
+    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+        let mut step = RawTimestep::default();
+        while let Some(key) = map.next_key_seed(KeySeed(TIMESTEP_KEYS))? {
+            match key {
+                Key::Known(0) => step.index = Some(map.next_value()?),
+                Key::Known(1) => step.t = Some(map.next_value()?),
+                Key::Known(_) => {
+                    let objects_path = child_path(self.path, "objects");
+                    step.objects = Some(map.next_value_seed(ObjectsSeed {
+                        path: &objects_path,
+                        env: self.env,
+                    })?);
+                }
+                // A key given twice keeps its last value in its first place, as a JSON map does.
+                Key::Other(k) => {
+                    step.extra.insert(k, map.next_value()?);
+                }
+            }
+        }
+        Ok(Ok(step))
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, seq: A) -> Result<Self::Value, A::Error> {
+        Ok(self.found(Value::deserialize(SeqAccessDeserializer::new(seq))?))
+    }
+
+    scalars_to_found!();
+}
+
+impl TimestepSeed<'_> {
+    fn found(self, v: Value) -> Result<RawTimestep, Fault> {
+        Err(not_an_object(self.path, "a timestep", &v))
+    }
+}
+
+/// An object key: its position in a layout's list of known keys, or the key itself.
+enum Key {
+    Known(usize),
+    Other(String),
+}
+
+/// Reads a key against a layout's known keys without allocating for a known one.
+struct KeySeed(&'static [&'static str]);
+
+impl<'de> DeserializeSeed<'de> for KeySeed {
+    type Value = Key;
+    fn deserialize<D: serde::Deserializer<'de>>(self, d: D) -> Result<Key, D::Error> {
+        d.deserialize_str(self)
+    }
+}
+
+impl<'de> Visitor<'de> for KeySeed {
+    type Value = Key;
+
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str("an object key")
+    }
+
+    fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Key, E> {
+        Ok(match self.0.iter().position(|k| *k == v) {
+            Some(i) => Key::Known(i),
+            None => Key::Other(v.to_owned()),
+        })
+    }
+}
+
+/// The `objects` field of a timestep.
+struct ObjectsSeed<'a> {
+    path: &'a str,
+    env: Env,
+}
+
+impl<'de> DeserializeSeed<'de> for ObjectsSeed<'_> {
+    type Value = ObjectsRead;
+    fn deserialize<D: serde::Deserializer<'de>>(self, d: D) -> Result<ObjectsRead, D::Error> {
+        d.deserialize_any(self)
+    }
+}
+
+impl<'de> Visitor<'de> for ObjectsSeed<'_> {
+    type Value = ObjectsRead;
+
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str("an array of objects")
+    }
+
+    /// Converts objects in order and stops converting at the first fault (the rest of the array is
+    /// still read, as JSON, so that a syntax error after it is found just the same).
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<ObjectsRead, A::Error> {
+        let mut out: Vec<Object> = Vec::with_capacity(seq.size_hint().unwrap_or(16));
+        let mut ids: Vec<String> = Vec::with_capacity(out.capacity());
+        let mut j = 0usize;
+        let mut fault = None;
+        loop {
+            if fault.is_some() {
+                if seq.next_element::<IgnoredAny>()?.is_none() {
+                    break;
+                }
+                continue;
+            }
+            let seed = ObjectSeed {
+                path: ObjectPath::Item(self.path, j),
+                env: self.env,
+            };
+            let Some(obj) = seq.next_element_seed(seed)? else {
+                break;
+            };
+            match obj {
+                Ok(obj) => {
+                    let id = obj.object_id();
+                    if let Some(first) = ids.iter().position(|x| *x == id) {
+                        fault = Some(Fault::new(
+                            ObjectPath::Item(self.path, j).text(),
+                            FaultKind::DuplicateObject,
+                            format!(
+                                "object id {id:?} appears twice in this timestep (also at objects[{first}])"
+                            ),
+                        ));
+                    } else {
+                        ids.push(id);
+                        out.push(obj);
+                    }
+                }
+                Err(f) => fault = Some(f),
+            }
+            j += 1;
+        }
+        Ok(ObjectsRead::Array(match fault {
+            Some(f) => Err(f),
+            None => Ok(out),
+        }))
+    }
+
+    fn visit_map<A: MapAccess<'de>>(self, map: A) -> Result<ObjectsRead, A::Error> {
+        Ok(self.found(Value::deserialize(MapAccessDeserializer::new(map))?))
+    }
+
+    scalars_to_found!();
+}
+
+impl ObjectsSeed<'_> {
+    fn found(self, v: Value) -> ObjectsRead {
+        ObjectsRead::Other(v)
+    }
+}
+
+/// The fields of one object in the layout of its environment: each known field's value in its
+/// slot, the others (in input order) for the object's `extra`.
+struct Slots {
+    keys: &'static [&'static str],
+    values: [Option<Value>; MAX_OBJECT_KEYS],
+    extra: JsonMap,
+}
+
+/// The most fields a layout names (I-PHYRE's).
+const MAX_OBJECT_KEYS: usize = IPHYRE_KEYS.len();
+
+impl Lookup for Slots {
+    fn field(&self, key: &str) -> Option<&Value> {
+        let i = self.keys.iter().position(|k| *k == key)?;
+        self.values[i].as_ref()
+    }
+}
+
+/// One object of a timestep.
+struct ObjectSeed<'a> {
+    path: ObjectPath<'a>,
+    env: Env,
+}
+
+impl ObjectSeed<'_> {
+    fn found(self, v: Value) -> Result<Object, Fault> {
+        Err(not_an_object(&self.path.text(), "an object", &v))
+    }
+}
+
+impl<'de> DeserializeSeed<'de> for ObjectSeed<'_> {
+    type Value = Result<Object, Fault>;
+    fn deserialize<D: serde::Deserializer<'de>>(self, d: D) -> Result<Self::Value, D::Error> {
+        d.deserialize_any(self)
+    }
+}
+
+impl<'de> Visitor<'de> for ObjectSeed<'_> {
+    type Value = Result<Object, Fault>;
+
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str("an object")
+    }
+
+    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+        let mut slots = Slots {
+            keys: layout_keys(self.env),
+            values: Default::default(),
+            extra: JsonMap::new(),
+        };
+        while let Some(key) = map.next_key_seed(KeySeed(slots.keys))? {
+            match key {
+                Key::Known(i) => slots.values[i] = Some(map.next_value()?),
+                Key::Other(k) => {
+                    slots.extra.insert(k, map.next_value()?);
+                }
+            }
+        }
+        Ok(
+            object_of(&Fields::new(&slots, self.path), self.env).map(|body| Object {
+                body,
+                extra: slots.extra,
+            }),
+        )
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, seq: A) -> Result<Self::Value, A::Error> {
+        Ok(self.found(Value::deserialize(SeqAccessDeserializer::new(seq))?))
+    }
+
+    scalars_to_found!();
 }
 
 /// Object fields of each environment's layout, in the paper's order.
@@ -925,62 +1201,57 @@ pub(crate) const IPHYRE_KEYS: &[&str] = &[
     "angular_velocity",
 ];
 
-/// Converts one object in the layout of `env`.
-fn parse_object(v: &Value, path: &str, env: Env) -> Result<Object, Fault> {
-    let f = Fields::of(v, path, "an object")?;
-    let (body, known) = match env {
-        Env::Pooltool => {
-            let ball = PoolBall {
-                kind: f.str("kind")?.into(),
-                ball_id: f.str("ball_id")?.into(),
-                position: f.vec3("position")?,
-                velocity: f.vec3("velocity")?,
-                angular_velocity: f.vec3("angular_velocity")?,
-                motion_state_code: f.i64("motion_state_code")?,
-                motion_state: f.str("motion_state")?.into(),
-                radius: f.f64("radius")?,
-            };
-            (Body::Pool(ball), POOL_KEYS)
-        }
-        Env::Phyre => {
-            let o = PhyreObject {
-                object_index: f.i64("object_index")?,
-                shape: f.str("shape")?,
-                color: f.str("color")?,
-                diameter: f.f64("diameter")?,
-                x: f.f64("x")?,
-                y: f.f64("y")?,
-                angle: f.f64("angle")?,
-                vx: f.f64("vx")?,
-                vy: f.f64("vy")?,
-                angular_velocity: f.f64("angular_velocity")?,
-                is_user_input: f.bool("is_user_input")?,
-            };
-            (Body::Phyre(o), PHYRE_KEYS)
-        }
-        Env::Iphyre => {
-            let o = IphyreObject {
-                index: f.i64("index")?,
-                x1: f.f64("x1")?,
-                y1: f.f64("y1")?,
-                x2: f.f64("x2")?,
-                y2: f.f64("y2")?,
-                radius: f.f64("radius")?,
-                eliminable: f.f64("eliminable")?,
-                dynamic: f.f64("dynamic")?,
-                joint: f.i64("joint")?,
-                spring: f.i64("spring")?,
-                angle: f.opt_f64("angle")?,
-                vx: f.opt_f64("vx")?,
-                vy: f.opt_f64("vy")?,
-                angular_velocity: f.opt_f64("angular_velocity")?,
-            };
-            (Body::Iphyre(o), IPHYRE_KEYS)
-        }
-    };
-    Ok(Object {
-        body,
-        extra: f.rest(known),
+/// The known fields of each environment's objects.
+fn layout_keys(env: Env) -> &'static [&'static str] {
+    match env {
+        Env::Pooltool => POOL_KEYS,
+        Env::Phyre => PHYRE_KEYS,
+        Env::Iphyre => IPHYRE_KEYS,
+    }
+}
+
+/// Converts the fields of one object in the layout of `env`.
+fn object_of<M: Lookup + ?Sized>(f: &Fields<'_, M>, env: Env) -> Result<Body, Fault> {
+    Ok(match env {
+        Env::Pooltool => Body::Pool(PoolBall {
+            kind: f.str("kind")?.into(),
+            ball_id: f.str("ball_id")?.into(),
+            position: f.vec3("position")?,
+            velocity: f.vec3("velocity")?,
+            angular_velocity: f.vec3("angular_velocity")?,
+            motion_state_code: f.i64("motion_state_code")?,
+            motion_state: f.str("motion_state")?.into(),
+            radius: f.f64("radius")?,
+        }),
+        Env::Phyre => Body::Phyre(PhyreObject {
+            object_index: f.i64("object_index")?,
+            shape: f.str("shape")?,
+            color: f.str("color")?,
+            diameter: f.f64("diameter")?,
+            x: f.f64("x")?,
+            y: f.f64("y")?,
+            angle: f.f64("angle")?,
+            vx: f.f64("vx")?,
+            vy: f.f64("vy")?,
+            angular_velocity: f.f64("angular_velocity")?,
+            is_user_input: f.bool("is_user_input")?,
+        }),
+        Env::Iphyre => Body::Iphyre(IphyreObject {
+            index: f.i64("index")?,
+            x1: f.f64("x1")?,
+            y1: f.f64("y1")?,
+            x2: f.f64("x2")?,
+            y2: f.f64("y2")?,
+            radius: f.f64("radius")?,
+            eliminable: f.f64("eliminable")?,
+            dynamic: f.f64("dynamic")?,
+            joint: f.i64("joint")?,
+            spring: f.i64("spring")?,
+            angle: f.opt_f64("angle")?,
+            vx: f.opt_f64("vx")?,
+            vy: f.opt_f64("vy")?,
+            angular_velocity: f.opt_f64("angular_velocity")?,
+        }),
     })
 }
 
@@ -1002,7 +1273,7 @@ fn parse_events(v: &Value) -> Result<Vec<Event>, Fault> {
             let f = Fields::of(e, &path, "an event")?;
             let t = match e.get("t") {
                 None | Some(Value::Null) => None,
-                Some(t) => Some(number(t, &f.path_of("t"))?),
+                Some(t) => Some(number(t, || f.path_of("t"))?),
             };
             Ok(Event {
                 kind: f.str("kind")?,
@@ -1024,4 +1295,255 @@ fn parse_outcome(v: &Value) -> Result<Outcome, Fault> {
         metrics: f.opt_object("metrics")?.unwrap_or_default(),
         extra: f.rest(OUTCOME_KEYS),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+
+    /// The reference: a timestep parsed as a JSON value first and then read field by field, as the
+    /// reader did before it read timesteps straight into the model.
+    fn by_value(
+        v: &Value,
+        path: &str,
+        env: Env,
+        last: Option<(i64, f64)>,
+    ) -> Result<Timestep, Fault> {
+        let f = Fields::of(v, path, "a timestep")?;
+        let index = f.i64("index")?;
+        let t = f.f64("t")?;
+        if let Some((prev_index, prev_t)) = last {
+            if index <= prev_index {
+                return Err(Fault::new(
+                    f.path_of("index"),
+                    FaultKind::Order,
+                    format!(
+                        "timestep index {index} does not increase (previous timestep has index {prev_index})"
+                    ),
+                ));
+            }
+            if t <= prev_t {
+                return Err(Fault::new(
+                    f.path_of("t"),
+                    FaultKind::Order,
+                    format!("time t = {t} does not increase (previous timestep has t = {prev_t})"),
+                ));
+            }
+        }
+        let objects_path = f.path_of("objects");
+        let objects = match v.get("objects") {
+            None => {
+                return Err(Fault::new(
+                    &objects_path,
+                    FaultKind::Missing,
+                    "missing required field `objects`",
+                ));
+            }
+            Some(Value::Array(items)) => items,
+            Some(other) => {
+                return Err(Fault::new(
+                    &objects_path,
+                    FaultKind::Type,
+                    format!("expected an array of objects, found {}", describe(other)),
+                ));
+            }
+        };
+        let mut out = Vec::new();
+        let mut ids: Vec<String> = Vec::new();
+        for (j, o) in objects.iter().enumerate() {
+            let opath = format!("{objects_path}[{j}]");
+            let of = Fields::of(o, &opath, "an object")?;
+            let obj = Object {
+                body: object_of(&of, env)?,
+                extra: of.rest(layout_keys(env)),
+            };
+            let id = obj.object_id();
+            if let Some(first) = ids.iter().position(|x| *x == id) {
+                return Err(Fault::new(
+                    opath,
+                    FaultKind::DuplicateObject,
+                    format!(
+                        "object id {id:?} appears twice in this timestep (also at objects[{first}])"
+                    ),
+                ));
+            }
+            ids.push(id);
+            out.push(obj);
+        }
+        Ok(Timestep {
+            index,
+            t,
+            objects: out,
+            extra: f.rest(TIMESTEP_KEYS),
+        })
+    }
+
+    /// The reader's own way: the element read straight into the model, then checked.
+    fn streamed(
+        text: &str,
+        path: &str,
+        env: Env,
+        last: Option<(i64, f64)>,
+    ) -> Result<Timestep, Fault> {
+        let mut de = serde_json::Deserializer::from_str(text);
+        let raw = TimestepSeed { path, env }.deserialize(&mut de).unwrap();
+        de.end().unwrap();
+        raw.and_then(|r| r.finish(path, last))
+    }
+
+    /// A value of a field in each JSON type and some edge cases, as JSON text.
+    fn any_value(rng: &mut SplitMix64) -> String {
+        let pick = [
+            "\"ball\"",
+            "\"1\"",
+            "\"cue\"",
+            "\"\"",
+            "0",
+            "1",
+            "-0",
+            "-0.0",
+            "2.5",
+            "-3",
+            "1e300",
+            "18446744073709551615",
+            "9223372036854775808",
+            "100000000000000000000",
+            "true",
+            "false",
+            "null",
+            "[]",
+            "[1, 2]",
+            "[1, 2, 3]",
+            "[1, \"2\", 3]",
+            "[1, 2, 3, 4]",
+            "[null, 0, 0]",
+            "{}",
+            "{\"a\": 1}",
+        ];
+        pick[rng.below(pick.len())].to_string()
+    }
+
+    /// A valid value of a known field.
+    fn good_value(key: &str, j: usize, rng: &mut SplitMix64) -> String {
+        match key {
+            "kind" => "\"ball\"".into(),
+            "ball_id" => format!("\"{}\"", j % 3),
+            "shape" => "\"ball\"".into(),
+            "color" => "\"red\"".into(),
+            "motion_state" => "\"rolling\"".into(),
+            "position" | "velocity" | "angular_velocity" => {
+                format!("[{}, {}, 0]", rng.below(10) as i64 - 5, rng.next_f64())
+            }
+            "is_user_input" => "false".into(),
+            "object_index" | "index" => format!("{}", j % 3),
+            "motion_state_code" | "joint" | "spring" => format!("{}", rng.below(4)),
+            _ => format!("{}", rng.next_f64() * 10.0),
+        }
+    }
+
+    /// An object's fields as JSON text: the layout's, some dropped, doubled, mistyped, reordered
+    /// or joined by unknown ones.
+    fn object_text(keys: &[&str], j: usize, rng: &mut SplitMix64) -> String {
+        if rng.below(150) == 0 {
+            return any_value(rng);
+        }
+        let mut fields: Vec<(String, String)> = Vec::new();
+        for k in keys {
+            if rng.below(150) == 0 {
+                continue;
+            }
+            let v = if rng.below(120) == 0 {
+                any_value(rng)
+            } else {
+                good_value(k, j, rng)
+            };
+            fields.push((k.to_string(), v));
+            if rng.below(150) == 0 {
+                fields.push((k.to_string(), any_value(rng)));
+            }
+        }
+        if rng.below(5) == 0 {
+            let n = 1 + rng.below(3);
+            for e in 0..n {
+                fields.push((format!("extra{}", e % 2), any_value(rng)));
+            }
+        }
+        if rng.below(4) == 0 {
+            let a = rng.below(fields.len().max(1));
+            let b = rng.below(fields.len().max(1));
+            if a < fields.len() && b < fields.len() {
+                fields.swap(a, b);
+            }
+        }
+        let body: Vec<String> = fields
+            .iter()
+            .map(|(k, v)| format!("{}: {v}", Value::String(k.clone())))
+            .collect();
+        format!("{{{}}}", body.join(", "))
+    }
+
+    fn timestep_text(env: Env, rng: &mut SplitMix64) -> String {
+        let keys = layout_keys(env);
+        let n = rng.below(5);
+        let objects: Vec<String> = (0..n).map(|j| object_text(keys, j, rng)).collect();
+        let mut fields = vec![
+            ("index".to_string(), format!("{}", rng.below(4))),
+            ("t".to_string(), format!("{}", rng.next_f64())),
+            ("objects".to_string(), format!("[{}]", objects.join(", "))),
+        ];
+        for f in fields.iter_mut() {
+            if rng.below(20) == 0 {
+                f.1 = any_value(rng);
+            }
+        }
+        if rng.below(20) == 0 {
+            let i = rng.below(fields.len());
+            fields.remove(i);
+        }
+        if rng.below(10) == 0 {
+            let i = rng.below(fields.len());
+            let dup = (fields[i].0.clone(), any_value(rng));
+            fields.push(dup);
+        }
+        if rng.below(6) == 0 {
+            fields.push(("note".into(), any_value(rng)));
+            fields.reverse();
+        }
+        if rng.below(60) == 0 {
+            return any_value(rng);
+        }
+        let body: Vec<String> = fields
+            .iter()
+            .map(|(k, v)| format!("\"{k}\": {v}"))
+            .collect();
+        format!("{{{}}}", body.join(", "))
+    }
+
+    #[test]
+    fn a_timestep_read_straight_into_the_model_gives_what_reading_it_as_a_value_gave() {
+        let mut rng = SplitMix64::new(7);
+        let mut faults = std::collections::BTreeMap::<&str, usize>::new();
+        for case in 0..6000 {
+            let env = [Env::Pooltool, Env::Phyre, Env::Iphyre][case % 3];
+            let text = timestep_text(env, &mut rng);
+            let last = match rng.below(3) {
+                0 => None,
+                1 => Some((1, 0.5)),
+                _ => Some((-1, -1.0)),
+            };
+            let path = "$.timesteps[4]";
+            let value: Value = serde_json::from_str(&text).unwrap();
+            let want = by_value(&value, path, env, last);
+            let got = streamed(&text, path, env, last);
+            assert_eq!(got, want, "case {case}: {text}");
+            *faults
+                .entry(got.as_ref().err().map_or("ok", |f| f.kind.as_str()))
+                .or_default() += 1;
+        }
+        // The cases reach every outcome the rules have.
+        for kind in ["ok", "type", "missing", "duplicate_object", "order"] {
+            assert!(faults.get(kind).copied().unwrap_or(0) >= 50, "{faults:?}");
+        }
+    }
 }
