@@ -883,24 +883,7 @@ impl RawTimestep {
         let f = Fields::new(&self, ObjectPath::Whole(path));
         let index = f.i64("index")?;
         let t = f.f64("t")?;
-        if let Some((prev_index, prev_t)) = last {
-            if index <= prev_index {
-                return Err(Fault::new(
-                    f.path_of("index"),
-                    FaultKind::Order,
-                    format!(
-                        "timestep index {index} does not increase (previous timestep has index {prev_index})"
-                    ),
-                ));
-            }
-            if t <= prev_t {
-                return Err(Fault::new(
-                    f.path_of("t"),
-                    FaultKind::Order,
-                    format!("time t = {t} does not increase (previous timestep has t = {prev_t})"),
-                ));
-            }
-        }
+        increasing(&f, (index, t), last)?;
         let objects = match self.objects {
             None => {
                 return Err(Fault::new(
@@ -925,6 +908,34 @@ impl RawTimestep {
             extra: self.extra,
         })
     }
+}
+
+/// Checks that a timestep's `index` and `t` are above the previous timestep's.
+fn increasing<M: Lookup + ?Sized>(
+    f: &Fields<'_, M>,
+    (index, t): (i64, f64),
+    last: Option<(i64, f64)>,
+) -> Result<(), Fault> {
+    let Some((prev_index, prev_t)) = last else {
+        return Ok(());
+    };
+    if index <= prev_index {
+        return Err(Fault::new(
+            f.path_of("index"),
+            FaultKind::Order,
+            format!(
+                "timestep index {index} does not increase (previous timestep has index {prev_index})"
+            ),
+        ));
+    }
+    if t <= prev_t {
+        return Err(Fault::new(
+            f.path_of("t"),
+            FaultKind::Order,
+            format!("time t = {t} does not increase (previous timestep has t = {prev_t})"),
+        ));
+    }
+    Ok(())
 }
 
 impl<'de> DeserializeSeed<'de> for TimestepSeed<'_> {
@@ -1313,24 +1324,7 @@ mod tests {
         let f = Fields::of(v, path, "a timestep")?;
         let index = f.i64("index")?;
         let t = f.f64("t")?;
-        if let Some((prev_index, prev_t)) = last {
-            if index <= prev_index {
-                return Err(Fault::new(
-                    f.path_of("index"),
-                    FaultKind::Order,
-                    format!(
-                        "timestep index {index} does not increase (previous timestep has index {prev_index})"
-                    ),
-                ));
-            }
-            if t <= prev_t {
-                return Err(Fault::new(
-                    f.path_of("t"),
-                    FaultKind::Order,
-                    format!("time t = {t} does not increase (previous timestep has t = {prev_t})"),
-                ));
-            }
-        }
+        increasing(&f, (index, t), last)?;
         let objects_path = f.path_of("objects");
         let objects = match v.get("objects") {
             None => {
