@@ -1,4 +1,6 @@
-//! Typed access to the fields of one JSON object, with errors that carry the JSON path of the fault.
+//! Typed access to the fields of one JSON object (a JSON map, or the slots the streaming reader filled
+//! for a known layout), with errors that carry the JSON path of the fault. A path is made into text
+//! only for a fault. Does not own the layouts or the reading itself (`read`).
 
 use std::borrow::Cow;
 
