@@ -955,6 +955,7 @@ impl<'de> Visitor<'de> for TimestepSeed<'_> {
     fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
         let mut step = RawTimestep::default();
         while let Some(key) = map.next_key_seed(KeySeed(TIMESTEP_KEYS))? {
+            // Positions in `TIMESTEP_KEYS`: `index`, `t`, `objects`.
             match key {
                 Key::Known(0) => step.index = Some(map.next_value()?),
                 Key::Known(1) => step.t = Some(map.next_value()?),
