@@ -156,6 +156,24 @@ pub fn import_round_trip(
                 "its rows decode to another trace:\n{back:?}\ninstead of\n{trace:?}"
             ));
         }
+        // Read with its balls left as columns, it loads into a worker with the same bytes and
+        // rebuilds to the same trace.
+        let framed = crate::trace::FramedTrace::decode(&rows)
+            .map_err(|e| format!("its rows do not decode as columns: {e}"))?;
+        for detectors in [1, 12] {
+            if crate::detect::protocol::load_request_framed("k", &framed, detectors)
+                != crate::detect::protocol::load_request("k", &trace, detectors)
+            {
+                return Err(format!(
+                    "read as columns, it loads into a worker with other bytes: {trace:?}"
+                ));
+            }
+        }
+        if framed.into_trace().ok().as_ref() != Some(&trace) {
+            return Err(format!(
+                "read as columns, it rebuilds to another trace: {trace:?}"
+            ));
+        }
         let text = json::to_value(&trace).to_string();
         let again = json::read_str("again", &text, env);
         match again.as_slice() {

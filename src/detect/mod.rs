@@ -23,7 +23,7 @@ mod error;
 mod library;
 mod marshal;
 mod pool;
-mod protocol;
+pub(crate) mod protocol;
 mod sandbox;
 pub mod tables;
 mod text;

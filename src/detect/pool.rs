@@ -22,7 +22,7 @@ use super::protocol::{self, COMPILE, RUN, WorkerReply};
 use super::sandbox::{SandboxLayers, SandboxLimits, resolve_python};
 use super::validate::{Pattern, validate};
 use super::worker::{Death, Reply, Worker, parse};
-use crate::trace::Trace;
+use crate::trace::{FramedTrace, Trace};
 
 /// The result of one detector on one trace.
 #[derive(Clone, Debug)]
@@ -126,6 +126,34 @@ pub struct WorkerPool {
     layers: SandboxLayers,
 }
 
+/// What the pool reads of a trace: its id and steps, and the request that loads it into a worker.
+trait Loadable: Sync {
+    /// The trace; its steps' objects need not be built.
+    fn shell(&self) -> &Trace;
+    /// The load request for a run of `detectors` detectors.
+    fn load_request(&self, key: &str, detectors: usize) -> (u8, Vec<u8>);
+}
+
+impl Loadable for Trace {
+    fn shell(&self) -> &Trace {
+        self
+    }
+
+    fn load_request(&self, key: &str, detectors: usize) -> (u8, Vec<u8>) {
+        protocol::load_request(key, self, detectors)
+    }
+}
+
+impl Loadable for FramedTrace {
+    fn shell(&self) -> &Trace {
+        FramedTrace::shell(self)
+    }
+
+    fn load_request(&self, key: &str, detectors: usize) -> (u8, Vec<u8>) {
+        protocol::load_request_framed(key, self, detectors)
+    }
+}
+
 /// The key of a trace in a worker's cache.
 fn trace_key(trace: &Trace) -> String {
     format!(
@@ -178,8 +206,18 @@ impl WorkerPool {
     /// [`CandidateStatus::Failed`] result, and a worker that cannot be restarted fails its calls as
     /// `crashed`. Each worker first takes the traces it already holds, then the rest in order.
     pub fn run(&self, detectors: &[Detector], traces: &[Trace]) -> BatchResult {
+        self.run_any(detectors, traces)
+    }
+
+    /// [`WorkerPool::run`] over traces read from a run's tables: a billiards trace whose frame rows
+    /// are still columns goes to its worker straight from them, with the same bytes and results.
+    pub fn run_framed(&self, detectors: &[Detector], traces: &[FramedTrace]) -> BatchResult {
+        self.run_any(detectors, traces)
+    }
+
+    fn run_any<T: Loadable>(&self, detectors: &[Detector], traces: &[T]) -> BatchResult {
         let nd = detectors.len();
-        let keys: Vec<String> = traces.iter().map(trace_key).collect();
+        let keys: Vec<String> = traces.iter().map(|t| trace_key(t.shell())).collect();
         let taken: Vec<AtomicBool> = traces.iter().map(|_| AtomicBool::new(false)).collect();
         let next = AtomicUsize::new(0);
         let shared = Shared {
@@ -323,9 +361,10 @@ impl WorkerPool {
             one_by_one: false,
             steps: job
                 .trace
+                .shell()
                 .timesteps
                 .first()
-                .zip(job.trace.timesteps.last())
+                .zip(job.trace.shell().timesteps.last())
                 .map(|(a, b)| (a.index, b.index)),
         };
         let mut pending: Vec<usize> = (0..detectors.len()).collect();
@@ -572,7 +611,7 @@ impl WorkerPool {
         &self,
         worker: &mut Worker,
         key: &str,
-        trace: &Trace,
+        trace: &dyn Loadable,
         detectors: usize,
         stats: &mut RunStats,
     ) -> Result<(), DetectorError> {
@@ -582,7 +621,7 @@ impl WorkerPool {
             return Ok(());
         }
         let c0 = Instant::now();
-        let (kind, body) = protocol::load_request(key, trace, detectors);
+        let (kind, body) = trace.load_request(key, detectors);
         stats.convert_s += c0.elapsed().as_secs_f64();
         let l0 = Instant::now();
         let wait = self
@@ -722,7 +761,7 @@ struct TraceJob<'j> {
     t: usize,
     /// Its key in the workers' caches.
     key: &'j str,
-    trace: &'j Trace,
+    trace: &'j dyn Loadable,
     shared: &'j Shared,
 }
 

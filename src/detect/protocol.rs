@@ -82,13 +82,49 @@ pub(crate) const LAZY_BELOW: usize = 6;
 /// 5-8× cheaper for the worker than parsing them from JSON; objects built lazily when `detectors` is
 /// under [`LAZY_BELOW`]), else the paper's JSON.
 pub(crate) fn load_request(key: &str, trace: &Trace, detectors: usize) -> (u8, Vec<u8>) {
-    match pool_columns(key, trace, detectors < LAZY_BELOW) {
+    use crate::trace::{Body, Env, PoolSteps};
+    let plain = trace.env == Env::Pooltool
+        && trace.timesteps.iter().all(|t| {
+            t.objects
+                .iter()
+                .all(|o| matches!(o.body, Body::Pool(_)) && o.extra.is_empty())
+        });
+    let body = plain
+        .then(|| {
+            pool_columns(
+                key,
+                trace,
+                &PoolSteps::of_trace(trace),
+                detectors < LAZY_BELOW,
+            )
+        })
+        .flatten();
+    match body {
         Some(body) => (LOAD_POOL, body),
         None => (LOAD_TRACE, load_body(key, trace)),
     }
 }
 
-/// `<u32 header length><header JSON><f64 block>`; see `load_pool_columns` in worker.py.
+/// The request that loads a trace read from a run's tables: [`load_request`]'s bytes, written
+/// straight from the frame rows when they are still columns (no `Object` built per ball per step).
+pub(crate) fn load_request_framed(
+    key: &str,
+    trace: &crate::trace::FramedTrace,
+    detectors: usize,
+) -> (u8, Vec<u8>) {
+    let rows = trace.pool_rows();
+    let body = rows
+        .as_ref()
+        .and_then(|r| pool_columns(key, trace.shell(), &r.steps(), detectors < LAZY_BELOW));
+    match body {
+        Some(body) => (LOAD_POOL, body),
+        None => load_request(key, trace.shell(), detectors),
+    }
+}
+
+/// `<u32 header length><header JSON><f64 block>`; see `load_pool_columns` in worker.py. `shell`
+/// gives the trace's fields and its steps' indices, times and unknown fields, `steps` its balls
+/// (from the same trace's objects, or from its frame rows: the bytes are the same).
 ///
 /// Most balls sit still most of the time (about 70 % of the object rows of a random 9-ball shot repeat
 /// the row before), and the trace the worker builds is read-only, so a ball whose state is bit-for-bit
@@ -112,14 +148,19 @@ pub(crate) fn load_request(key: &str, trace: &Trace, detectors: usize) -> (u8, V
 ///   share a row one tuple, as it always has (`load_pool_columns` in worker.py).
 ///
 /// All numbers are little-endian.
-fn pool_columns(key: &str, trace: &Trace, lazy: bool) -> Option<Vec<u8>> {
-    use crate::trace::{Body, Env, PoolBall};
-    if trace.env != Env::Pooltool {
+fn pool_columns(
+    key: &str,
+    shell: &Trace,
+    steps: &crate::trace::PoolSteps<'_>,
+    lazy: bool,
+) -> Option<Vec<u8>> {
+    use crate::trace::BallView;
+    if steps.len() != shell.timesteps.len() {
         return None;
     }
     // The floats first: a moving ball differs there, so its strings are never compared.
-    fn same(a: &PoolBall, b: &PoolBall) -> bool {
-        let bits = |x: &PoolBall| {
+    fn same(a: &BallView<'_>, b: &BallView<'_>) -> bool {
+        let bits = |x: &BallView<'_>| {
             let mut v = [0u64; 10];
             for (i, f) in x
                 .position
@@ -141,43 +182,34 @@ fn pool_columns(key: &str, trace: &Trace, lazy: bool) -> Option<Vec<u8>> {
     }
     let mut protos: Vec<(&str, &str, i64, &str)> = Vec::new();
     let mut proto: Vec<u32> = Vec::new();
-    let mut starts: Vec<u32> = Vec::with_capacity(trace.timesteps.len());
-    let mut firsts: Vec<u32> = Vec::with_capacity(trace.timesteps.len() + 1);
+    let mut starts: Vec<u32> = Vec::with_capacity(steps.len());
+    let mut firsts: Vec<u32> = Vec::with_capacity(steps.len() + 1);
     let mut rows: Vec<u32> = Vec::new();
     // Each slot's current state.
     let mut current: Vec<u32> = Vec::new();
     let mut vecs: Vec<u8> = Vec::new();
     let mut radii: Vec<u8> = Vec::new();
-    let mut prev: Vec<&PoolBall> = Vec::new();
-    let mut row: Vec<&PoolBall> = Vec::new();
+    let mut prev: Vec<BallView<'_>> = Vec::new();
+    let mut row: Vec<BallView<'_>> = Vec::new();
     // Each slot's last row in `protos`.
     let mut last: Vec<Option<usize>> = Vec::new();
-    for ts in &trace.timesteps {
+    for k in 0..steps.len() {
         row.clear();
+        row.extend(steps.balls(k));
         firsts.push(u32::try_from(proto.len()).ok()?);
-        let all_new = prev.len() != ts.objects.len();
+        let all_new = prev.len() != row.len();
         if all_new {
             current.clear();
-            current.resize(ts.objects.len(), 0);
+            current.resize(row.len(), 0);
         }
         let mut changed = false;
-        for (j, o) in ts.objects.iter().enumerate() {
-            let Body::Pool(b) = &o.body else { return None };
-            if !o.extra.is_empty() {
-                return None;
-            }
-            row.push(b);
-            if !all_new && same(prev[j], b) {
+        for (j, b) in row.iter().enumerate() {
+            if !all_new && same(&prev[j], b) {
                 continue;
             }
             changed = true;
             current[j] = u32::try_from(proto.len()).ok()?;
-            let key = (
-                b.ball_id.as_str(),
-                b.kind.as_str(),
-                b.motion_state_code,
-                b.motion_state.as_str(),
-            );
+            let key = (b.ball_id, b.kind, b.motion_state_code, b.motion_state);
             // The slot's previous row usually has the same (id, kind, state): try it before the
             // table (a linear search comparing strings).
             let k = match last.get(j).copied().flatten().filter(|&k| protos[k] == key) {
@@ -217,19 +249,18 @@ fn pool_columns(key: &str, trace: &Trace, lazy: bool) -> Option<Vec<u8>> {
         }
         std::mem::swap(&mut prev, &mut row);
     }
-    let step_extra: Option<Vec<&crate::trace::JsonMap>> = trace
+    let step_extra: Option<Vec<&crate::trace::JsonMap>> = shell
         .timesteps
         .iter()
         .any(|t| !t.extra.is_empty())
-        .then(|| trace.timesteps.iter().map(|t| &t.extra).collect());
-    let shell = shell_of(trace);
+        .then(|| shell.timesteps.iter().map(|t| &t.extra).collect());
     let mut header = Vec::with_capacity(4096 + 4 * proto.len());
     header.extend_from_slice(b"{\"id\":");
     serde_json::to_writer(&mut header, key).ok()?;
     header.extend_from_slice(b",\"trace\":");
-    crate::trace::json::write_trace(&mut header, &shell, false).ok()?;
+    crate::trace::json::write_trace(&mut header, &shell_of(shell), false).ok()?;
     let rest = serde_json::json!({
-        "index": trace.timesteps.iter().map(|t| t.index).collect::<Vec<_>>(),
+        "index": shell.timesteps.iter().map(|t| t.index).collect::<Vec<_>>(),
         "protos": protos,
         "states": proto.len(),
         "words": rows.len(),
@@ -239,14 +270,14 @@ fn pool_columns(key: &str, trace: &Trace, lazy: bool) -> Option<Vec<u8>> {
     header.push(b',');
     let rest = serde_json::to_vec(&rest).ok()?;
     header.extend_from_slice(&rest[1..]);
-    let steps = trace.timesteps.len();
+    let n_steps = shell.timesteps.len();
     firsts.push(u32::try_from(proto.len()).ok()?);
     let words = proto.len() + firsts.len() + starts.len() + rows.len();
     let mut body =
-        Vec::with_capacity(4 + header.len() + 8 * steps + vecs.len() + radii.len() + 4 * words);
+        Vec::with_capacity(4 + header.len() + 8 * n_steps + vecs.len() + radii.len() + 4 * words);
     body.extend_from_slice(&u32::try_from(header.len()).ok()?.to_le_bytes());
     body.extend_from_slice(&header);
-    for ts in &trace.timesteps {
+    for ts in &shell.timesteps {
         body.extend_from_slice(&ts.t.to_le_bytes());
     }
     body.extend_from_slice(&vecs);
@@ -549,6 +580,63 @@ mod tests {
         let out = child.wait_with_output().unwrap();
         assert!(out.status.success(), "{out:?}");
         serde_json::from_slice(&out.stdout).unwrap()
+    }
+
+    type Request = (u8, Vec<u8>);
+
+    /// The load request of a trace read from its rows, and of the same trace rebuilt whole.
+    fn both_requests(trace: &Trace, detectors: usize) -> (Request, Request, bool) {
+        use crate::trace::{FramedTrace, TraceBatchBuilder, TraceRows, decode_trace};
+        let b = TraceBatchBuilder::from_trace(trace, "scene", "test").unwrap();
+        let rows = TraceRows {
+            env: trace.env,
+            trace: &b.traces,
+            timesteps: &b.timesteps,
+            frames: &b.frames,
+            events: &b.events,
+        };
+        let framed = FramedTrace::decode(&rows).unwrap();
+        let whole = decode_trace(&rows).unwrap();
+        (
+            load_request_framed("k", &framed, detectors),
+            load_request("k", &whole, detectors),
+            framed.is_columns(),
+        )
+    }
+
+    #[test]
+    fn a_trace_whose_balls_are_still_columns_loads_with_the_bytes_its_objects_give() {
+        let config = crate::envs::pool::PoolConfig::default_7ft();
+        let opts = crate::envs::pool::TraceOptions { dt: 0.02 };
+        for seed in [3, 11] {
+            let mut trace = crate::envs::pool::dataset_trace(&config, seed, 0, &opts).unwrap();
+            for detectors in [1, 12] {
+                let (framed, whole, columns) = both_requests(&trace, detectors);
+                assert!(columns);
+                assert_eq!(framed.0, LOAD_POOL);
+                assert!(framed == whole, "seed {seed}, {detectors} detectors");
+            }
+            // Unknown fields on a step travel in the header; on a ball, the trace goes as JSON.
+            trace.timesteps[2]
+                .extra
+                .insert("camera".into(), serde_json::json!("top"));
+            let (framed, whole, columns) = both_requests(&trace, 12);
+            assert!(columns && framed.0 == LOAD_POOL && framed == whole);
+            trace.timesteps[4].objects[0]
+                .extra
+                .insert("chalk".into(), serde_json::json!(true));
+            let (framed, whole, columns) = both_requests(&trace, 12);
+            assert!(!columns && framed.0 == LOAD_TRACE && framed == whole);
+        }
+        // Balls that come and go (a step with fewer objects) and strings that change.
+        let mut trace = crate::envs::pool::dataset_trace(&config, 5, 0, &opts).unwrap();
+        trace.timesteps[6].objects.truncate(3);
+        if let crate::trace::Body::Pool(b) = &mut trace.timesteps[7].objects[1].body {
+            b.ball_id = "99".into();
+            b.kind = "ghost".into();
+        }
+        let (framed, whole, columns) = both_requests(&trace, 3);
+        assert!(columns && framed == whole);
     }
 
     #[test]

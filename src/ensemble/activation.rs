@@ -363,6 +363,12 @@ fn union(parent: &mut [usize], a: usize, b: usize) {
     }
 }
 
+/// Whether `detectors` form any label ensemble, so that [`combine`] reads the traces' objects
+/// (without one it returns the annotations as they are and reads only trace ids).
+pub fn has_ensembles(detectors: &[Detector]) -> bool {
+    detectors.iter().any(|d| d.ensemble.is_some())
+}
+
 /// Replaces the member patterns of every ensemble label among `detectors` by the ensemble annotations
 /// of their traces; patterns of other detectors pass through unchanged (a plain library's annotations
 /// are returned as they are). Ensemble annotations follow the others, by trace then label.

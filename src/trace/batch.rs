@@ -20,6 +20,7 @@ use super::Env;
 use super::model::{
     Body, Event, IphyreObject, JsonMap, Object, Outcome, PhyreObject, PoolBall, Timestep, Trace,
 };
+use super::pool_steps::BallView;
 use super::schema::{EVENTS, FRAMES, SCENES, TIMESTEPS, TRACES};
 
 /// One trace as one batch per table.
@@ -706,6 +707,16 @@ pub struct TraceRows<'a> {
 /// Rebuilds a trace from its rows: the inverse of [`TraceBatchBuilder`]. Reads the `traces` row,
 /// the timesteps, the frames into their timesteps and the events, in that order.
 pub fn decode_trace(rows: &TraceRows<'_>) -> Result<Trace, DecodeError> {
+    decode_with(rows, |frames, timesteps| frames.fill(timesteps)).map(|(trace, ())| trace)
+}
+
+/// Rebuilds a trace from its rows as [`decode_trace`] does, in the same order of reads (and so of
+/// errors), with `frames` deciding what becomes of the frame rows: `decode_trace` fills them into
+/// their timesteps; [`FramedTrace`](super::FramedTrace) may keep them as columns.
+pub(super) fn decode_with<T>(
+    rows: &TraceRows<'_>,
+    frames: impl FnOnce(&FrameCols<'_>, &mut Vec<Timestep>) -> Result<T, DecodeError>,
+) -> Result<(Trace, T), DecodeError> {
     let env = rows.env;
     let tr = Cols {
         table: "traces",
@@ -717,10 +728,10 @@ pub fn decode_trace(rows: &TraceRows<'_>) -> Result<Trace, DecodeError> {
     let trace_id = tr.str("trace_id")?.value(0).to_string();
     let (outcome, top_extra) = decode_outcome(&tr, &trace_id)?;
     let mut timesteps = decode_timesteps(rows.timesteps, &trace_id)?;
-    let frames = FrameCols::read(rows.frames, env, &trace_id)?;
-    frames.fill(&mut timesteps)?;
+    let cols = FrameCols::read(rows.frames, env, &trace_id)?;
+    let kept = frames(&cols, &mut timesteps)?;
     let events = decode_events(rows.events, &trace_id)?;
-    Ok(Trace {
+    let trace = Trace {
         trace_id,
         env,
         task_id: tr.str("task_id")?.value(0).to_string(),
@@ -728,7 +739,8 @@ pub fn decode_trace(rows: &TraceRows<'_>) -> Result<Trace, DecodeError> {
         events,
         outcome,
         extra: top_extra,
-    })
+    };
+    Ok((trace, kept))
 }
 
 /// The outcome and the unknown top-level fields of a trace's `traces` row.
@@ -804,7 +816,7 @@ fn decode_events(batch: &RecordBatch, trace_id: &str) -> Result<Vec<Event>, Deco
 
 /// The columns of a trace's `frames` rows, read once; a row becomes an object of its
 /// environment's kind, and a value that kind needs but the row lacks is [`DecodeError::Null`].
-struct FrameCols<'a> {
+pub(super) struct FrameCols<'a> {
     env: Env,
     trace_id: &'a str,
     step: &'a Int64Array,
@@ -840,7 +852,11 @@ struct FrameCols<'a> {
 
 impl<'a> FrameCols<'a> {
     /// Every column of `batch` (the `frames` rows of trace `trace_id` of `env`).
-    fn read(batch: &'a RecordBatch, env: Env, trace_id: &'a str) -> Result<Self, DecodeError> {
+    pub(super) fn read(
+        batch: &'a RecordBatch,
+        env: Env,
+        trace_id: &'a str,
+    ) -> Result<Self, DecodeError> {
         let fr = Cols {
             table: "frames",
             batch,
@@ -882,7 +898,7 @@ impl<'a> FrameCols<'a> {
 
     /// Appends every row's object to its timestep. Rows arrive sorted by (step, slot), so they
     /// are walked alongside the timesteps; a row whose step has no timestep is an error.
-    fn fill(&self, timesteps: &mut [Timestep]) -> Result<(), DecodeError> {
+    pub(super) fn fill(&self, timesteps: &mut [Timestep]) -> Result<(), DecodeError> {
         let mut cursor = 0usize;
         for i in 0..self.step.len() {
             let step = self.step.value(i);
@@ -908,6 +924,72 @@ impl<'a> FrameCols<'a> {
             target.objects.push(Object { body, extra });
         }
         Ok(())
+    }
+
+    /// For a billiards trace whose every row [`FrameCols::fill`] would take as it is (each row's
+    /// step a timestep's, every value a ball needs present, no unknown fields), each timestep's first
+    /// row and then the number of rows; `None` when any row is otherwise (`fill` then builds the
+    /// objects, or names the row that is wrong).
+    pub(super) fn plain_pool_starts(&self, timesteps: &[Timestep]) -> Option<Vec<usize>> {
+        if self.env != Env::Pooltool || self.extra.len() != self.extra_nulls() {
+            return None;
+        }
+        let floats = [
+            self.z,
+            self.vx,
+            self.vy,
+            self.vz,
+            self.wx,
+            self.wy,
+            self.wz,
+            self.radius,
+        ];
+        if floats.iter().any(|a| a.null_count() > 0) || self.msc.null_count() > 0 {
+            return None;
+        }
+        let n = self.step.len();
+        if !(0..n).all(|i| self.kind.get(i).is_some() && self.ms.get(i).is_some()) {
+            return None;
+        }
+        // Rows to timesteps as `fill` walks them: each run of rows of one step to the first
+        // timestep of that index at or after the previous run's (a repeated index gets none: its
+        // rows went to the first). A row that would go back is one `fill` rejects.
+        let mut starts = Vec::with_capacity(timesteps.len() + 1);
+        let mut i = 0usize;
+        for ts in timesteps {
+            starts.push(i);
+            while i < n && self.step.value(i) == ts.index {
+                i += 1;
+            }
+            if i < n && self.step.value(i) < ts.index {
+                return None;
+            }
+        }
+        starts.push(i);
+        (i == n).then_some(starts)
+    }
+
+    /// Rows whose `extra` is null.
+    fn extra_nulls(&self) -> usize {
+        match &self.extra {
+            StrCol::Plain(a) => a.null_count(),
+            StrCol::Dict { keys, .. } => keys.null_count(),
+        }
+    }
+
+    /// Frame row `i`'s ball, borrowed: the values [`FrameCols::pool_ball`] copies, for a row
+    /// [`FrameCols::plain_pool_starts`] has checked (a missing string reads as empty here).
+    pub(super) fn ball_view(&self, i: usize) -> BallView<'_> {
+        BallView {
+            kind: self.kind.value(i),
+            ball_id: self.oid.value(i),
+            position: [self.x.value(i), self.y.value(i), self.z.value(i)],
+            velocity: [self.vx.value(i), self.vy.value(i), self.vz.value(i)],
+            angular_velocity: [self.wx.value(i), self.wy.value(i), self.wz.value(i)],
+            motion_state_code: i64::from(self.msc.value(i)),
+            motion_state: self.ms.value(i),
+            radius: self.radius.value(i),
+        }
     }
 
     fn null(&self, col: &str, i: usize) -> DecodeError {

@@ -231,9 +231,12 @@ impl PoolFrames {
         let o = self.rows.obj[i] as usize;
         let c = self.code[i];
         BallView {
+            kind: "ball",
             ball_id: &self.ids[o],
             position: [self.rows.x[i], self.rows.y[i], self.z[i]],
             velocity: [self.v[0][i], self.v[1][i], self.v[2][i]],
+            angular_velocity: [self.w[0][i], self.w[1][i], self.w[2][i]],
+            motion_state_code: i64::from(c),
             motion_state: usize::try_from(c)
                 .ok()
                 .and_then(|c| self.state_names.get(c))

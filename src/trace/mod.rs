@@ -2,7 +2,7 @@
 //!
 //! **Owns:** the types of a trace ([`Trace`], [`Timestep`], [`Object`], [`Event`], [`Outcome`]), the
 //! environments ([`Env`]), the inline strings of its per-ball fields ([`ShortStr`]), the Arrow schemas of the trace tables ([`schema`]), conversion between traces
-//! and record batches ([`batch`]), traces held in columns straight from a simulator ([`frames`]), billiard-ball states by step read alike from either form ([`pool_steps`]), borrowed column views of them for a
+//! and record batches ([`batch`]), traces held in columns straight from a simulator ([`frames`]), traces read from the tables with their billiard balls left in columns ([`framed`]), billiard-ball states by step read alike from either form ([`pool_steps`]), borrowed column views of them for a
 //! columnar writer ([`view`]) and the
 //! JSON import/export format ([`json`]).
 //! **Does not:** read or write files of a run directory (`store/`), run SQL (`query/`) or order stages
@@ -13,6 +13,7 @@
 
 pub mod batch;
 mod env;
+pub mod framed;
 pub mod frames;
 pub mod json;
 mod model;
@@ -23,6 +24,7 @@ pub mod view;
 
 pub use batch::{TraceBatchBuilder, TraceBatches, TraceMeta, TraceRows, decode_trace};
 pub use env::{Env, UnknownEnv};
+pub use framed::{FramedTrace, PoolRows};
 pub use frames::{Frames, TraceColumns, TraceTables};
 pub use model::{
     Body, Event, IphyreObject, JsonMap, Object, Outcome, PhyreObject, PoolBall, Timestep, Trace,

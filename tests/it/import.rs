@@ -338,7 +338,8 @@ fn folders_arrays_and_duplicate_ids() {
 /// (fuzz/): the examples of every environment, as `.json` and as JSON Lines, edited at random
 /// (bytes changed, ranges dropped or repeated, numbers swapped for hostile literals, the text cut
 /// short), must each end in traces and typed errors, and every accepted trace must survive the trip
-/// to Arrow rows and back and through export (`testutil::import_round_trip`).
+/// to Arrow rows and back (also read with its balls left as columns, loading into a detector worker
+/// with the bytes its objects give) and through export (`testutil::import_round_trip`).
 #[test]
 fn no_input_makes_the_json_importer_panic_or_lose_an_accepted_trace() {
     let (cases, accepted) = sweep_json_import(0x0bad_5eed_1234_5678, 60, None);

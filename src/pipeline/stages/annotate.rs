@@ -1,6 +1,11 @@
 //! `annotate`: runs a detector library over a run's traces in the sandboxed worker pool and writes the
 //! `detectors`, `detector_calls` and `annotations` tables.
 //!
+//! Traces are read as [`FramedTrace`]s: a billiards trace's balls go from their frame columns
+//! straight into the workers' load request, and its annotations need only its id and step times,
+//! so no paper-layout object is built per ball per step (an ensemble library's combination reads
+//! the balls, so for one the traces are built whole once their detectors have run).
+//!
 //! One shard per trace file set (the files an `import` or `simulate` shard wrote), so a killed stage
 //! resumes at the first unfinished set; the `detectors` rows are a last shard of their own. A detector
 //! that fails (syntax, forbidden construct, exception, timeout, memory, invalid output) is a
@@ -18,17 +23,18 @@ use serde_json::{Value, json};
 use std::collections::BTreeMap;
 
 use super::detector_setup::{DetectorSetup, SandboxParams};
-use super::trace_files::{read_traces, trace_file_sets};
+use super::trace_files::{read_framed_traces, trace_file_sets};
 use crate::detect::tables::{annotations_batch, calls_batch, detectors_batch};
 use crate::detect::{Annotation, BatchResult, CandidateStatus, Library, WorkerPool};
 use crate::pipeline::params::ParamsOf;
 use crate::pipeline::registry::{BuildError, StageKind};
 use crate::pipeline::spec::{PipelineSpec, StageDef};
 use crate::pipeline::stage::{Stage, StageContext, StageError, StageOutput};
-use crate::trace::{Env, Trace};
+use crate::trace::{Env, FramedTrace, Trace};
 
 /// The most object rows a set may hold for it to be finished while the next set is read and run
-/// (about 190 billiard shots at dt 0.01, half a gigabyte as `Trace`s); a larger set is finished first.
+/// (about 190 billiard shots at dt 0.01, half a gigabyte as `Trace`s and less while their balls
+/// stay columns); a larger set is finished first.
 const OVERLAP_MAX_ROWS: usize = 1 << 20;
 
 /// The `annotate` stage kind.
@@ -122,7 +128,7 @@ pub(crate) fn status_counts(batch: &BatchResult) -> BTreeMap<String, u64> {
 struct RanSet {
     /// The shard the set's tables are written as.
     shard: String,
-    traces: Vec<Trace>,
+    traces: Vec<FramedTrace>,
     batch: BatchResult,
     /// `pool.layers()`, for the shard record.
     layers: Value,
@@ -148,7 +154,7 @@ fn finish_set(
         batch_s,
     } = set;
     let shard = shard.as_str();
-    let ids: Vec<&str> = traces.iter().map(|t| t.trace_id.as_str()).collect();
+    let ids: Vec<&str> = traces.iter().map(|t| t.shell().trace_id.as_str()).collect();
     let mut rows = BTreeMap::new();
     let calls = calls_batch(&lib.detectors, &ids, &batch.results)?;
     rows.insert(
@@ -158,6 +164,18 @@ fn finish_set(
     drop(calls);
     let statuses = status_counts(&batch);
     let s = batch.stats.clone();
+    drop(ids);
+    let n_traces = traces.len();
+    // Annotations read a trace's id and step times; an ensemble library's also read its balls.
+    let traces: Vec<Trace> = if crate::ensemble::activation::has_ensembles(&lib.detectors) {
+        traces
+            .into_iter()
+            .map(FramedTrace::into_trace)
+            .collect::<Result<_, _>>()
+            .map_err(|e| StageError::Internal(format!("rebuilding a trace read before: {e}")))?
+    } else {
+        traces.into_iter().map(FramedTrace::into_shell).collect()
+    };
     let anns = annotations_of(lib, &traces, batch);
     if !anns.is_empty() {
         let b = annotations_batch(&anns)?;
@@ -167,7 +185,7 @@ fn finish_set(
         );
     }
     let record = json!({
-        "traces": traces.len(),
+        "traces": n_traces,
         "annotations": anns.len(),
         "statuses": statuses,
         "rows": rows,
@@ -237,17 +255,13 @@ impl Stage for AnnotateStage {
                 }
                 let pool = pool.as_ref().expect("just started");
                 let r0 = std::time::Instant::now();
-                let traces = read_traces(ctx.run(), set)?;
+                let traces = read_framed_traces(ctx.run(), set)?;
                 let read_s = r0.elapsed().as_secs_f64();
                 let b0 = std::time::Instant::now();
-                let batch = pool.run(&lib.detectors, &traces);
+                let batch = pool.run_framed(&lib.detectors, &traces);
                 let batch_s = b0.elapsed().as_secs_f64();
                 join(&mut finishing, &mut records)?;
-                let rows: usize = traces
-                    .iter()
-                    .flat_map(|t| &t.timesteps)
-                    .map(|s| s.objects.len())
-                    .sum();
+                let rows: usize = traces.iter().map(FramedTrace::frame_rows).sum();
                 let set = RanSet {
                     shard,
                     traces,

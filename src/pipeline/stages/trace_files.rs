@@ -20,8 +20,9 @@ use crate::digest::words_u64;
 use crate::pipeline::stage::StageError;
 use crate::rng::SplitMix64;
 use crate::store::{ReadTraceError, RunDir, key_order, read_file_whole, trace_ids};
+use crate::trace::batch::DecodeError;
 use crate::trace::schema::table_schema;
-use crate::trace::{Env, Trace, TraceRows, decode_trace};
+use crate::trace::{Env, FramedTrace, Trace, TraceRows, decode_trace};
 
 /// One file name shared by the trace tables of one environment.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -164,6 +165,24 @@ pub(crate) fn set_trace_ids(run: &RunDir, set: &TraceFileSet) -> Result<Vec<Stri
 
 /// Reads every trace of a file set, in the order of the `traces` file.
 pub(crate) fn read_traces(run: &RunDir, set: &TraceFileSet) -> Result<Vec<Trace>, StageError> {
+    read_set(run, set, decode_trace)
+}
+
+/// Reads every trace of a file set as [`read_traces`] does, with each billiards trace's frame rows
+/// left as columns where they can be (for the detector workers, which take them as columns).
+pub(crate) fn read_framed_traces(
+    run: &RunDir,
+    set: &TraceFileSet,
+) -> Result<Vec<FramedTrace>, StageError> {
+    read_set(run, set, FramedTrace::decode)
+}
+
+/// Every trace of a file set, each decoded from its rows by `decode`.
+fn read_set<T>(
+    run: &RunDir,
+    set: &TraceFileSet,
+    decode: impl Fn(&TraceRows<'_>) -> Result<T, DecodeError>,
+) -> Result<Vec<T>, StageError> {
     let schema = table_schema("traces")
         .ok_or_else(|| StageError::Internal("no schema for traces".into()))?;
     let path = run.partition_dir("traces", Some(set.env)).join(&set.name);
@@ -183,7 +202,7 @@ pub(crate) fn read_traces(run: &RunDir, set: &TraceFileSet) -> Result<Vec<Trace>
     let mut out = Vec::with_capacity(ids.len());
     for i in 0..ids.len() {
         let id = ids.value(i);
-        let trace = decode_trace(&TraceRows {
+        let trace = decode(&TraceRows {
             env: set.env,
             trace: &traces.slice(i, 1),
             timesteps: &slice(&steps, rs.get(id)),
