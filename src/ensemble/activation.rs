@@ -34,7 +34,31 @@ use rayon::prelude::*;
 use serde_json::json;
 
 use crate::detect::{Annotation, Detector, DetectorId, EnsembleSettings, Library};
-use crate::trace::{Body, Env, Trace};
+use crate::trace::{Body, Env, FramedTrace, PoolRows, Trace};
+
+/// A trace as the linking rule reads it: its id and steps, and the objects of a step with their
+/// centres, from its objects or from its billiard frame rows (the same ids and centres).
+enum Objects<'a> {
+    Built(&'a Trace),
+    Rows(&'a Trace, Box<PoolRows<'a>>),
+}
+
+impl<'a> Objects<'a> {
+    /// The view of a trace read from a run's tables.
+    fn of_framed(t: &'a FramedTrace) -> Self {
+        match t.pool_rows() {
+            Some(rows) => Objects::Rows(t.shell(), Box::new(rows)),
+            None => Objects::Built(t.shell()),
+        }
+    }
+
+    /// The trace (its id and steps; its objects only when `Built`).
+    fn trace(&self) -> &Trace {
+        match self {
+            Objects::Built(t) | Objects::Rows(t, _) => t,
+        }
+    }
+}
 
 /// One member of a label's ensemble: its detector id, reliability weight w and training reward t.
 #[derive(Clone, Debug, PartialEq)]
@@ -145,22 +169,23 @@ impl LabelEnsemble {
         if items.is_empty() {
             return Vec::new();
         }
-        self.clusters(trace, &items, &Prepared::of(self))
+        self.clusters(&Objects::Built(trace), &items, &Prepared::of(self))
     }
 
     /// The ensemble annotations of `trace` from `items`, its member patterns with their member's
     /// index, in the order given.
     fn clusters(
         &self,
-        trace: &Trace,
+        view: &Objects<'_>,
         items: &[(usize, &Annotation)],
         prepared: &Prepared,
     ) -> Vec<Annotation> {
+        let trace = view.trace();
         let scale = crate::envs::facts(self.env).nearby_scale;
         let mut id_buf = String::new();
         let centres: Vec<Option<(f64, f64)>> = items
             .iter()
-            .map(|(_, a)| centroid(trace, a, &mut id_buf))
+            .map(|(_, a)| centroid(view, a, &mut id_buf))
             .collect();
         let n = items.len();
         let mut parent: Vec<usize> = (0..n).collect();
@@ -305,19 +330,29 @@ fn linked(
 
 /// The centroid of a pattern's objects' centres at its first step (the nearest step at or after it),
 /// or `None` when none of its objects is in the trace there. `buf` is scratch space for object ids.
-fn centroid(trace: &Trace, a: &Annotation, buf: &mut String) -> Option<(f64, f64)> {
-    let i = trace
-        .timesteps
+fn centroid(view: &Objects<'_>, a: &Annotation, buf: &mut String) -> Option<(f64, f64)> {
+    let steps = &view.trace().timesteps;
+    let i = steps
         .partition_point(|t| t.index < a.start_step)
-        .min(trace.timesteps.len().checked_sub(1)?);
-    let step = &trace.timesteps[i];
+        .min(steps.len().checked_sub(1)?);
     let (mut x, mut y, mut n) = (0.0, 0.0, 0usize);
-    for o in &step.objects {
-        if a.objects.iter().any(|id| id == object_id(&o.body, buf)) {
-            let (cx, cy) = o.body.centre();
+    let mut add = |id: &str, (cx, cy): (f64, f64)| {
+        if a.objects.iter().any(|o| o == id) {
             x += cx;
             y += cy;
             n += 1;
+        }
+    };
+    match view {
+        Objects::Built(t) => {
+            for o in &t.timesteps[i].objects {
+                add(object_id(&o.body, buf), o.body.centre());
+            }
+        }
+        Objects::Rows(_, rows) => {
+            for b in rows.steps().balls(i) {
+                add(b.ball_id, (b.position[0], b.position[1]));
+            }
         }
     }
     (n > 0).then(|| (x / n as f64, y / n as f64))
@@ -363,16 +398,29 @@ fn union(parent: &mut [usize], a: usize, b: usize) {
     }
 }
 
-/// Whether `detectors` form any label ensemble, so that [`combine`] reads the traces' objects
-/// (without one it returns the annotations as they are and reads only trace ids).
-pub fn has_ensembles(detectors: &[Detector]) -> bool {
-    detectors.iter().any(|d| d.ensemble.is_some())
-}
-
 /// Replaces the member patterns of every ensemble label among `detectors` by the ensemble annotations
 /// of their traces; patterns of other detectors pass through unchanged (a plain library's annotations
 /// are returned as they are). Ensemble annotations follow the others, by trace then label.
 pub fn combine(detectors: &[Detector], traces: &[Trace], anns: Vec<Annotation>) -> Vec<Annotation> {
+    combine_views(detectors, traces, |t| Objects::Built(t), anns)
+}
+
+/// [`combine`] over traces read from a run's tables, reading a billiards trace's balls from its frame
+/// rows when they are still columns (the same annotations).
+pub fn combine_framed(
+    detectors: &[Detector],
+    traces: &[FramedTrace],
+    anns: Vec<Annotation>,
+) -> Vec<Annotation> {
+    combine_views(detectors, traces, |t| Objects::of_framed(t), anns)
+}
+
+fn combine_views<T: Sync>(
+    detectors: &[Detector],
+    traces: &[T],
+    view: impl Fn(&T) -> Objects<'_> + Sync,
+    anns: Vec<Annotation>,
+) -> Vec<Annotation> {
     let ensembles = LabelEnsemble::of_detectors(detectors);
     if ensembles.is_empty() {
         return anns;
@@ -407,10 +455,11 @@ pub fn combine(detectors: &[Detector], traces: &[Trace], anns: Vec<Annotation>) 
         .par_iter()
         .map(|trace| {
             let mut found = Vec::new();
-            if let Some(slots) = by_trace.get(trace.trace_id.as_str()) {
+            let view = view(trace);
+            if let Some(slots) = by_trace.get(view.trace().trace_id.as_str()) {
                 for ((e, items), p) in ensembles.iter().zip(slots).zip(&prepared) {
                     if !items.is_empty() {
-                        found.extend(e.clusters(trace, items, p));
+                        found.extend(e.clusters(&view, items, p));
                     }
                 }
             }
@@ -668,6 +717,53 @@ mod tests {
             .map(|a| (a.start_step, (a.activation * 1e9).round() / 1e9))
             .collect();
         assert_eq!(got, vec![(3, 0.9), (4, 0.9)]);
+    }
+
+    #[test]
+    fn a_trace_read_with_its_balls_as_columns_combines_as_its_objects_do() {
+        use crate::trace::{FramedTrace, TraceBatchBuilder, TraceRows};
+        let config = crate::envs::pool::PoolConfig::default_7ft();
+        let opts = crate::envs::pool::TraceOptions { dt: 0.05 };
+        let shot = crate::envs::pool::dataset_trace(&config, 4, 0, &opts).unwrap();
+        for t in [trace(), shot] {
+            let b = TraceBatchBuilder::from_trace(&t, "scene", "test").unwrap();
+            let framed = FramedTrace::decode(&TraceRows {
+                env: t.env,
+                trace: &b.traces,
+                timesteps: &b.timesteps,
+                frames: &b.frames,
+                events: &b.events,
+            })
+            .unwrap();
+            assert!(framed.is_columns());
+            let last = t.timesteps.last().unwrap().index;
+            let ids: Vec<String> = t.timesteps[0]
+                .objects
+                .iter()
+                .map(|o| o.body.object_id())
+                .collect();
+            // Patterns of the three members at steps spread over the trace, each naming one or
+            // two balls, at tolerances from tight (space decides) to loose.
+            for (gamma, eps_s, eps_t) in [(0.0, 0.02, 1.0), (0.3, 0.5, 3.0), (0.5, 0.002, 8.0)] {
+                let ds = members(gamma, eps_s, eps_t);
+                let mut anns = Vec::new();
+                for i in 0..24usize {
+                    let s = (i as i64 * 7919) % (last + 1);
+                    let objs = [&ids[i % ids.len()], &ids[(i / 2) % ids.len()]];
+                    let objs: Vec<&str> = objs[..1 + i % 2].iter().map(|s| s.as_str()).collect();
+                    anns.push(ann(&ds[i % 3], &t, i, s, (s + 2).min(last), &objs));
+                }
+                let whole = combine(&ds, std::slice::from_ref(&t), anns.clone());
+                let columns = combine_framed(&ds, std::slice::from_ref(&framed), anns);
+                let clustered = |a: &Annotation| {
+                    a.metadata
+                        .as_ref()
+                        .is_some_and(|m| m.get("ensemble").is_some())
+                };
+                assert!(whole.iter().any(clustered));
+                assert_eq!(columns, whole, "γ {gamma}, ε_s {eps_s}, ε_t {eps_t}");
+            }
+        }
     }
 
     #[test]

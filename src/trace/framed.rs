@@ -86,12 +86,6 @@ impl FramedTrace {
         }
         Ok(self.trace)
     }
-
-    /// The trace without its objects when they are still columns (its id, steps, events and
-    /// outcome, all a consumer of its annotations reads), else the whole trace.
-    pub fn into_shell(self) -> Trace {
-        self.trace
-    }
 }
 
 /// A billiards trace's frame rows read as ball states, step by step, without building objects
@@ -238,7 +232,6 @@ mod tests {
                 assert_eq!(a.t(k), o.t(k));
                 assert!(a.balls(k).eq(o.balls(k)), "step {k}");
             }
-            assert_eq!(framed.into_shell().timesteps.len(), trace.timesteps.len());
         }
     }
 

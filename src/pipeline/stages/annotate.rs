@@ -4,7 +4,7 @@
 //! Traces are read as [`FramedTrace`]s: a billiards trace's balls go from their frame columns
 //! straight into the workers' load request, and its annotations need only its id and step times,
 //! so no paper-layout object is built per ball per step (an ensemble library's combination reads
-//! the balls, so for one the traces are built whole once their detectors have run).
+//! the balls from the columns too).
 //!
 //! One shard per trace file set (the files an `import` or `simulate` shard wrote), so a killed stage
 //! resumes at the first unfinished set; the `detectors` rows are a last shard of their own. A detector
@@ -102,6 +102,27 @@ pub(crate) fn annotations_of(
     traces: &[Trace],
     batch: BatchResult,
 ) -> Vec<Annotation> {
+    let out = patterns_of(library, |t| &traces[t], batch);
+    crate::ensemble::activation::combine(&library.detectors, traces, out)
+}
+
+/// [`annotations_of`] for traces read from a run's tables (their balls may still be columns).
+fn framed_annotations_of(
+    library: &Library,
+    traces: &[FramedTrace],
+    batch: BatchResult,
+) -> Vec<Annotation> {
+    let out = patterns_of(library, |t| traces[t].shell(), batch);
+    crate::ensemble::activation::combine_framed(&library.detectors, traces, out)
+}
+
+/// One annotation per pattern of a batch's successful calls, in the batch's order; `trace(t)` is the
+/// batch's trace `t` (its id and step times are read).
+fn patterns_of<'t>(
+    library: &Library,
+    trace: impl Fn(usize) -> &'t Trace,
+    batch: BatchResult,
+) -> Vec<Annotation> {
     let mut out = Vec::new();
     for r in batch.results {
         if r.status != CandidateStatus::Ok {
@@ -109,10 +130,10 @@ pub(crate) fn annotations_of(
         }
         let det = &library.detectors[r.detector];
         for (seq, p) in r.patterns.into_iter().enumerate() {
-            out.push(Annotation::new(det, &traces[r.trace], seq, p));
+            out.push(Annotation::new(det, trace(r.trace), seq, p));
         }
     }
-    crate::ensemble::activation::combine(&library.detectors, traces, out)
+    out
 }
 
 /// Counts of call statuses, for summaries.
@@ -164,19 +185,7 @@ fn finish_set(
     drop(calls);
     let statuses = status_counts(&batch);
     let s = batch.stats.clone();
-    drop(ids);
-    let n_traces = traces.len();
-    // Annotations read a trace's id and step times; an ensemble library's also read its balls.
-    let traces: Vec<Trace> = if crate::ensemble::activation::has_ensembles(&lib.detectors) {
-        traces
-            .into_iter()
-            .map(FramedTrace::into_trace)
-            .collect::<Result<_, _>>()
-            .map_err(|e| StageError::Internal(format!("rebuilding a trace read before: {e}")))?
-    } else {
-        traces.into_iter().map(FramedTrace::into_shell).collect()
-    };
-    let anns = annotations_of(lib, &traces, batch);
+    let anns = framed_annotations_of(lib, &traces, batch);
     if !anns.is_empty() {
         let b = annotations_batch(&anns)?;
         rows.insert(
@@ -185,7 +194,7 @@ fn finish_set(
         );
     }
     let record = json!({
-        "traces": n_traces,
+        "traces": traces.len(),
         "annotations": anns.len(),
         "statuses": statuses,
         "rows": rows,
