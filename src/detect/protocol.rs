@@ -112,13 +112,18 @@ pub(crate) fn load_request_framed(
     trace: &crate::trace::FramedTrace,
     detectors: usize,
 ) -> (u8, Vec<u8>) {
-    let rows = trace.pool_rows();
-    let body = rows
-        .as_ref()
-        .and_then(|r| pool_columns(key, trace.shell(), &r.steps(), detectors < LAZY_BELOW));
-    match body {
+    let Some(rows) = trace.pool_rows() else {
+        // Its objects are built: the shell is the whole trace.
+        return load_request(key, trace.shell(), detectors);
+    };
+    match pool_columns(key, trace.shell(), &rows.steps(), detectors < LAZY_BELOW) {
         Some(body) => (LOAD_POOL, body),
-        None => load_request(key, trace.shell(), detectors),
+        // Too large for the columns' u32 counts: the paper's JSON of the whole trace, as
+        // `load_request` sends it (its objects were checked when the trace was read).
+        None => match trace.clone().into_trace() {
+            Ok(whole) => load_request(key, &whole, detectors),
+            Err(_) => load_request(key, trace.shell(), detectors),
+        },
     }
 }
 

@@ -16,7 +16,7 @@
 use arrow::array::RecordBatch;
 
 use super::batch::{DecodeError, FrameCols, TraceRows, decode_with};
-use super::model::Trace;
+use super::model::{Timestep, Trace};
 use super::pool_steps::{BallView, PoolSteps};
 
 /// A trace whose billiard frame rows may still be columns.
@@ -61,7 +61,7 @@ impl FramedTrace {
         Some(PoolRows {
             cols,
             starts,
-            times: self.trace.timesteps.iter().map(|t| t.t).collect(),
+            timesteps: &self.trace.timesteps,
         })
     }
 
@@ -93,7 +93,8 @@ impl FramedTrace {
 pub struct PoolRows<'a> {
     cols: FrameCols<'a>,
     starts: &'a [usize],
-    times: Vec<f64>,
+    /// The trace's timesteps (their index, time and unknown fields; no objects).
+    timesteps: &'a [Timestep],
 }
 
 impl std::fmt::Debug for PoolRows<'_> {
@@ -111,9 +112,9 @@ impl<'a> PoolRows<'a> {
         PoolSteps::Rows(self)
     }
 
-    /// Each timestep's time (s).
-    pub(super) fn times(&self) -> &[f64] {
-        &self.times
+    /// The timesteps, without their objects (those are the rows).
+    pub(super) fn timesteps(&self) -> &'a [Timestep] {
+        self.timesteps
     }
 
     /// Timestep `k`'s rows.

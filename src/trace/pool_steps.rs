@@ -101,7 +101,7 @@ impl<'a> PoolSteps<'a> {
         match self {
             PoolSteps::Trace(s) => s[k].t,
             PoolSteps::Columns { frames, .. } => frames.times()[k],
-            PoolSteps::Rows(r) => r.times()[k],
+            PoolSteps::Rows(r) => r.timesteps()[k].t,
         }
     }
 
@@ -110,7 +110,7 @@ impl<'a> PoolSteps<'a> {
         match self {
             PoolSteps::Trace(s) => s.partition_point(|s| s.t <= t),
             PoolSteps::Columns { frames, .. } => frames.times().partition_point(|&s| s <= t),
-            PoolSteps::Rows(r) => r.times().partition_point(|&s| s <= t),
+            PoolSteps::Rows(r) => r.timesteps().partition_point(|s| s.t <= t),
         }
     }
 
