@@ -53,8 +53,8 @@ pub use self::atomic::{
 pub use self::columns::ColumnSink;
 pub use self::manifest::{Manifest, OutputFile, StageStatus};
 pub use self::parquet::{
-    Codec, ParquetSettings, ParquetSink, ROW_GROUP_ROWS, Stats, read_batches, read_file,
-    read_file_whole,
+    Codec, ParquetSettings, ParquetSink, ROW_GROUP_ROWS, Stats, Strings, plain_strings,
+    read_batches, read_file, read_file_whole, read_file_whole_as,
 };
 pub use self::traces::{ReadTraceError, read_trace, read_traces, trace_ids};
 pub(crate) use self::traces::{file_trace_ids, key_order, rows_of};

@@ -8,7 +8,10 @@ use arrow::array::RecordBatch;
 use arrow::datatypes::DataType;
 use arrow::datatypes::SchemaRef;
 use parquet::arrow::ArrowWriter;
-use parquet::arrow::arrow_reader::{ParquetRecordBatchReader, ParquetRecordBatchReaderBuilder};
+use parquet::arrow::arrow_reader::{
+    ArrowReaderMetadata, ArrowReaderOptions, ParquetRecordBatchReader,
+    ParquetRecordBatchReaderBuilder,
+};
 use parquet::basic::{Compression, Encoding, ZstdLevel};
 use parquet::file::metadata::ParquetMetaData;
 use parquet::file::properties::{EnabledStatistics, WriterProperties};
@@ -214,14 +217,71 @@ impl ParquetSink {
     }
 }
 
+/// How a reader gives the string columns the file's Arrow schema keeps dictionary-encoded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Strings {
+    /// As written: `Dictionary` columns stay dictionaries.
+    AsWritten,
+    /// As plain `Utf8` (`LargeUtf8`, …: the dictionary's value type). For a batch that spans row
+    /// groups this is cheaper: each row group has its own dictionary, and a dictionary batch across
+    /// them is built by hashing every row's string into a new one, where a plain one copies it.
+    Plain,
+}
+
+/// `schema` with every dictionary column given as its value type.
+pub fn plain_strings(schema: &SchemaRef) -> SchemaRef {
+    if !schema
+        .fields()
+        .iter()
+        .any(|f| matches!(f.data_type(), DataType::Dictionary(..)))
+    {
+        return schema.clone();
+    }
+    let fields: Vec<arrow::datatypes::FieldRef> = schema
+        .fields()
+        .iter()
+        .map(|f| match f.data_type() {
+            DataType::Dictionary(_, value) => {
+                std::sync::Arc::new(f.as_ref().clone().with_data_type(value.as_ref().clone()))
+            }
+            _ => f.clone(),
+        })
+        .collect();
+    std::sync::Arc::new(arrow::datatypes::Schema::new_with_metadata(
+        fields,
+        schema.metadata().clone(),
+    ))
+}
+
 /// A reader of the Parquet file at `path`, in batches of the rows `batch_rows` gives for its metadata.
 fn reader(
     path: &Path,
     batch_rows: impl FnOnce(&ParquetMetaData) -> usize,
 ) -> Result<ParquetRecordBatchReader, StoreError> {
+    reader_of(path, Strings::AsWritten, batch_rows)
+}
+
+/// [`reader`], with the string columns given as `strings` says.
+fn reader_of(
+    path: &Path,
+    strings: Strings,
+    batch_rows: impl FnOnce(&ParquetMetaData) -> usize,
+) -> Result<ParquetRecordBatchReader, StoreError> {
     let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
-    let builder =
-        ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| StoreError::parquet(path, e))?;
+    let meta = ArrowReaderMetadata::load(&file, ArrowReaderOptions::new())
+        .map_err(|e| StoreError::parquet(path, e))?;
+    let meta = match strings {
+        Strings::Plain if plain_strings(meta.schema()) != *meta.schema() => {
+            let plain = plain_strings(meta.schema());
+            ArrowReaderMetadata::try_new(
+                meta.metadata().clone(),
+                ArrowReaderOptions::new().with_schema(plain),
+            )
+            .map_err(|e| StoreError::parquet(path, e))?
+        }
+        _ => meta,
+    };
+    let builder = ParquetRecordBatchReaderBuilder::new_with_metadata(file, meta);
     let rows = batch_rows(builder.metadata());
     builder
         .with_batch_size(rows)
@@ -259,6 +319,11 @@ const WHOLE_FILE_MAX_ROWS: usize = 1 << 22;
 /// than `WHOLE_FILE_MAX_ROWS` rows), so that a reader which needs every row together
 /// (`concat_batches` of one batch slices, it does not copy) pays no second copy of the rows.
 pub fn read_file_whole(path: &Path) -> Result<Vec<RecordBatch>, StoreError> {
+    read_file_whole_as(path, Strings::AsWritten)
+}
+
+/// [`read_file_whole`], with the string columns given as `strings` says.
+pub fn read_file_whole_as(path: &Path, strings: Strings) -> Result<Vec<RecordBatch>, StoreError> {
     let whole = |meta: &ParquetMetaData| {
         meta.row_groups()
             .iter()
@@ -266,7 +331,7 @@ pub fn read_file_whole(path: &Path) -> Result<Vec<RecordBatch>, StoreError> {
             .fold(0usize, usize::saturating_add)
             .clamp(1, WHOLE_FILE_MAX_ROWS)
     };
-    collect(path, reader(path, whole)?)
+    collect(path, reader_of(path, strings, whole)?)
 }
 
 /// Reads every batch of a Parquet file.
@@ -313,8 +378,8 @@ mod tests {
         let props = WriterProperties::builder()
             .set_max_row_group_row_count(Some(1000))
             .build();
-        let mut w =
-            ArrowWriter::try_new(File::create(&path).unwrap(), schema, Some(props)).unwrap();
+        let mut w = ArrowWriter::try_new(File::create(&path).unwrap(), schema.clone(), Some(props))
+            .unwrap();
         w.write(&batch).unwrap();
         w.close().unwrap();
 
@@ -326,6 +391,23 @@ mod tests {
         assert_eq!(got.iter().flatten().collect::<Vec<_>>(), labels);
         assert_eq!(whole[0].column(1).as_ref(), batch.column(1).as_ref());
         assert!(read_file(&path).unwrap().len() > 1);
+
+        // Read with plain strings: the same rows, the label column as Utf8, the floats untouched, and
+        // the schema `plain_strings` gives.
+        let plain = read_file_whole_as(&path, Strings::Plain).unwrap();
+        assert_eq!(plain.len(), 1);
+        assert_eq!(plain[0].schema(), plain_strings(&schema));
+        assert_eq!(plain[0].schema().field(0).data_type(), &DataType::Utf8);
+        let got = plain[0]
+            .column(0)
+            .as_any()
+            .downcast_ref::<StringArray>()
+            .unwrap();
+        assert_eq!(got.iter().flatten().collect::<Vec<_>>(), labels);
+        assert_eq!(plain[0].column(1).as_ref(), batch.column(1).as_ref());
+        // A schema without dictionaries is its own plain form.
+        let floats = Arc::new(Schema::new(vec![Field::new("x", DataType::Float64, false)]));
+        assert!(Arc::ptr_eq(&plain_strings(&floats), &floats));
     }
 
     #[test]

@@ -19,7 +19,9 @@ use arrow::datatypes::DataType;
 use crate::digest::words_u64;
 use crate::pipeline::stage::StageError;
 use crate::rng::SplitMix64;
-use crate::store::{ReadTraceError, RunDir, key_order, read_file_whole, trace_ids};
+use crate::store::{
+    ReadTraceError, RunDir, Strings, key_order, plain_strings, read_file_whole_as, trace_ids,
+};
 use crate::trace::batch::DecodeError;
 use crate::trace::schema::table_schema;
 use crate::trace::{Env, FramedTrace, Trace, TraceRows, decode_trace};
@@ -53,7 +55,8 @@ pub(crate) fn trace_file_sets(run: &RunDir, env: Env) -> Result<Vec<TraceFileSet
 
 /// All rows of `table` in the set's file (an empty batch when no such file is published), grouped
 /// by `trace_id` and ordered by `sort_by` within each trace, with the trace ids as plain strings
-/// alongside. Rows a stage wrote are already so (one trace after another, in table order), and
+/// alongside. String columns come plain, not as dictionaries ([`Strings::Plain`]: the file is read
+/// as one batch across its row groups, each with its own dictionary). Rows a stage wrote are already so (one trace after another, in table order), and
 /// are then taken as they are; others are sorted by `trace_id` then `sort_by`.
 fn sorted_rows(
     run: &RunDir,
@@ -61,14 +64,16 @@ fn sorted_rows(
     table: &str,
     sort_by: &[&str],
 ) -> Result<(RecordBatch, StringArray), StageError> {
-    let schema = table_schema(table)
-        .ok_or_else(|| StageError::Internal(format!("no schema for table {table}")))?;
+    let schema = plain_strings(
+        &table_schema(table)
+            .ok_or_else(|| StageError::Internal(format!("no schema for table {table}")))?,
+    );
     // The set's file of this table, if it is published (a stage writes no file for an empty table).
     let published = run.table(table)?.files.into_iter().find(|f| {
         f.env == Some(set.env) && f.path.file_name().is_some_and(|n| n == set.name.as_str())
     });
     let batches = match published {
-        Some(f) => read_file_whole(&f.path)?,
+        Some(f) => read_file_whole_as(&f.path, Strings::Plain)?,
         None => Vec::new(),
     };
     let all = concat_batches(&schema, &batches)?;
@@ -183,10 +188,12 @@ fn read_set<T>(
     set: &TraceFileSet,
     decode: impl Fn(&TraceRows<'_>) -> Result<T, DecodeError>,
 ) -> Result<Vec<T>, StageError> {
-    let schema = table_schema("traces")
-        .ok_or_else(|| StageError::Internal("no schema for traces".into()))?;
+    let schema = plain_strings(
+        &table_schema("traces")
+            .ok_or_else(|| StageError::Internal("no schema for traces".into()))?,
+    );
     let path = run.partition_dir("traces", Some(set.env)).join(&set.name);
-    let traces = concat_batches(&schema, &read_file_whole(&path)?)?;
+    let traces = concat_batches(&schema, &read_file_whole_as(&path, Strings::Plain)?)?;
     let (steps, step_ids) = sorted_rows(run, set, "timesteps", &["step"])?;
     let (frames, frame_ids) = sorted_rows(run, set, "frames", &["step", "slot"])?;
     let (events, event_ids) = sorted_rows(run, set, "events", &["seq"])?;
