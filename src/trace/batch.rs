@@ -56,7 +56,20 @@ pub struct TraceMeta<'a> {
 }
 
 fn json_or_null(map: &JsonMap) -> Option<String> {
-    (!map.is_empty()).then(|| Value::Object(map.clone()).to_string())
+    (!map.is_empty()).then(|| serde_json::to_string(map).expect("a JSON map serialises"))
+}
+
+/// Appends `value` as compact JSON text (the text `Value::to_string` gives), written through
+/// `buf` so that no string is allocated per row; null where there is none.
+fn append_json(out: &mut StringBuilder, buf: &mut Vec<u8>, value: Option<&Value>) {
+    match value {
+        Some(v) => {
+            buf.clear();
+            serde_json::to_writer(&mut *buf, v).expect("a JSON value serialises");
+            out.append_value(std::str::from_utf8(buf).expect("serde_json writes UTF-8"));
+        }
+        None => out.append_null(),
+    }
 }
 
 pub(super) fn constant_dict(value: &str, len: usize) -> ArrayRef {
@@ -469,6 +482,7 @@ pub(super) fn events_batch(trace_id: &str, events: &[Event]) -> Result<RecordBat
     let mut agents = ListBuilder::new(StringBuilder::new());
     let mut payload = StringBuilder::new();
     let mut extra = StringBuilder::new();
+    let mut buf = Vec::new();
     for (i, e) in events.iter().enumerate() {
         seq.append_value(i32::try_from(i).unwrap_or(i32::MAX));
         kind.append_value(&e.kind);
@@ -482,7 +496,7 @@ pub(super) fn events_batch(trace_id: &str, events: &[Event]) -> Result<RecordBat
             }
             None => agents.append(false),
         }
-        payload.append_option(e.payload.as_ref().map(Value::to_string));
+        append_json(&mut payload, &mut buf, e.payload.as_ref());
         extra.append_option(json_or_null(&e.extra));
     }
     RecordBatch::try_new(
