@@ -737,10 +737,18 @@ struct Encoded {
 
 /// Appends `v` as PLAIN little-endian values.
 fn plain_f64(v: &[f64], out: &mut Vec<u8>) {
-    let at = out.len();
-    out.resize(at + v.len() * 8, 0);
-    for (dst, x) in out[at..].chunks_exact_mut(8).zip(v) {
-        dst.copy_from_slice(&x.to_le_bytes());
+    #[cfg(target_endian = "little")]
+    {
+        // The values' own bytes are already little-endian: one copy, no zero-fill first.
+        use arrow::datatypes::ToByteSlice;
+        out.extend_from_slice(v.to_byte_slice());
+    }
+    #[cfg(not(target_endian = "little"))]
+    {
+        out.reserve(v.len() * 8);
+        for x in v {
+            out.extend_from_slice(&x.to_le_bytes());
+        }
     }
 }
 
