@@ -465,7 +465,7 @@ impl From<IphyreFrames> for Frames {
 
 /// Whether, at every row, the sum of the `K` columns' values (added in column order, as
 /// [`Frames::first_non_finite`] adds them) is finite; false also when the columns' lengths differ.
-/// `s - s` is 0 for a finite `s` and NaN otherwise, and a NaN stays in its lane's total.
+/// `s * 0.0` is ±0 for a finite `s` and NaN otherwise, and a NaN stays in its lane's total.
 fn finite_sums<const K: usize>(cols: [&[f64]; K]) -> bool {
     const LANES: usize = 8;
     let n = cols.first().map_or(0, |c| c.len());
@@ -483,10 +483,10 @@ fn finite_sums<const K: usize>(cols: [&[f64]; K]) -> bool {
         });
         for (l, a) in acc.iter_mut().enumerate() {
             let s = blocks.iter().fold(0.0, |s, b| s + b[l]);
-            *a += s - s;
+            *a += s * 0.0;
         }
     }
-    let tail = (full..n).fold(0.0, |t, i| t + (sum(i) - sum(i)));
+    let tail = (full..n).fold(0.0, |t, i| t + sum(i) * 0.0);
     tail == 0.0 && acc.iter().all(|a| *a == 0.0)
 }
 
