@@ -270,9 +270,13 @@ fn reader_of(
     let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
     let meta = ArrowReaderMetadata::load(&file, ArrowReaderOptions::new())
         .map_err(|e| StoreError::parquet(path, e))?;
-    let meta = match strings {
-        Strings::Plain if plain_strings(meta.schema()) != *meta.schema() => {
-            let plain = plain_strings(meta.schema());
+    let plain = match strings {
+        Strings::Plain => Some(plain_strings(meta.schema())),
+        Strings::AsWritten => None,
+    };
+    let meta = match plain {
+        // A schema without dictionaries is its own plain form (the same `Arc`).
+        Some(plain) if !std::sync::Arc::ptr_eq(&plain, meta.schema()) => {
             ArrowReaderMetadata::try_new(
                 meta.metadata().clone(),
                 ArrowReaderOptions::new().with_schema(plain),

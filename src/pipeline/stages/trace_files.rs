@@ -56,8 +56,9 @@ pub(crate) fn trace_file_sets(run: &RunDir, env: Env) -> Result<Vec<TraceFileSet
 /// All rows of `table` in the set's file (an empty batch when no such file is published), grouped
 /// by `trace_id` and ordered by `sort_by` within each trace, with the trace ids as plain strings
 /// alongside. String columns come plain, not as dictionaries ([`Strings::Plain`]: the file is read
-/// as one batch across its row groups, each with its own dictionary). Rows a stage wrote are already so (one trace after another, in table order), and
-/// are then taken as they are; others are sorted by `trace_id` then `sort_by`.
+/// as one batch across its row groups, each with its own dictionary). Rows a stage wrote are
+/// already so (one trace after another, in table order), and are then taken as they are; others
+/// are sorted by `trace_id` then `sort_by`.
 fn sorted_rows(
     run: &RunDir,
     set: &TraceFileSet,
