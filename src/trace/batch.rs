@@ -664,6 +664,14 @@ impl StrCol {
         }
     }
 
+    /// Rows that are null (a key outside the dictionary is not counted).
+    fn null_count(&self) -> usize {
+        match self {
+            StrCol::Plain(a) => a.null_count(),
+            StrCol::Dict { keys, .. } => keys.null_count(),
+        }
+    }
+
     /// Row `i` (the empty string where it is null).
     fn value(&self, i: usize) -> &str {
         self.get(i).unwrap_or("")
@@ -945,7 +953,7 @@ impl<'a> FrameCols<'a> {
     /// row and then the number of rows; `None` when any row is otherwise (`fill` then builds the
     /// objects, or names the row that is wrong).
     pub(super) fn plain_pool_starts(&self, timesteps: &[Timestep]) -> Option<Vec<usize>> {
-        if self.env != Env::Pooltool || self.extra.len() != self.extra_nulls() {
+        if self.env != Env::Pooltool || self.extra.len() != self.extra.null_count() {
             return None;
         }
         let floats = [
@@ -981,14 +989,6 @@ impl<'a> FrameCols<'a> {
         }
         starts.push(i);
         (i == n).then_some(starts)
-    }
-
-    /// Rows whose `extra` is null.
-    fn extra_nulls(&self) -> usize {
-        match &self.extra {
-            StrCol::Plain(a) => a.null_count(),
-            StrCol::Dict { keys, .. } => keys.null_count(),
-        }
     }
 
     /// Frame row `i`'s ball, borrowed: the values [`FrameCols::pool_ball`] copies, for a row

@@ -11,10 +11,7 @@
 //! first.
 
 use arrow::array::{Array, ArrayRef, RecordBatch, StringArray};
-use arrow::compute::{
-    SortColumn, cast, concat_batches, lexsort_to_indices, take, take_record_batch,
-};
-use arrow::datatypes::DataType;
+use arrow::compute::{SortColumn, concat_batches, lexsort_to_indices, take, take_record_batch};
 
 use crate::digest::words_u64;
 use crate::pipeline::stage::StageError;
@@ -78,14 +75,11 @@ fn sorted_rows(
         None => Vec::new(),
     };
     let all = concat_batches(&schema, &batches)?;
+    // Plain strings already (the reader's schema), so no cast.
     let ids = all
         .column_by_name("trace_id")
-        .ok_or_else(|| StageError::Internal(format!("{table}: no trace_id column")))?;
-    let ids: ArrayRef = if matches!(ids.data_type(), DataType::Utf8) {
-        ids.clone()
-    } else {
-        cast(ids, &DataType::Utf8)?
-    };
+        .ok_or_else(|| StageError::Internal(format!("{table}: no trace_id column")))?
+        .clone();
     if all.num_rows() == 0 {
         return Ok((all, StringArray::from(Vec::<String>::new())));
     }
