@@ -20,7 +20,7 @@
 #                  made with $PYTHON39 -m venv and `pip install phyre "numpy<1.24"`)
 #   IPHYRE_VENV    I-PHYRE venv (default /work/venvs/iphyre if present, else tools/phyre/venv, made with
 #                  `pip install iphyre numpy pygame "pymunk<7"`)
-#   PYTHON39       interpreter for a new PHYRE venv (default python3.9)
+#   PYTHON39       interpreter for a new PHYRE venv (default python3.9, else pyenv's installed 3.9)
 #   NO_DOCS=1      print the table without editing docs/performance.md
 set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
@@ -45,7 +45,15 @@ fi
 if [ ! -x "$PHYRE_VENV/bin/python" ]; then
   echo "== installing PHYRE 0.2.2 into $PHYRE_VENV" >&2
   py39="${PYTHON39:-python3.9}"
-  command -v "$py39" >/dev/null || {
+  is39() { "$1" -c 'import sys; assert sys.version_info[:2] == (3, 9)' >/dev/null 2>&1; }
+  # `command -v` is not enough: pyenv's shim for python3.9 exists where a 3.9 is installed but not
+  # selected, and fails when run; then take pyenv's own 3.9 if it has one.
+  if [ -z "${PYTHON39:-}" ] && ! is39 "$py39" && command -v pyenv >/dev/null; then
+    for cand in "$(pyenv root)"/versions/3.9*/bin/python3.9; do
+      if is39 "$cand"; then py39="$cand"; break; fi
+    done
+  fi
+  is39 "$py39" || {
     echo "PHYRE needs Python 3.9 (no wheels for later versions): set PYTHON39 to a 3.9 interpreter (e.g. pyenv install 3.9.18)" >&2
     exit 2
   }
