@@ -61,7 +61,7 @@ fn json_or_null(map: &JsonMap) -> Option<String> {
 
 /// Appends `value` as compact JSON text (the text `Value::to_string` gives), written through
 /// `buf` so that no string is allocated per row; null where there is none.
-fn append_json(out: &mut StringBuilder, buf: &mut Vec<u8>, value: Option<&Value>) {
+fn append_json(out: &mut StringBuilder, buf: &mut Vec<u8>, value: Option<&impl serde::Serialize>) {
     match value {
         Some(v) => {
             buf.clear();
@@ -497,7 +497,11 @@ pub(super) fn events_batch(trace_id: &str, events: &[Event]) -> Result<RecordBat
             None => agents.append(false),
         }
         append_json(&mut payload, &mut buf, e.payload.as_ref());
-        extra.append_option(json_or_null(&e.extra));
+        append_json(
+            &mut extra,
+            &mut buf,
+            (!e.extra.is_empty()).then_some(&e.extra),
+        );
     }
     RecordBatch::try_new(
         EVENTS.clone(),
