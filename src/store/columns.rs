@@ -733,6 +733,24 @@ struct Encoded {
     /// The dictionary page's PLAIN values and their count, if dictionary-encoded.
     dict: Option<(Vec<u8>, usize)>,
     statistics: Option<Statistics>,
+    /// The values section is the column's own float values, as their little-endian bytes are in
+    /// memory, and was not copied into the page buffer ([`page_body`]).
+    floats_in_place: bool,
+}
+
+/// The data page of `c` as `encode_values` left it: `data` (its levels and values), or, for a
+/// column whose values were left in place, the values' own bytes (a non-nullable PLAIN float
+/// page on a little-endian machine is exactly those bytes, so the codec reads them where they
+/// are instead of from a copy).
+fn page_body<'a>(c: &'a Column, floats_in_place: bool, data: &'a [u8]) -> &'a [u8] {
+    match &c.data {
+        #[cfg(target_endian = "little")]
+        Data::F64(v) if floats_in_place => {
+            use arrow::datatypes::ToByteSlice;
+            v.to_byte_slice()
+        }
+        _ => data,
+    }
 }
 
 /// Appends `v` as PLAIN little-endian values.
@@ -752,7 +770,9 @@ fn plain_f64(v: &[f64], out: &mut Vec<u8>) {
     }
 }
 
-/// Appends the data page's values section of `c`'s present values to `values`.
+/// Appends the data page's values section of `c`'s present values to `values`, except for the
+/// PLAIN values of a float column written with no levels before them: those stay where they are
+/// (`floats_in_place`, read through [`page_body`]).
 fn encode_values(c: &Column, values: &mut Vec<u8>) -> Encoded {
     let nulls = Some(c.nulls);
     let stats = c.stats;
@@ -763,11 +783,16 @@ fn encode_values(c: &Column, values: &mut Vec<u8>) -> Encoded {
             let constant = v
                 .first()
                 .filter(|x| v.iter().all(|y| y.to_bits() == x.to_bits()));
+            let mut floats_in_place = false;
             let dict = match constant {
                 Some(x) if v.len() > 1 => {
                     values.push(0);
                     rle_run(0, v.len(), 0, values);
                     Some((x.to_le_bytes().to_vec(), 1))
+                }
+                _ if values.is_empty() && cfg!(target_endian = "little") => {
+                    floats_in_place = true;
+                    None
                 }
                 _ => {
                     plain_f64(v, values);
@@ -776,6 +801,7 @@ fn encode_values(c: &Column, values: &mut Vec<u8>) -> Encoded {
             };
             let range = float_range(v);
             Encoded {
+                floats_in_place,
                 dict,
                 statistics: stats.then(|| {
                     ValueStatistics::<f64>::new(
@@ -845,6 +871,7 @@ fn encode_values(c: &Column, values: &mut Vec<u8>) -> Encoded {
                     Encoded {
                         dict: Some((dict, entries)),
                         statistics,
+                        floats_in_place: false,
                     }
                 }
                 _ => {
@@ -855,6 +882,7 @@ fn encode_values(c: &Column, values: &mut Vec<u8>) -> Encoded {
                     Encoded {
                         dict: None,
                         statistics,
+                        floats_in_place: false,
                     }
                 }
             }
@@ -872,6 +900,7 @@ fn encode_values(c: &Column, values: &mut Vec<u8>) -> Encoded {
             let some = !v.is_empty();
             Encoded {
                 dict: None,
+                floats_in_place: false,
                 statistics: stats.then(|| {
                     ValueStatistics::<bool>::new(
                         some.then_some(lo),
@@ -888,6 +917,7 @@ fn encode_values(c: &Column, values: &mut Vec<u8>) -> Encoded {
             if idx.is_empty() {
                 return Encoded {
                     dict: None,
+                    floats_in_place: false,
                     statistics: stats.then(|| {
                         ValueStatistics::<ByteArray>::new(None, None, None, nulls, false).into()
                     }),
@@ -909,6 +939,7 @@ fn encode_values(c: &Column, values: &mut Vec<u8>) -> Encoded {
             Encoded {
                 dict: Some((page, dict.len())),
                 statistics,
+                floats_in_place: false,
             }
         }
     }
@@ -923,7 +954,11 @@ fn encode_chunk(
     compression: Compression,
     float_pages: ZstdPage,
 ) -> parquet::errors::Result<EncodedChunk> {
-    let mut data = Vec::with_capacity(rows * 8 + 64);
+    // A non-nullable float column's PLAIN page needs no buffer of its own (`page_body`).
+    let mut data = match c.data {
+        Data::F64(_) if !c.nullable => Vec::new(),
+        _ => Vec::with_capacity(rows * 8 + 64),
+    };
     if c.nullable {
         def_levels(&c.def_runs, &mut data);
     }
@@ -938,18 +973,18 @@ fn encode_chunk(
     } else {
         ZstdPage::default()
     };
-    let mut compress = |buf: Vec<u8>| -> parquet::errors::Result<(Bytes, usize)> {
+    let mut compress = |buf: &[u8]| -> parquet::errors::Result<(Bytes, usize)> {
         let raw = buf.len();
-        Ok(match compressor.compress(&buf, page)? {
+        Ok(match compressor.compress(buf, page)? {
             Some(z) => (Bytes::from(z), raw),
-            None => (Bytes::from(buf), raw),
+            None => (Bytes::copy_from_slice(buf), raw),
         })
     };
     {
         let mut pages = SerializedPageWriter::new(&mut sink);
         dict_offset = None;
         let data_encoding = if let Some((dict, entries)) = enc.dict {
-            let (buf, raw) = compress(dict)?;
+            let (buf, raw) = compress(&dict)?;
             let spec = pages.write_page(CompressedPage::new(
                 Page::DictionaryPage {
                     buf,
@@ -972,7 +1007,7 @@ fn encode_chunk(
         } else {
             Encoding::PLAIN
         };
-        let (buf, raw) = compress(data)?;
+        let (buf, raw) = compress(page_body(c, enc.floats_in_place, &data))?;
         let spec = pages.write_page(CompressedPage::new(
             Page::DataPage {
                 buf,
