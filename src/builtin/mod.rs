@@ -6,7 +6,7 @@
 //! Each file is found by its path in the repository ([`get`], [`text`]), e.g.
 //! `data/libraries/pooltool/library.toml`. The table, games and tasks are embedded once, by the
 //! environment that reads them (`envs::pool::DEFAULT_TABLE_JSON`, `envs::iphyre::DEFAULT_GAMES_JSON`,
-//! `envs::phyre::DEFAULT_TASKS_GZ`); this index refers to those constants instead of embedding them
+//! `envs::phyre::DEFAULT_TASKS_ZST`); this index refers to those constants instead of embedding them
 //! again.
 //! The prompt templates are embedded by `llm::prompt`, and the detector worker and mutation scripts by
 //! their modules; they are not listed here.
@@ -105,8 +105,8 @@ const ENVS: &[File] = &[
         bytes: crate::envs::pool::DEFAULT_TABLE_JSON.as_bytes(),
     },
     File {
-        path: "data/tasks/phyre_ball_tasks.jsonl.gz",
-        bytes: crate::envs::phyre::DEFAULT_TASKS_GZ,
+        path: "data/tasks/phyre_ball_tasks.jsonl.zst",
+        bytes: crate::envs::phyre::DEFAULT_TASKS_ZST,
     },
 ];
 
@@ -186,7 +186,7 @@ mod tests {
         want.extend(on_disk("goals", &[".toml"]));
         want.extend(on_disk("tables", &[".json"]));
         want.extend(on_disk("games", &[".json"]));
-        want.extend(on_disk("tasks", &[".gz"]));
+        want.extend(on_disk("tasks", &[".zst"]));
         want.sort();
         let root = Path::new(env!("CARGO_MANIFEST_DIR"));
         for path in &want {

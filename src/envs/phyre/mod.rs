@@ -3,7 +3,7 @@
 //! PHYRE 0.2.2 on Box2D (box2d-rs, PHYRE's own engine; the default) or rapier2d, following
 //! `docs/envs/phyre.md` §R1–§R7.
 //!
-//! **Owns:** the task set ([`TaskSet`], lazily indexed from the committed `data/tasks/phyre_ball_tasks.jsonl.gz`),
+//! **Owns:** the task set ([`TaskSet`], lazily indexed from the committed `data/tasks/phyre_ball_tasks.jsonl.zst`),
 //! the physics constants ([`PhysicsParams`]), actions and their validity ([`BallAction`], [`Placement`],
 //! DeepPHY's [`deepphy_action`]), the physics world ([`World`] over the Box2D and rapier2d backends), the episode loop with PHYRE's success rule
 //! ([`episode::run`]), traces ([`trace_of`]), the evaluation folds ([`folds`]), seeded random actions
@@ -49,7 +49,7 @@ pub use folds::{EvalSetup, Fold, fold};
 pub use params::{Engine, PIXELS_PER_METRE, PhysicsParams};
 pub use sample::{MAX_DRAWS, action_rng, random_valid_action};
 pub use task::{Body, Color, Shape, Task};
-pub use tasks::{DEFAULT_TASKS_GZ, TaskSet};
+pub use tasks::{DEFAULT_TASKS_FINGERPRINT, DEFAULT_TASKS_TEXT_SHA256, DEFAULT_TASKS_ZST, TaskSet};
 pub use to_trace::{trace_columns, trace_of};
 pub use world::{BodyState, ContactChange, World};
 

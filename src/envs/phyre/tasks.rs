@@ -1,19 +1,36 @@
 //! [`TaskSet`]: the 2,500 PHYRE ball-tier tasks, loaded fast and lazily.
 //!
-//! The committed file `data/tasks/phyre_ball_tasks.jsonl.gz` (314 KB, embedded in the binary) is
+//! The committed file `data/tasks/phyre_ball_tasks.jsonl.zst` (189 KB, zstd, embedded in the binary) is
 //! decompressed once, on first use, into one ~10 MB string; a scan of its lines records each task id and
 //! the byte range of its line. A task is parsed only when asked for ([`TaskSet::get`]), so listing ids or
-//! simulating one task never parses the other 2,499.
+//! simulating one task never parses the other 2,499. (zstd rather than gzip: inflating the gzip file
+//! took about 8.6 ms of every process that read a PHYRE task, zstd takes about 1 ms; see
+//! `docs/performance.md`, "The task set in zstd".)
 
-use std::io::Read;
 use std::ops::Range;
 use std::sync::OnceLock;
 
 use super::error::{PhyreError, Result};
 use super::task::Task;
 
-/// The committed ball-tier task file (PHYRE 0.2.2, Apache-2.0; see `data/README.md`).
-pub const DEFAULT_TASKS_GZ: &[u8] = include_bytes!("../../../data/tasks/phyre_ball_tasks.jsonl.gz");
+/// The committed ball-tier task file (PHYRE 0.2.2, Apache-2.0; see `data/README.md`): JSON Lines,
+/// zstd-compressed with its content size in the frame header.
+pub const DEFAULT_TASKS_ZST: &[u8] =
+    include_bytes!("../../../data/tasks/phyre_ball_tasks.jsonl.zst");
+
+/// SHA-256 of [`DEFAULT_TASKS_ZST`]'s text, decompressed (a unit test holds the file to it).
+pub const DEFAULT_TASKS_TEXT_SHA256: &str =
+    "55fa9c292e784bab69bcf14cad45d390f6e3496c3f549a4cd7cf61b47132b9a6";
+
+/// What a `simulate` stage's fingerprint records of the task data. For this text it is
+/// `9b0dafdd8ff08c9e`, the first 16 hex digits of the SHA-256 of the gzip file the same text was
+/// committed in before (`phyre_ball_tasks.jsonl.gz`), so that runs made then keep their fingerprints
+/// and are not simulated again for a change of container. A different text must record the first 16
+/// hex digits of its own SHA-256 (a unit test checks this once the text changes).
+pub const DEFAULT_TASKS_FINGERPRINT: &str = "9b0dafdd8ff08c9e";
+
+/// The decompressed text of the committed task file is at most this large (it is 9.9 MB).
+const MAX_TASK_TEXT: u64 = 1 << 30;
 
 /// A set of PHYRE tasks, one JSON line each, indexed by task id.
 #[derive(Debug)]
@@ -46,17 +63,33 @@ impl TaskSet {
     pub fn default_tasks() -> Result<&'static TaskSet> {
         static DEFAULT: OnceLock<std::result::Result<TaskSet, String>> = OnceLock::new();
         DEFAULT
-            .get_or_init(|| TaskSet::from_gzip(DEFAULT_TASKS_GZ).map_err(|e| e.to_string()))
+            .get_or_init(|| TaskSet::from_zstd(DEFAULT_TASKS_ZST).map_err(|e| e.to_string()))
             .as_ref()
-            .map_err(|m| bad("data/tasks/phyre_ball_tasks.jsonl.gz".into(), m.clone()))
+            .map_err(|m| bad("data/tasks/phyre_ball_tasks.jsonl.zst".into(), m.clone()))
     }
 
-    /// Decompresses and indexes gzipped JSON Lines.
-    pub fn from_gzip(bytes: &[u8]) -> Result<TaskSet> {
-        let mut text = String::with_capacity(bytes.len() * 32);
-        flate2::read::GzDecoder::new(bytes)
-            .read_to_string(&mut text)
-            .map_err(|e| bad("gzip".into(), e.to_string()))?;
+    /// Decompresses and indexes zstd-compressed JSON Lines (one frame whose header gives its
+    /// decompressed size, as the `zstd` command line writes it).
+    pub fn from_zstd(bytes: &[u8]) -> Result<TaskSet> {
+        let size = match zstd::zstd_safe::get_frame_content_size(bytes) {
+            Ok(Some(n)) if n <= MAX_TASK_TEXT => n as usize,
+            Ok(Some(n)) => {
+                return Err(bad(
+                    "zstd".into(),
+                    format!("{n} bytes decompressed, more than {MAX_TASK_TEXT}"),
+                ));
+            }
+            Ok(None) => {
+                return Err(bad(
+                    "zstd".into(),
+                    "the frame header gives no decompressed size",
+                ));
+            }
+            Err(_) => return Err(bad("zstd".into(), "not a zstd frame")),
+        };
+        let raw =
+            zstd::bulk::decompress(bytes, size).map_err(|e| bad("zstd".into(), e.to_string()))?;
+        let text = String::from_utf8(raw).map_err(|e| bad("zstd".into(), e.to_string()))?;
         TaskSet::from_jsonl(text)
     }
 
@@ -198,6 +231,35 @@ mod tests {
         let set = TaskSet::from_jsonl("{\"task_id\":\"a\", \"x\": 1}\n".into()).unwrap();
         let e = set.get("a").unwrap_err().to_string();
         assert!(e.contains("line 1"), "{e}");
-        assert!(TaskSet::from_gzip(b"not gzip").is_err());
+        assert!(TaskSet::from_zstd(b"not zstd").is_err());
+        // A frame without its size in the header is refused by name.
+        let mut enc = zstd::stream::Encoder::new(Vec::new(), 3).unwrap();
+        enc.include_contentsize(false).unwrap();
+        std::io::Write::write_all(&mut enc, b"{\"task_id\":\"a\"}\n").unwrap();
+        let e = TaskSet::from_zstd(&enc.finish().unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("no decompressed size"), "{e}");
+        let sized = zstd::bulk::compress(b"{\"task_id\":\"a\"}\n", 3).unwrap();
+        assert_eq!(TaskSet::from_zstd(&sized).unwrap().len(), 1);
+    }
+
+    #[test]
+    fn the_committed_text_is_the_one_the_fingerprint_names() {
+        use sha2::{Digest, Sha256};
+        let size = zstd::zstd_safe::get_frame_content_size(DEFAULT_TASKS_ZST)
+            .unwrap()
+            .unwrap();
+        let text = zstd::bulk::decompress(DEFAULT_TASKS_ZST, size as usize).unwrap();
+        let sha = crate::digest::hex(&Sha256::digest(&text));
+        assert_eq!(
+            sha, DEFAULT_TASKS_TEXT_SHA256,
+            "the task file changed: update both constants"
+        );
+        // The text committed as gzip until session 31 keeps that file's fingerprint; any other
+        // text fingerprints as its own hash.
+        if sha != "55fa9c292e784bab69bcf14cad45d390f6e3496c3f549a4cd7cf61b47132b9a6" {
+            assert_eq!(DEFAULT_TASKS_FINGERPRINT, &sha[..16]);
+        }
     }
 }

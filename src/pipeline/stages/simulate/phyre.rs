@@ -29,8 +29,8 @@ use super::shards::{Count, ItemOutput, ShardTotals, replay_pair};
 use super::{ShardParams, SimulateSummary, Simulation};
 use crate::digest::hex;
 use crate::envs::phyre::{
-    BallAction, DEFAULT_STRIDE, DEFAULT_TASKS_GZ, Engine, EvalSetup, PhyreEnv, PhysicsParams,
-    RecordOptions, Status, Task, TaskSet, action_rng, dataset_tasks, episode, fold,
+    BallAction, DEFAULT_STRIDE, DEFAULT_TASKS_FINGERPRINT, Engine, EvalSetup, PhyreEnv,
+    PhysicsParams, RecordOptions, Status, Task, TaskSet, action_rng, dataset_tasks, episode, fold,
     random_valid_action, trace_columns,
 };
 use crate::pipeline::registry::BuildError;
@@ -270,9 +270,8 @@ impl Simulation for PhyreSimulation {
                 json!({"task": task, "action": [action.x, action.y, action.r]})
             }
         };
-        let data = hex(&Sha256::digest(DEFAULT_TASKS_GZ));
         Ok(
-            json!({"env": "phyre", "engine": self.params.engine.name(), "stride": self.record.stride, "tasks_data": &data[..16], "work": work}),
+            json!({"env": "phyre", "engine": self.params.engine.name(), "stride": self.record.stride, "tasks_data": DEFAULT_TASKS_FINGERPRINT, "work": work}),
         )
     }
 
