@@ -3,9 +3,9 @@
 //! The committed file `data/tasks/phyre_ball_tasks.jsonl.zst` (189 KB, zstd, embedded in the binary) is
 //! decompressed once, on first use, into one ~10 MB string; a scan of its lines records each task id and
 //! the byte range of its line. A task is parsed only when asked for ([`TaskSet::get`]), so listing ids or
-//! simulating one task never parses the other 2,499. (zstd rather than gzip: inflating the gzip file
-//! took about 8.6 ms of every process that read a PHYRE task, zstd takes about 1 ms; see
-//! `docs/performance.md`, "The task set in zstd".)
+//! simulating one task never parses the other 2,499. (zstd rather than gzip: it saves about 3 ms of
+//! CPU in every process that reads a PHYRE task; `docs/performance.md`, "Float pages read in place;
+//! the task set in zstd".)
 
 use std::ops::Range;
 use std::sync::OnceLock;
