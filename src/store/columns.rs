@@ -19,6 +19,7 @@
 //! (`v − min`); floats are copied. The rows a reader sees are the same as `ArrowWriter`'s; the
 //! bytes differ (encodings, one data page per column chunk, chunk statistics without a page index).
 
+use std::borrow::Cow;
 use std::collections::HashMap;
 use std::fs::File;
 use std::io::BufWriter;
@@ -742,14 +743,13 @@ struct Encoded {
 /// column whose values were left in place, the values' own bytes (a non-nullable PLAIN float
 /// page on a little-endian machine is exactly those bytes, so the codec reads them where they
 /// are instead of from a copy).
-fn page_body<'a>(c: &'a Column, floats_in_place: bool, data: &'a [u8]) -> &'a [u8] {
+fn page_body(c: &Column, floats_in_place: bool, data: Vec<u8>) -> Cow<'_, [u8]> {
     match &c.data {
-        #[cfg(target_endian = "little")]
-        Data::F64(v) if floats_in_place => {
+        Data::F64(v) if floats_in_place && cfg!(target_endian = "little") => {
             use arrow::datatypes::ToByteSlice;
-            v.to_byte_slice()
+            Cow::Borrowed(v.to_byte_slice())
         }
-        _ => data,
+        _ => Cow::Owned(data),
     }
 }
 
@@ -973,18 +973,19 @@ fn encode_chunk(
     } else {
         ZstdPage::default()
     };
-    let mut compress = |buf: &[u8]| -> parquet::errors::Result<(Bytes, usize)> {
+    // An uncompressed page is its buffer, moved (or copied, for values read in place).
+    let mut compress = |buf: Cow<'_, [u8]>| -> parquet::errors::Result<(Bytes, usize)> {
         let raw = buf.len();
-        Ok(match compressor.compress(buf, page)? {
+        Ok(match compressor.compress(&buf, page)? {
             Some(z) => (Bytes::from(z), raw),
-            None => (Bytes::copy_from_slice(buf), raw),
+            None => (Bytes::from(buf.into_owned()), raw),
         })
     };
     {
         let mut pages = SerializedPageWriter::new(&mut sink);
         dict_offset = None;
         let data_encoding = if let Some((dict, entries)) = enc.dict {
-            let (buf, raw) = compress(&dict)?;
+            let (buf, raw) = compress(Cow::Owned(dict))?;
             let spec = pages.write_page(CompressedPage::new(
                 Page::DictionaryPage {
                     buf,
@@ -1007,7 +1008,7 @@ fn encode_chunk(
         } else {
             Encoding::PLAIN
         };
-        let (buf, raw) = compress(page_body(c, enc.floats_in_place, &data))?;
+        let (buf, raw) = compress(page_body(c, enc.floats_in_place, data))?;
         let spec = pages.write_page(CompressedPage::new(
             Page::DataPage {
                 buf,
