@@ -48,26 +48,12 @@ pub(crate) fn load_body(key: &str, trace: &Trace) -> Vec<u8> {
     buf.extend_from_slice(b"{\"id\":");
     serde_json::to_writer(&mut buf, key).expect("a string serialises");
     buf.extend_from_slice(b",\"trace\":");
-    crate::trace::json::write_trace(&mut buf, &shell_of(trace), false)
-        .expect("a trace always serialises");
+    crate::trace::json::write_trace_shell(&mut buf, trace).expect("a trace always serialises");
     buf.extend_from_slice(b",\"steps\":");
     crate::trace::json::write_steps_sharing_repeats(&mut buf, &trace.timesteps)
         .expect("a trace always serialises");
     buf.push(b'}');
     buf
-}
-
-/// The trace without its timesteps (they travel separately).
-fn shell_of(trace: &Trace) -> Trace {
-    Trace {
-        trace_id: trace.trace_id.clone(),
-        env: trace.env,
-        task_id: trace.task_id.clone(),
-        timesteps: Vec::new(),
-        events: trace.events.clone(),
-        outcome: trace.outcome.clone(),
-        extra: trace.extra.clone(),
-    }
 }
 
 /// Runs of fewer detectors than this get a pooltool trace with its steps' objects built when first
@@ -263,7 +249,7 @@ fn pool_columns(
     header.extend_from_slice(b"{\"id\":");
     serde_json::to_writer(&mut header, key).ok()?;
     header.extend_from_slice(b",\"trace\":");
-    crate::trace::json::write_trace(&mut header, &shell_of(shell), false).ok()?;
+    crate::trace::json::write_trace_shell(&mut header, shell).ok()?;
     let rest = serde_json::json!({
         "index": shell.timesteps.iter().map(|t| t.index).collect::<Vec<_>>(),
         "protos": protos,

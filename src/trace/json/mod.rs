@@ -27,4 +27,5 @@ pub use read::{
 };
 pub use write::{
     PaperTrace, timestep_to_value, to_value, write_steps_sharing_repeats, write_trace,
+    write_trace_shell,
 };

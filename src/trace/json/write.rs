@@ -24,6 +24,14 @@ pub fn write_trace(out: &mut impl Write, trace: &Trace, pretty: bool) -> serde_j
     }
 }
 
+/// Writes a trace as compact JSON with an empty `timesteps` list: the bytes [`write_trace`] writes
+/// for a copy of the trace without its timesteps, without making that copy (its events cloned only
+/// to be written and dropped). This is the part of a load request that is not the steps (which
+/// travel separately, `detect::protocol`).
+pub fn write_trace_shell(out: &mut impl Write, trace: &Trace) -> serde_json::Result<()> {
+    serde_json::to_writer(out, &Shell(trace))
+}
+
 /// The trace as a JSON value (for tests and small traces).
 pub fn to_value(trace: &Trace) -> Value {
     serde_json::to_value(PaperTrace(trace))
@@ -99,17 +107,30 @@ fn extras<M: SerializeMap>(m: &mut M, extra: &JsonMap) -> Result<(), M::Error> {
 
 impl Serialize for PaperTrace<'_> {
     fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        let t = self.0;
-        let mut m = s.serialize_map(None)?;
-        m.serialize_entry("trace_id", &t.trace_id)?;
-        m.serialize_entry("environment", t.env.as_str())?;
-        m.serialize_entry("task_id", &t.task_id)?;
-        extras(&mut m, &t.extra)?;
-        m.serialize_entry("timesteps", &Steps(&t.timesteps))?;
-        m.serialize_entry("events", &Events(&t.events))?;
-        m.serialize_entry("outcome", &OutcomeJson(&t.outcome))?;
-        m.end()
+        trace_with_steps(self.0, &self.0.timesteps, s)
     }
+}
+
+/// A borrowed trace that serialises as [`PaperTrace`] with no timesteps.
+struct Shell<'a>(&'a Trace);
+
+impl Serialize for Shell<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        trace_with_steps(self.0, &[], s)
+    }
+}
+
+/// `t` in the paper's layout, with `steps` as its timesteps.
+fn trace_with_steps<S: Serializer>(t: &Trace, steps: &[Timestep], s: S) -> Result<S::Ok, S::Error> {
+    let mut m = s.serialize_map(None)?;
+    m.serialize_entry("trace_id", &t.trace_id)?;
+    m.serialize_entry("environment", t.env.as_str())?;
+    m.serialize_entry("task_id", &t.task_id)?;
+    extras(&mut m, &t.extra)?;
+    m.serialize_entry("timesteps", &Steps(steps))?;
+    m.serialize_entry("events", &Events(&t.events))?;
+    m.serialize_entry("outcome", &OutcomeJson(&t.outcome))?;
+    m.end()
 }
 
 struct Steps<'a>(&'a [Timestep]);
@@ -250,6 +271,28 @@ mod tests {
     use super::*;
     use crate::testutil::synthetic_trace;
     use crate::trace::Env;
+
+    #[test]
+    fn a_shell_is_the_trace_written_without_its_timesteps() {
+        for env in Env::ALL {
+            let mut t = synthetic_trace(env, 3, 5, 2);
+            t.extra.insert("source".into(), Value::from("test"));
+            t.extra
+                .insert("z_last".into(), serde_json::json!({"a": [1, 2.5]}));
+            let mut want = Vec::new();
+            let mut copy = t.clone();
+            copy.timesteps.clear();
+            write_trace(&mut want, &copy, false).unwrap();
+            let mut got = Vec::new();
+            write_trace_shell(&mut got, &t).unwrap();
+            assert_eq!(
+                String::from_utf8(got).unwrap(),
+                String::from_utf8(want).unwrap(),
+                "{env}"
+            );
+            assert!(!t.events.is_empty(), "{env}: the shell carries the events");
+        }
+    }
 
     #[test]
     fn repeated_objects_are_written_once_and_only_against_the_step_before() {
