@@ -4,8 +4,8 @@
 //! decompressed once, on first use, into one ~10 MB string; a scan of its lines records each task id and
 //! the byte range of its line. A task is parsed only when asked for ([`TaskSet::get`]), so listing ids or
 //! simulating one task never parses the other 2,499. (zstd rather than gzip: it saves about 3 ms of
-//! CPU in every process that reads a PHYRE task; `docs/performance.md`, "Float pages read in place;
-//! the task set in zstd".)
+//! CPU in every process that reads a PHYRE task; `docs/performance.md`, "the task set in zstd" under
+//! session 31.)
 
 use std::ops::Range;
 use std::sync::OnceLock;
