@@ -26,7 +26,8 @@ def find_pattern(trace):
     for oid, m in sorted(kin.items()):
         if _is_static(kin, oid):
             continue
-        free = [not _in_contact(contacts, oid, ts[k]) for k in m["k"]]
+        mine = [g for g in contacts if oid in g["pair"]]  # this body's contacts, in their order
+        free = [not _in_contact(mine, oid, ts[k]) for k in m["k"]]
         # Maximal runs: a frame in contact ends a flight, however short the contact.
         for i, j in _runs(m["k"], ts, free, MIN_S, gap=0.0):
             a, b = m["k"][i], m["k"][j]

@@ -16,10 +16,13 @@ def find_pattern(trace):
         r = float(m["o"][0].get("diameter", 0.0)) / 2.0
         ball = m["o"][0].get("shape") == "ball"
         flags, partner = [], []
+        # The contacts this object is part of, in their order; read only at steps where it moves fast
+        # enough to be flagged (a partner is read only at a flagged step, where a run starts).
+        mine = [g for g in contacts if oid in g["pair"]]
         for k, v, o in zip(m["k"], m["v"], m["o"]):
             sp = (v[0] ** 2 + v[1] ** 2) ** 0.5
             w = abs(float(o.get("angular_velocity") or 0.0)) * r
-            touching = _in_contact(contacts, oid, ts[k])
+            touching = _in_contact(mine, oid, ts[k]) if sp >= MOVING_V else None
             partner.append(touching[0]["pair"] if touching else None)
             flags.append(sp >= MOVING_V and bool(touching) and not (ball and abs(w - sp) <= ROLL_TOL * sp))
         for i, j in _runs(m["k"], ts, flags, MIN_S):

@@ -77,8 +77,9 @@ def find_pattern(trace):
         if _is_static(kin, oid) or m["o"][0].get("shape") == "jar":
             continue
         flags, partners = [], []
+        mine = [g for g in contacts if oid in g["pair"]]  # this body's contacts, in their order
         for k, v, o in zip(m["k"], m["v"], m["o"]):
-            touch = _in_contact(contacts, oid, ts[k])
+            touch = _in_contact(mine, oid, ts[k])
             partners.append(touch)
             flags.append(len(touch) >= 2 and (v[0] ** 2 + v[1] ** 2) ** 0.5 <= REST_V
                          and abs(float(o.get("angular_velocity") or 0.0)) <= ROT_V
