@@ -734,18 +734,21 @@ struct Encoded {
     /// The dictionary page's PLAIN values and their count, if dictionary-encoded.
     dict: Option<(Vec<u8>, usize)>,
     statistics: Option<Statistics>,
-    /// The values section is the column's own float values, as their little-endian bytes are in
-    /// memory, and was not copied into the page buffer ([`page_body`]).
-    floats_in_place: bool,
 }
 
-/// The data page of `c` as `encode_values` left it: `data` (its levels and values), or, for a
-/// column whose values were left in place, the values' own bytes (a non-nullable PLAIN float
-/// page on a little-endian machine is exactly those bytes, so the codec reads them where they
-/// are instead of from a copy).
-fn page_body(c: &Column, floats_in_place: bool, data: Vec<u8>) -> Cow<'_, [u8]> {
+/// Whether `c`'s PLAIN values are left where they are rather than copied into its data page: a
+/// non-nullable float column's page has no levels before its values, and on a little-endian machine
+/// those values' own bytes are the page ([`page_body`]).
+fn values_in_place(c: &Column) -> bool {
+    matches!(c.data, Data::F64(_)) && !c.nullable && cfg!(target_endian = "little")
+}
+
+/// The data page of `c` as `encode_values` left it: `data` (its levels and values), or, for PLAIN
+/// values left in place ([`values_in_place`]; `dict` tells whether they were dictionary-encoded
+/// instead), the values' own bytes, which the codec reads where they are instead of from a copy.
+fn page_body(c: &Column, dict: bool, data: Vec<u8>) -> Cow<'_, [u8]> {
     match &c.data {
-        Data::F64(v) if floats_in_place && cfg!(target_endian = "little") => {
+        Data::F64(v) if !dict && values_in_place(c) => {
             use arrow::datatypes::ToByteSlice;
             Cow::Borrowed(v.to_byte_slice())
         }
@@ -770,9 +773,8 @@ fn plain_f64(v: &[f64], out: &mut Vec<u8>) {
     }
 }
 
-/// Appends the data page's values section of `c`'s present values to `values`, except for the
-/// PLAIN values of a float column written with no levels before them: those stay where they are
-/// (`floats_in_place`, read through [`page_body`]).
+/// Appends the data page's values section of `c`'s present values to `values`, except for PLAIN
+/// values left in place ([`values_in_place`], read through [`page_body`]).
 fn encode_values(c: &Column, values: &mut Vec<u8>) -> Encoded {
     let nulls = Some(c.nulls);
     let stats = c.stats;
@@ -783,17 +785,13 @@ fn encode_values(c: &Column, values: &mut Vec<u8>) -> Encoded {
             let constant = v
                 .first()
                 .filter(|x| v.iter().all(|y| y.to_bits() == x.to_bits()));
-            let mut floats_in_place = false;
             let dict = match constant {
                 Some(x) if v.len() > 1 => {
                     values.push(0);
                     rle_run(0, v.len(), 0, values);
                     Some((x.to_le_bytes().to_vec(), 1))
                 }
-                _ if values.is_empty() && cfg!(target_endian = "little") => {
-                    floats_in_place = true;
-                    None
-                }
+                _ if values_in_place(c) => None,
                 _ => {
                     plain_f64(v, values);
                     None
@@ -801,7 +799,6 @@ fn encode_values(c: &Column, values: &mut Vec<u8>) -> Encoded {
             };
             let range = float_range(v);
             Encoded {
-                floats_in_place,
                 dict,
                 statistics: stats.then(|| {
                     ValueStatistics::<f64>::new(
@@ -871,7 +868,6 @@ fn encode_values(c: &Column, values: &mut Vec<u8>) -> Encoded {
                     Encoded {
                         dict: Some((dict, entries)),
                         statistics,
-                        floats_in_place: false,
                     }
                 }
                 _ => {
@@ -882,7 +878,6 @@ fn encode_values(c: &Column, values: &mut Vec<u8>) -> Encoded {
                     Encoded {
                         dict: None,
                         statistics,
-                        floats_in_place: false,
                     }
                 }
             }
@@ -900,7 +895,6 @@ fn encode_values(c: &Column, values: &mut Vec<u8>) -> Encoded {
             let some = !v.is_empty();
             Encoded {
                 dict: None,
-                floats_in_place: false,
                 statistics: stats.then(|| {
                     ValueStatistics::<bool>::new(
                         some.then_some(lo),
@@ -917,7 +911,6 @@ fn encode_values(c: &Column, values: &mut Vec<u8>) -> Encoded {
             if idx.is_empty() {
                 return Encoded {
                     dict: None,
-                    floats_in_place: false,
                     statistics: stats.then(|| {
                         ValueStatistics::<ByteArray>::new(None, None, None, nulls, false).into()
                     }),
@@ -939,7 +932,6 @@ fn encode_values(c: &Column, values: &mut Vec<u8>) -> Encoded {
             Encoded {
                 dict: Some((page, dict.len())),
                 statistics,
-                floats_in_place: false,
             }
         }
     }
@@ -954,10 +946,11 @@ fn encode_chunk(
     compression: Compression,
     float_pages: ZstdPage,
 ) -> parquet::errors::Result<EncodedChunk> {
-    // A non-nullable float column's PLAIN page needs no buffer of its own (`page_body`).
-    let mut data = match c.data {
-        Data::F64(_) if !c.nullable => Vec::new(),
-        _ => Vec::with_capacity(rows * 8 + 64),
+    // Values left in place need no page buffer (`page_body`).
+    let mut data = if values_in_place(c) {
+        Vec::new()
+    } else {
+        Vec::with_capacity(rows * 8 + 64)
     };
     if c.nullable {
         def_levels(&c.def_runs, &mut data);
@@ -984,6 +977,7 @@ fn encode_chunk(
     {
         let mut pages = SerializedPageWriter::new(&mut sink);
         dict_offset = None;
+        let dict_encoded = enc.dict.is_some();
         let data_encoding = if let Some((dict, entries)) = enc.dict {
             let (buf, raw) = compress(Cow::Owned(dict))?;
             let spec = pages.write_page(CompressedPage::new(
@@ -1008,7 +1002,7 @@ fn encode_chunk(
         } else {
             Encoding::PLAIN
         };
-        let (buf, raw) = compress(page_body(c, enc.floats_in_place, data))?;
+        let (buf, raw) = compress(page_body(c, dict_encoded, data))?;
         let spec = pages.write_page(CompressedPage::new(
             Page::DataPage {
                 buf,
