@@ -55,6 +55,7 @@ pub struct TraceMeta<'a> {
     pub source: &'a str,
 }
 
+/// A one-row column's JSON text (a trace's outcome or unknown fields); null when the map is empty.
 fn json_or_null(map: &JsonMap) -> Option<String> {
     (!map.is_empty()).then(|| serde_json::to_string(map).expect("a JSON map serialises"))
 }
@@ -70,6 +71,11 @@ fn append_json(out: &mut StringBuilder, buf: &mut Vec<u8>, value: Option<&impl s
         }
         None => out.append_null(),
     }
+}
+
+/// Appends a map of unknown fields as [`append_json`] does; null when it is empty.
+fn append_json_map(out: &mut StringBuilder, buf: &mut Vec<u8>, map: &JsonMap) {
+    append_json(out, buf, (!map.is_empty()).then_some(map));
 }
 
 pub(super) fn constant_dict(value: &str, len: usize) -> ArrayRef {
@@ -114,6 +120,8 @@ struct FrameColumns {
     joint: Int64Builder,
     spring: Int64Builder,
     extra: StringBuilder,
+    /// The buffer `extra`'s JSON is written through.
+    json: Vec<u8>,
     rows: usize,
 }
 
@@ -243,7 +251,7 @@ impl FrameColumns {
         self.dynamic.append_option(r.dynamic);
         self.joint.append_option(r.joint);
         self.spring.append_option(r.spring);
-        self.extra.append_option(json_or_null(&obj.extra));
+        append_json_map(&mut self.extra, &mut self.json, &obj.extra);
     }
 
     fn finish(&mut self, trace_id: &str) -> Result<RecordBatch, ArrowError> {
@@ -294,6 +302,8 @@ pub struct TraceBatchBuilder {
     t: Float64Builder,
     n_objects: Int32Builder,
     step_extra: StringBuilder,
+    /// The buffer `step_extra`'s JSON is written through.
+    json: Vec<u8>,
     steps: usize,
     distinct_objects: std::collections::BTreeSet<String>,
     t_range: Option<(f64, f64)>,
@@ -314,7 +324,7 @@ impl TraceBatchBuilder {
         self.t.append_value(ts.t);
         self.n_objects
             .append_value(i32::try_from(ts.objects.len()).unwrap_or(i32::MAX));
-        self.step_extra.append_option(json_or_null(&ts.extra));
+        append_json_map(&mut self.step_extra, &mut self.json, &ts.extra);
         for (slot, obj) in ts.objects.iter().enumerate() {
             self.frames
                 .push(ts.index, ts.t, i32::try_from(slot).unwrap_or(i32::MAX), obj);
@@ -497,11 +507,7 @@ pub(super) fn events_batch(trace_id: &str, events: &[Event]) -> Result<RecordBat
             None => agents.append(false),
         }
         append_json(&mut payload, &mut buf, e.payload.as_ref());
-        append_json(
-            &mut extra,
-            &mut buf,
-            (!e.extra.is_empty()).then_some(&e.extra),
-        );
+        append_json_map(&mut extra, &mut buf, &e.extra);
     }
     RecordBatch::try_new(
         EVENTS.clone(),
