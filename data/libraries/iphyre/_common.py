@@ -95,6 +95,9 @@ def _velocities(track, ts):
     the real time between the neighbouring frames (frames are not evenly spaced)."""
     out = []
     n = len(track)
+    # Each entry's centre once computed, where the formula first needs it; an entry repeating the
+    # previous entry's dict (an unchanged object) has its centre.
+    cs = [None] * n
     for i, (k, o) in enumerate(track):
         if o.get("vx") is not None and o.get("vy") is not None:
             out.append((float(o["vx"]), float(o["vy"])))
@@ -105,7 +108,16 @@ def _velocities(track, ts):
         if a == b or dt <= 0.0:
             out.append((0.0, 0.0))
             continue
-        ca, cb = _centre(track[a][1]), _centre(track[b][1])
+        ca = cs[a]
+        if ca is None:
+            oa = track[a][1]
+            ca = cs[a - 1] if a > 0 and cs[a - 1] is not None and track[a - 1][1] is oa else _centre(oa)
+            cs[a] = ca
+        cb = cs[b]
+        if cb is None:
+            ob = track[b][1]
+            cb = cs[a] if track[a][1] is ob else _centre(ob)
+            cs[b] = cb
         out.append(((cb[0] - ca[0]) / dt, (cb[1] - ca[1]) / dt))
     return out
 

@@ -31,19 +31,61 @@ def _closest(o1, o2):
         if best is None or d < best[2]:
             best = (pts[0], pts[1], d)
     # Crossing segments: distance 0 at the crossing.
+    c = _crossing(a, b)
+    if c is not None:
+        return c, c, 0.0
+    return best
+
+
+def _crossing(a, b):
+    """The point where segments a and b, each (x1, y1, x2, y2), cross (by the parameters of both
+    lines), or None."""
     d1x, d1y, d2x, d2y = a[2] - a[0], a[3] - a[1], b[2] - b[0], b[3] - b[1]
     den = d1x * d2y - d1y * d2x
     if den != 0.0:
         s = ((b[0] - a[0]) * d2y - (b[1] - a[1]) * d2x) / den
         u = ((b[0] - a[0]) * d1y - (b[1] - a[1]) * d1x) / den
         if 0.0 <= s <= 1.0 and 0.0 <= u <= 1.0:
-            c = (a[0] + s * d1x, a[1] + s * d1y)
-            return c, c, 0.0
-    return best
+            return (a[0] + s * d1x, a[1] + s * d1y)
+    return None
 
 
 def _gap(o1, o2):
     return _closest(o1, o2)[2] - float(o1.get("radius", 0.0)) - float(o2.get("radius", 0.0))
+
+
+def _capsule(o, cache, slot):
+    """[o, segment as _closest reads it, its extents (x0, x1, y0, y1), all four finite and within a
+    million px, radius (None until read)], kept per slot of the step's list while the slot holds the
+    same dict."""
+    e = cache.get(slot)
+    if e is None or e[0] is not o:
+        a = (float(o["x1"]), float(o["y1"]), float(o["x2"]), float(o["y2"]))
+        ext = (min(a[0], a[2]), max(a[0], a[2]), min(a[1], a[3]), max(a[1], a[3]))
+        e = [o, a, ext, all(-1e6 < v < 1e6 for v in a), None]
+        cache[slot] = e
+    return e
+
+
+def _gap_far(o1, o2, i, j, cache):
+    """KEEP_GAP + 1 for a pair _gap finds more than KEEP_GAP apart because the segments' extents are
+    (finite, within a million px, farther apart on an axis than KEEP_GAP and both radii with 1e-6 px to
+    spare, and not crossing as _closest tests it); None when _gap must answer. Values are read in
+    _gap's order (both segments, then both radii), so a bad one raises as _gap raises."""
+    e1, e2 = _capsule(o1, cache, i), _capsule(o2, cache, j)
+    r1, r2 = e1[4], e2[4]
+    if r1 is None:
+        r1 = e1[4] = float(o1.get("radius", 0.0))
+    if r2 is None:
+        r2 = e2[4] = float(o2.get("radius", 0.0))
+    if not (e1[3] and e2[3] and -1e6 < r1 < 1e6 and -1e6 < r2 < 1e6):
+        return None
+    ea, eb = e1[2], e2[2]
+    if max(ea[0] - eb[1], eb[0] - ea[1], ea[2] - eb[3], eb[2] - ea[3]) <= KEEP_GAP + r1 + r2 + 1e-6:
+        return None
+    if _crossing(e1[1], e2[1]) is not None:
+        return None  # _closest answers 0 at the crossing
+    return KEEP_GAP + 1.0
 
 
 def _pair_key(p):
@@ -91,14 +133,25 @@ def _contacts(trace):
         return out
     # No event log: touching capsules frame by frame.
     steps = trace["timesteps"]
+    # A pair of slots whose objects are the very dicts of the last time it was measured (a step repeats
+    # an unchanged object's dict) has the same gap; so does each slot's segment and radius.
+    seen, cache = {}, {}
     for k, s in enumerate(steps):
         objs = s.get("objects", [])
-        for i in range(len(objs)):
-            for j in range(i + 1, len(objs)):
-                o1, o2 = objs[i], objs[j]
-                if not (o1.get("dynamic") or o2.get("dynamic")):
-                    continue
-                gap = _gap(o1, o2)
+        n = len(objs)
+        dyn = [j for j in range(n) if objs[j].get("dynamic")]
+        for i in range(n if dyn else 0):
+            o1 = objs[i]
+            for j in range(i + 1, n) if o1.get("dynamic") else [j for j in dyn if j > i]:
+                o2 = objs[j]
+                c = seen.get((i, j))
+                if c is not None and c[0] is o1 and c[1] is o2:
+                    gap = c[2]
+                else:
+                    gap = _gap_far(o1, o2, i, j, cache)
+                    if gap is None:
+                        gap = _gap(o1, o2)
+                    seen[(i, j)] = (o1, o2, gap)
                 if gap > KEEP_GAP:
                     continue
                 key = tuple(sorted((str(o1.get("index")), str(o2.get("index")))))
