@@ -50,28 +50,51 @@ def _span(idx, ts, t0, t1=None):
 
 
 def _kin(trace):
-    """{object id: {"k": [timestep positions], "o": [object dicts], "v": [(vx, vy)]}}."""
+    """{object id: {"k": [timestep positions], "o": [object dicts], "v": [(vx, vy)]}}: the recorded
+    velocity where an object has both, else its displacement between the neighbouring entries of its
+    track over their time apart (0 for a track of one entry or no time apart)."""
     _, ts = _clock(trace)
     tr = {}
     for k, s in enumerate(trace.get("timesteps", [])):
         for o in s.get("objects", []):
-            tr.setdefault(str(o.get("object_index")), []).append((k, o))
+            oid = str(o.get("object_index"))
+            t = tr.get(oid)
+            if t is None:
+                tr[oid] = t = ([], [])
+            t[0].append(k)
+            t[1].append(o)
     out = {}
-    for oid, track in tr.items():
+    for oid, (ks, os_) in tr.items():
         vs = []
-        n = len(track)
-        for i, (k, o) in enumerate(track):
+        n = len(ks)
+        last = n - 1
+        fx, fy = [None] * n, [None] * n  # x and y of an entry once read (as the formula reads them)
+        for i in range(n):
+            o = os_[i]
             if o.get("vx") is not None and o.get("vy") is not None:
                 vs.append((float(o["vx"]), float(o["vy"])))
                 continue
-            a, b = max(i - 1, 0), min(i + 1, n - 1)
-            dt = ts[track[b][0]] - ts[track[a][0]]
+            a = i - 1 if i > 0 else 0
+            b = i + 1 if i < last else last
+            dt = ts[ks[b]] - ts[ks[a]]
             if a == b or dt <= 0.0:
                 vs.append((0.0, 0.0))
-            else:
-                vs.append(((float(track[b][1]["x"]) - float(track[a][1]["x"])) / dt,
-                           (float(track[b][1]["y"]) - float(track[a][1]["y"])) / dt))
-        out[oid] = {"k": [k for k, _ in track], "o": [o for _, o in track], "v": vs}
+                continue
+            xb = fx[b]
+            if xb is None:
+                xb = fx[b] = float(os_[b]["x"])
+            xa = fx[a]
+            if xa is None:
+                xa = fx[a] = float(os_[a]["x"])
+            vx = (xb - xa) / dt
+            yb = fy[b]
+            if yb is None:
+                yb = fy[b] = float(os_[b]["y"])
+            ya = fy[a]
+            if ya is None:
+                ya = fy[a] = float(os_[a]["y"])
+            vs.append((vx, (yb - ya) / dt))
+        out[oid] = {"k": ks, "o": os_, "v": vs}
     return out
 
 

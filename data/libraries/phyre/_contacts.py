@@ -125,19 +125,7 @@ def _seg_dist(px, py, ax, ay, bx, by):
 
 def _inside(px, py, poly):
     """Point inside a convex polygon (either winding)."""
-    sign = 0
-    n = len(poly)
-    for i in range(n):
-        ax, ay = poly[i]
-        bx, by = poly[(i + 1) % n]
-        c = (bx - ax) * (py - ay) - (by - ay) * (px - ax)
-        if c != 0.0:
-            s = 1 if c > 0 else -1
-            if sign == 0:
-                sign = s
-            elif s != sign:
-                return False
-    return True
+    return _inside_e(px, py, _edges(poly))
 
 
 def _poly_dist(p, q):
@@ -196,6 +184,123 @@ def _gap(sa, sb):
     return min(_poly_dist(p, q) for p in sa[1] for q in sb[1])
 
 
+def _edges(poly):
+    """A polygon's edges as (ax, ay, dx, dy, dx^2 + dy^2): the terms _seg_dist and _inside compute from
+    an edge, computed once per outline instead of once per point tested against it."""
+    n = len(poly)
+    out = []
+    for i in range(n):
+        ax, ay = poly[i]
+        bx, by = poly[(i + 1) % n]
+        dx, dy = bx - ax, by - ay
+        out.append((ax, ay, dx, dy, dx * dx + dy * dy))
+    return out
+
+
+def _inside_e(px, py, edges):
+    """_inside over a polygon's _edges."""
+    sign = 0
+    for ax, ay, dx, dy, _ in edges:
+        c = dx * (py - ay) - dy * (px - ax)
+        if c != 0.0:
+            s = 1 if c > 0 else -1
+            if sign == 0:
+                sign = s
+            elif s != sign:
+                return False
+    return True
+
+
+def _near_e(px, py, edges):
+    """The least _seg_dist from a point to a polygon's _edges (the first of equals, as min keeps)."""
+    best = None
+    for ax, ay, dx, dy, l2 in edges:
+        if l2 <= 0.0:
+            u = 0.0
+        else:
+            u = ((px - ax) * dx + (py - ay) * dy) / l2
+            u = u if u < 1.0 else 1.0  # min(1.0, u)
+            u = u if u > 0.0 else 0.0  # max(0.0, u)
+        qx, qy = ax + u * dx - px, ay + u * dy - py
+        d = (qx * qx + qy * qy) ** 0.5
+        if best is None or d < best:
+            best = d
+    return best
+
+
+def _outline_gap(ea, eb):
+    """_gap of two entries of _contacts' step list (oid, outline, is circle, extents, edges) whose
+    outlines are not both circles and whose extents lie within CONTACT_GAP: the same arithmetic in the
+    same order, over edges kept with the outline."""
+    if not ea[2]:
+        ea, eb = eb, ea  # a circle first, as _gap puts it
+    if eb[4] is None:
+        eb[4] = [_edges(q) for q in eb[1][1]]
+    best = None
+    if ea[2]:
+        cx, cy, r = ea[1][1], ea[1][2], ea[1][3]
+        for qe in eb[4]:
+            d = -r if _inside_e(cx, cy, qe) else _near_e(cx, cy, qe) - r
+            if best is None or d < best:
+                best = d
+        return best
+    if ea[4] is None:
+        ea[4] = [_edges(p) for p in ea[1][1]]
+    for p, pe in zip(ea[1][1], ea[4]):
+        for q, qe in zip(eb[1][1], eb[4]):
+            if any(_inside_e(x, y, qe) for x, y in p) or any(_inside_e(x, y, pe) for x, y in q):
+                d = 0.0
+            else:
+                d = None
+                for pts, es in ((p, qe), (q, pe)):
+                    for x, y in pts:
+                        e = _near_e(x, y, es)
+                        if d is None or e < d:
+                            d = e
+            if best is None or d < best:
+                best = d
+    return best
+
+
+def _touching(shapes, moved, tol, pairs):
+    """(a, b, gap) of each pair in a step's list of entries (oid, outline, is circle, extents, edges)
+    with a body that moves, gap at most tol, in the list's order: _gap's values, with the extents at
+    hand. A pair of outlines whose extents lie more than CONTACT_GAP apart on an axis is exactly a
+    pair _gap answers CONTACT_GAP + 1 for without looking further; `pairs` keeps each pair's last
+    measured gap of two outlines, used again while neither changes."""
+    touching = []
+    mv = [j for j, e in enumerate(shapes) if e[0] in moved]
+    for i, ea in enumerate(shapes if mv else ()):
+        a, sa, ca, ba, _ = ea
+        for eb in shapes[i + 1:] if a in moved else [shapes[j] for j in mv if j > i]:
+            b, sb, cb, bb, _ = eb
+            # What _gap computes, with the extents at hand (walls have none).
+            if ba is not None and bb is not None:
+                if ca and cb:
+                    gap = ((sa[1] - sb[1]) ** 2 + (sa[2] - sb[2]) ** 2) ** 0.5 - sa[3] - sb[3]
+                elif (ba[0] - bb[1] > CONTACT_GAP or bb[0] - ba[1] > CONTACT_GAP
+                      or ba[2] - bb[3] > CONTACT_GAP or bb[2] - ba[3] > CONTACT_GAP):
+                    continue
+                else:
+                    c = pairs.get((a, b))
+                    if c is not None and c[0] is ea and c[1] is eb:
+                        gap = c[2]  # neither outline changed since this pair was last measured
+                    else:
+                        gap = _outline_gap(ea, eb)
+                        pairs[(a, b)] = (ea, eb, gap)
+            elif ba is not None and sb[0] == "wall":
+                w = sb[2]
+                gap = ba[2 * sb[1]] - w if w <= 0.0 else w - ba[2 * sb[1] + 1]
+            elif bb is not None and sa[0] == "wall":
+                w = sa[2]
+                gap = bb[2 * sa[1]] - w if w <= 0.0 else w - bb[2 * sa[1] + 1]
+            else:
+                gap = _gap(sa, sb)
+            if gap <= tol:
+                touching.append((a, b, gap))
+    return touching
+
+
 def _contacts(trace):
     """Contact episodes in time order: {pair, t0, t1, begins, ended} (from geometry also t_seen: the
     contact began between t0 and t_seen)."""
@@ -239,27 +344,52 @@ def _contacts(trace):
     # Bodies that never move (static bars, walls; float32 noise aside) do not collide with each other.
     first = {}
     moved = set()
+    seen = {}  # object id -> the dict last looked at: a step that repeats it (same dict) changes nothing
     for s in steps:
         for o in s.get("objects", []):
             oid = str(o.get("object_index"))
-            if oid in moved or o.get("shape") == "wall":
+            if oid in moved or seen.get(oid) is o or o.get("shape") == "wall":
                 continue
+            seen[oid] = o
             p = (float(o.get("x", 0.0)), float(o.get("y", 0.0)), float(o.get("angle", 0.0) or 0.0))
             q = first.setdefault(oid, p)
             if abs(p[0] - q[0]) + abs(p[1] - q[1]) > 0.01 or abs(p[2] - q[2]) > 1e-4:
                 moved.add(oid)
+    # A body whose shape, size, position and angle equal its previous step's keeps that step's entry
+    # (outline, extents, edges): static bodies, and bodies at rest, every step. A step whose entries
+    # are all the previous step's has its touching pairs.
+    last, listed, pairs = {}, {}, {}
+    wall_entries = [(a, sh, False, None, None) for a, sh in walls]
+    before, touching = None, []
     for k, s in enumerate(steps):
-        shapes = [(str(o["object_index"]), _wall_of(o) if o.get("shape") == "wall" else _outline(o))
-                  for o in s.get("objects", [])]
-        shapes += walls
-        touching = []
-        for i, (a, sa) in enumerate(shapes):
-            for b, sb in shapes[i + 1:]:
-                if a not in moved and b not in moved:
-                    continue
-                gap = _gap(sa, sb)
-                if gap <= tol:
-                    touching.append((a, b, gap))
+        shapes = []
+        for o in s.get("objects", []):
+            oid = str(o["object_index"])
+            if o.get("shape") == "wall":
+                w = listed.get(oid)
+                if w is None or w[1] is not o:
+                    w = ((oid, _wall_of(o), False, None, None), o)
+                    listed[oid] = w
+                shapes.append(w[0])
+                continue
+            prev = last.get(oid)
+            if prev is not None and prev[2] is o:
+                shapes.append(prev[1])
+                continue
+            key = (o.get("shape"), o.get("diameter", 0.0), o.get("x", 0.0), o.get("y", 0.0),
+                   o.get("angle", 0.0))
+            if prev is not None and prev[0] == key:
+                last[oid] = (key, prev[1], o)
+                shapes.append(prev[1])
+                continue
+            sh = _outline(o)
+            entry = [oid, sh, sh[0] == "circle", _extent(sh, 0) + _extent(sh, 1), None]
+            last[oid] = (key, entry, o)
+            shapes.append(entry)
+        shapes += wall_entries
+        if before is None or len(shapes) != len(before) or any(x is not y for x, y in zip(shapes, before)):
+            touching = _touching(shapes, moved, tol, pairs)
+        before = shapes
         for a, b, gap in touching:
             key = tuple(sorted((a, b)))
             g = groups.get(key)
