@@ -15,8 +15,9 @@ Two steps (standard library only; Linux):
       serving a pipe) and replays STREAM through its own functions, pass after pass, timing each kind
       of request with the thread's CPU clock: loading traces (`P` and `T`), evicting them (`E`),
       compiling detectors (`C`) and running them (`R`). Prints the best pass per kind in ms per trace
-      and a SHA-256 of every reply's patterns and printed text (timings left out), so a change to
-      worker.py can be checked for the same output and timed in one command.
+      and a SHA-256 of every reply's patterns (as the values they decode to) and printed text (timings
+      left out), so a change to worker.py or to a library can be checked for the same output and timed
+      in one command.
 
 The replay runs the worker in this process, not behind the sandbox: only replay streams you captured
 from detectors you trust (the detector code is in the stream)."""
@@ -25,6 +26,7 @@ import argparse
 import gc
 import hashlib
 import json
+import marshal
 import os
 import shutil
 import stat
@@ -132,9 +134,14 @@ def load_worker(path):
 
 def reply_digest(h, raw, err, head):
     """Adds a call's reply (patterns or error) to the digest, without its wall and CPU times (`head`:
-    the worker's `_MARSHAL_HEAD`, which holds them)."""
+    the worker's `_MARSHAL_HEAD`, which holds them, and the printed text's length). Marshalled patterns
+    are hashed as the values they decode to, not as their bytes: marshal flags an object referenced more
+    than once, so the same patterns built from shared strings encode differently."""
     if raw is not None and raw[:1] == b"M":
-        h.update(raw[1 + head.size:])  # printed text and marshalled patterns
+        _, _, n = head.unpack_from(raw, 1)
+        start = 1 + head.size
+        h.update(raw[start:start + n])  # printed text
+        h.update(repr(marshal.loads(raw[start + n:])).encode())
         return
     msg = json.loads(raw) if raw is not None else err
     for d in (msg, msg.get("error") or {}):
