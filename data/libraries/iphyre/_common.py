@@ -108,16 +108,12 @@ def _velocities(track, ts):
         if a == b or dt <= 0.0:
             out.append((0.0, 0.0))
             continue
-        ca = cs[a]
-        if ca is None:
-            oa = track[a][1]
-            ca = cs[a - 1] if a > 0 and cs[a - 1] is not None and track[a - 1][1] is oa else _centre(oa)
-            cs[a] = ca
-        cb = cs[b]
-        if cb is None:
-            ob = track[b][1]
-            cb = cs[a] if track[a][1] is ob else _centre(ob)
-            cs[b] = cb
+        for e in (a, b):
+            if cs[e] is None:
+                o_e = track[e][1]
+                same = e > 0 and cs[e - 1] is not None and track[e - 1][1] is o_e
+                cs[e] = cs[e - 1] if same else _centre(o_e)
+        ca, cb = cs[a], cs[b]
         out.append(((cb[0] - ca[0]) / dt, (cb[1] - ca[1]) / dt))
     return out
 

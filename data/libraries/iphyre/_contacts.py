@@ -139,10 +139,11 @@ def _contacts(trace):
     for k, s in enumerate(steps):
         objs = s.get("objects", [])
         n = len(objs)
-        dyn = [j for j in range(n) if objs[j].get("dynamic")]
+        flags = [o.get("dynamic") for o in objs]
+        dyn = [j for j in range(n) if flags[j]]
         for i in range(n if dyn else 0):
             o1 = objs[i]
-            for j in range(i + 1, n) if o1.get("dynamic") else [j for j in dyn if j > i]:
+            for j in range(i + 1, n) if flags[i] else [j for j in dyn if j > i]:
                 o2 = objs[j]
                 c = seen.get((i, j))
                 if c is not None and c[0] is o1 and c[1] is o2:
