@@ -33,7 +33,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use annotrace::detect::{
-    Annotation, CandidateStatus, Detector, Library, SandboxLimits, WorkerPool,
+    Annotation, CandidateStatus, Detector, HelperSharing, Library, SandboxLimits, WorkerPool,
 };
 use annotrace::ensemble::activation::combine;
 use annotrace::ensemble::library::{LabelFile, MemberFile, write};
@@ -267,6 +267,8 @@ fn main() {
         WorkerPool::new(SandboxLimits {
             workers,
             call_timeout: Duration::from_secs(30),
+            // As `annotate`'s workers do: the members' shared helpers computed once per trace.
+            share_helpers: HelperSharing::Measured,
             ..SandboxLimits::default()
         })
         .expect("workers start")

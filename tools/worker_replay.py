@@ -10,7 +10,7 @@ Two steps (standard library only; Linux):
       reads: the worker runs with RLIMIT_FSIZE=0, so it cannot write a file itself, but it can write
       a pipe.
 
-  tools/worker_replay.py replay STREAM [--worker src/detect/worker.py] [--passes 3]
+  tools/worker_replay.py replay STREAM [--worker src/detect/worker.py] [--passes 3] [--share [measured|always]]
       Loads the worker's source without its `main()` (so without the sandbox's lock-down and without
       serving a pipe) and replays STREAM through its own functions, pass after pass, timing each kind
       of request with the thread's CPU clock: loading traces (`P` and `T`), evicting them (`E`),
@@ -116,13 +116,14 @@ def read_stream(path):
     return frames
 
 
-def load_worker(path):
-    """The worker's functions, without running its main()."""
+def load_worker(path, share=None):
+    """The worker's functions, without running its main() (`share`: as a pool with that
+    `share_helpers` starts it)."""
     src = open(path).read().rstrip()
     if not src.endswith("\nmain()"):
         sys.exit("worker_replay: %s does not end with its main() call" % path)
     saved = sys.argv, sys.stdout, sys.stderr
-    sys.argv = ["worker", json.dumps({"cpu_seconds": 0})]
+    sys.argv = ["worker", json.dumps({"cpu_seconds": 0, "share_helpers": share or "off"})]
     ns = {"__name__": "annotrace_worker"}
     try:
         exec(compile(src[:-len("main()")], path, "exec"), ns)
@@ -150,8 +151,8 @@ def reply_digest(h, raw, err, head):
     h.update(json.dumps(msg, sort_keys=True).encode())
 
 
-def one_pass(worker, frames):
-    ns = load_worker(worker)
+def one_pass(worker, frames, share=None):
+    ns = load_worker(worker, share)
     clock = time.thread_time
     spent = {"load": 0.0, "evict": 0.0, "compile": 0.0, "run": 0.0}
     traces = calls = 0
@@ -183,8 +184,13 @@ def one_pass(worker, frames):
         elif kind == b"R":
             msg = json.loads(f[1:])
             out = []
+            begin = ns.get("share_begin")  # as serve() does (worker.py from before sharing has none)
+            if begin is not None:
+                begin(msg["detectors"])
             for d in msg["detectors"]:
                 out.append(ns["run_detector"](d, msg["trace"]))
+            if begin is not None:
+                ns["share_end"]()
             spent["run"] += clock() - c0
             calls += len(out)
             for raw, err in out:
@@ -199,7 +205,7 @@ def replay(args):
     frames = read_stream(args.stream)
     best, digest, traces, calls = None, None, 0, 0
     for _ in range(args.passes):
-        spent, traces, calls, d = one_pass(args.worker, frames)
+        spent, traces, calls, d = one_pass(args.worker, frames, args.share)
         if digest is not None and d != digest:
             sys.exit("worker_replay: two passes gave different replies (%s, %s)" % (digest, d))
         digest = d
@@ -229,6 +235,9 @@ def main():
     r.add_argument("stream")
     r.add_argument("--worker", default=os.path.join(ROOT, "src", "detect", "worker.py"))
     r.add_argument("--passes", type=int, default=3)
+    r.add_argument("--share", nargs="?", const="measured", choices=("measured", "always"),
+                   help="share helper results between a request's detectors, as annotate's workers "
+                        "do (measured, the default) or whatever it costs (always)")
     args = p.parse_args()
     capture(args) if args.cmd == "capture" else replay(args)
 

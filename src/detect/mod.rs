@@ -35,7 +35,7 @@ pub use self::detector::{Detector, DetectorId, EnsembleSettings, Membership, nor
 pub use self::error::{CandidateStatus, DetectError, DetectorError};
 pub use self::library::{Library, LibraryError};
 pub use self::pool::{BatchResult, CallResult, RunStats, WorkerPool};
-pub use self::sandbox::{SandboxLayers, SandboxLimits, set_default_python};
+pub use self::sandbox::{HelperSharing, SandboxLayers, SandboxLimits, set_default_python};
 pub use self::text::{annotated_text, count_tokens};
 pub use self::validate::{Pattern, validate};
 

@@ -76,6 +76,41 @@ pub struct SandboxLimits {
     /// The Python layer (source check, reduced builtins). Default true. Turn it off only to test the OS
     /// layers on their own, as `tests/it/sandbox.rs` does.
     pub python_guard: bool,
+    /// Whether the detectors of one run request share their helpers' results. Default
+    /// [`HelperSharing::Off`]. On for the stages that run each trace once with all their detectors
+    /// (`DetectorSetup`); off where a call's own time is a measurement (`evolve`'s time penalty,
+    /// the search).
+    pub share_helpers: HelperSharing,
+}
+
+/// Whether the detectors of one run request share their helpers' results (`docs/detectors.md`,
+/// "Shared helper results"). A prelude helper that every detector of a library carries
+/// (`_contacts(trace)`, `_kin(trace)`) and whose result can depend on nothing but its arguments is
+/// then computed once per trace, and each detector gets its own copy of the result. The patterns are
+/// the same either way; a call's CPU time no longer counts what another call computed for it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum HelperSharing {
+    /// Every detector computes its own helpers.
+    #[default]
+    Off,
+    /// Helpers that can be shared are, while sharing pays: after its first three results, a helper
+    /// that took under 20 µs to compute on average, or whose results took more than 0.8 of that time
+    /// to copy, is called by every detector again.
+    Measured,
+    /// Every helper that can be shared is, whatever it costs (the tests hold sharing to the same
+    /// output with it).
+    Always,
+}
+
+impl HelperSharing {
+    /// The worker's spelling (`off`, `measured`, `always`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            HelperSharing::Off => "off",
+            HelperSharing::Measured => "measured",
+            HelperSharing::Always => "always",
+        }
+    }
 }
 
 impl Default for SandboxLimits {
@@ -97,6 +132,7 @@ impl Default for SandboxLimits {
             seccomp: true,
             require_seccomp: false,
             python_guard: true,
+            share_helpers: HelperSharing::Off,
         }
     }
 }
@@ -189,6 +225,7 @@ pub(crate) fn worker_command(python: &PathBuf, limits: &SandboxLimits, script: &
         "seccomp": limits.seccomp,
         "recursion_limit": limits.recursion_limit,
         "cpu_seconds": limits.call_timeout.as_secs_f64().ceil() + 1.0,
+        "share_helpers": limits.share_helpers.as_str(),
     });
     let mut cmd = Command::new(python);
     // No `-P` (CPython 3.11+ only; PyPy 3.9 refuses it): the worker drops the working folder's entry

@@ -42,6 +42,7 @@ import bisect
 import builtins as _builtins
 import fcntl
 import gc
+import itertools
 import json
 import marshal
 import os
@@ -60,6 +61,9 @@ MAX_OUTPUT_BYTES = int(CONFIG.get("max_output_bytes", 4 << 20))
 MAX_PRINT_BYTES = 4096
 PYTHON_GUARD = bool(CONFIG.get("python_guard", True))
 CPU_SECONDS = float(CONFIG.get("cpu_seconds", 0))
+# Helper results shared between the detectors of a run request (see "Helper results shared" below).
+SHARE_HELPERS = CONFIG.get("share_helpers", "off") in ("measured", "always")
+SHARE_ALWAYS = CONFIG.get("share_helpers") == "always"  # whatever sharing a helper costs
 
 # Larger pipes (1 MiB, Linux's default ceiling for unprivileged processes): a trace or a large reply then
 # crosses in one or two writes instead of many 64 KiB rounds, each of which wakes the other side.
@@ -535,6 +539,307 @@ def _private_copy(v, memo):
     return v
 
 
+# ---------------------------------------------------------------------------------------------------
+# Helper results shared between the detectors of one run request (config `share_helpers`: "measured"
+# shares while it pays, "always" whatever it costs; sandbox.rs `HelperSharing`).
+#
+# The detectors of a library carry the same prelude helpers (`_contacts(trace)`, `_kin(trace)`,
+# `_clock(trace)`), each compiled into its own namespace, and call them on the same cached trace. A
+# helper is shared when its result can depend on nothing but its arguments, so that every detector
+# computing it would get an equal value:
+#   * it is a module-level `def` (no decorator) whose first parameter is named `trace`, not
+#     `find_pattern`, and not (directly or through other helpers) recursive;
+#   * it and the functions it calls catch no exception that a call's depth or the worker's memory
+#     can raise (only builtin ones such as KeyError, TypeError, ValueError: `_CATCHABLE`), so what
+#     it returns cannot depend on where it is called from;
+#   * the detector's code has no `global` statement and stores or deletes no attribute anywhere, so
+#     its module-level bindings and its functions are fixed once the module has run;
+#   * every module-level name the helper reads (with the helpers it calls, transitively) is bound to
+#     a constant (numbers, strings, bytes, None, tuples and frozensets of them, a builtin other than
+#     `print`) or to another function meeting the same conditions, or is a builtin other than `print`;
+#     its default values are constants too.
+# Its fingerprint numbers the helper's code object with the names and values it reads (functions by
+# their own fingerprints): two detectors share a result only when all of these are equal.
+# A call is answered from the cache only when its first argument is the request's cached trace
+# itself (read-only, and the same object for every detector of the request) and every other argument
+# is a constant; the cached value is a private copy taken when the result was computed, and every
+# caller gets its own copy of it (lists and dicts copied, sharing inside the value kept; the trace's
+# read-only dicts, constants, and tuples that hold nothing else reused). A value holding anything else
+# (a set, whose iteration order a copy need not keep; a function; a generator) is not cached. Only
+# helpers that two or more detectors of the request reach are cached, and the last of them takes the
+# cached value itself. Detectors that may call dict's methods unbound (they read a private copy of
+# the trace) share nothing. What is shared is never computed again, so `cpu` of a call counts the
+# helpers it computed, not those it was handed.
+
+_FunctionType = type(_print)
+_F64 = struct.Struct("<d")
+_ATOMS = frozenset((int, float, complex, str, bytes, bool, type(None)))
+# Values a copy reuses: constants, and the trace's read-only dicts. Detector code can make no
+# FrozenDict but an empty one (`fromkeys` stores through the refusing `__setitem__`), so every one it
+# can hold is the trace's, read-only all the way down (dicts frozen, lists made tuples at load).
+_AS_IS = _ATOMS | {FrozenDict, LazyStep}
+_TUPLE = {tuple}
+_chain = itertools.chain.from_iterable
+_BUILTIN_VALUES = {id(v): n for n, v in SAFE_BUILTINS.items() if n != "print"}
+_SHARED = {}  # fingerprint -> {argument key: cached value}
+_SHARE_LEFT = {}  # fingerprint -> detectors of the request yet to run that reach it
+_SHARE_TRACE = [None]  # the cached trace while a sharing detector runs, else None
+_FINGERPRINTS = {}  # a function's code and what it reads -> its fingerprint, a number
+_SHARE_COST = {}  # fingerprint -> [results computed for sharing, their CPU s, the CPU s of copying them]
+_UNSHARED = set()  # fingerprints found not worth sharing: cheap to compute, dear to copy, or uncopyable
+_SHARE_TRIAL = 3  # results computed before a helper's cost is judged
+_SHARE_MIN_S = 20e-6  # a helper computed in less (on average) is called, not shared
+_SHARE_MAX_COPY = 0.8  # nor one whose results take more than this share of its time to copy
+
+
+class _NotShared(Exception):
+    pass
+
+
+def _constant(v):
+    t = type(v)
+    if t in _ATOMS:
+        return True
+    if t is tuple or t is frozenset:
+        return all(map(_constant, v))
+    return id(v) in _BUILTIN_VALUES and SAFE_BUILTINS.get(_BUILTIN_VALUES[id(v)]) is v
+
+
+def _code_names(code, out):
+    out.update(code.co_names)
+    for c in code.co_consts:
+        if type(c) is type(code):
+            _code_names(c, out)
+    return out
+
+
+# Exceptions a shared helper may catch: none that a call's depth or the worker's memory can raise
+# (RecursionError, MemoryError and their bases), so that what it returns cannot depend on who calls it.
+_CATCHABLE = frozenset((
+    "ArithmeticError", "AssertionError", "AttributeError", "IndexError", "KeyError", "LookupError",
+    "NameError", "NotImplementedError", "OverflowError", "StopIteration", "TypeError", "ValueError",
+    "ZeroDivisionError",
+))
+
+
+def _catches_only_catchable(node, ns):
+    """Whether every `except` in a function's source names builtin exceptions of `_CATCHABLE` only
+    (not rebound in the detector's namespace)."""
+    for h in ast.walk(node):
+        if isinstance(h, ast.ExceptHandler):
+            names = h.type.elts if isinstance(h.type, ast.Tuple) else (h.type,)
+            for n in names:
+                if not isinstance(n, ast.Name) or n.id not in _CATCHABLE or n.id in ns:
+                    return False
+    return True
+
+
+def _fingerprint(fn, ns, memo, safe):
+    """The fingerprint of a shareable function of `ns` (a number, equal for two functions only when
+    their code and everything they read are), or None (see above). `safe`: the (name, first line) of
+    the module-level `def`s whose handlers catch only `_CATCHABLE`."""
+    if fn in memo:
+        return memo[fn]  # None while it is being walked: recursion is not shared
+    memo[fn] = None
+    if fn.__globals__ is not ns or fn.__closure__ is not None \
+            or (fn.__code__.co_name, fn.__code__.co_firstlineno) not in safe:
+        return None
+    defaults = (fn.__defaults__ or ()) + tuple(sorted((fn.__kwdefaults__ or {}).items()))
+    if not _constant(defaults):
+        return None
+    # Code objects compare by value (bytecode, constants by type and value, names, line table).
+    parts = [fn.__code__, _key(defaults)]
+    for name in sorted(_code_names(fn.__code__, set())):
+        if name in ns:
+            v = ns[name]
+            if type(v) is _FunctionType:
+                sub = _fingerprint(v, ns, memo, safe)
+                if sub is None:
+                    return None
+                parts.append((name, sub))
+            elif _constant(v):
+                parts.append((name, _key(v)))
+            else:
+                return None
+        elif name == "print":
+            return None
+    fp = _FINGERPRINTS.setdefault(tuple(parts), len(_FINGERPRINTS))
+    memo[fn] = fp
+    return fp
+
+
+def _fixed_bindings(tree):
+    """Whether nothing in the code can rebind a module-level name or change a function after the
+    module has run: no `global` statement, no attribute stored or deleted."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Global):
+            return False
+        if isinstance(node, ast.Attribute) and not isinstance(node.ctx, ast.Load):
+            return False
+    return True
+
+
+def share_helpers(tree, ns):
+    """Replaces each shareable helper of a compiled detector's namespace by a sharing wrapper; returns
+    their fingerprints."""
+    if not PYTHON_GUARD or not _fixed_bindings(tree):
+        return ()
+    found = []
+    memo = {}
+    safe = {(node.name, node.lineno) for node in tree.body
+            if isinstance(node, ast.FunctionDef) and not node.decorator_list
+            and _catches_only_catchable(node, ns)}
+    for node in tree.body:
+        if not isinstance(node, ast.FunctionDef) or node.decorator_list or node.name == "find_pattern":
+            continue
+        params = node.args.posonlyargs + node.args.args
+        if not params or params[0].arg != "trace":
+            continue
+        fn = ns.get(node.name)
+        if type(fn) is not _FunctionType or fn.__code__.co_firstlineno != node.lineno \
+                or fn.__code__.co_name != node.name:
+            continue  # bound to something else by the end of the module
+        fp = _fingerprint(fn, ns, memo, safe)
+        if fp is not None:
+            found.append((node.name, fn, fp))
+    found = [x for x in found if x[2] not in _UNSHARED]
+    for name, fn, fp in found:
+        ns[name] = _sharing(fn, fp, ns, name)
+    return tuple(fp for _, _, fp in found)
+
+
+def _key(v):
+    """A key equal for two constants only when they are the same value of the same type (-0.0 and 0.0
+    apart; a builtin by its name); raises _NotShared for anything else."""
+    t = type(v)
+    if t is float:
+        return (t, _F64.pack(v))  # the bits: -0.0 and 0.0 apart, NaNs by sign and payload
+    if t is complex:
+        return (t, repr(v))
+    if t in _ATOMS:
+        return (t, v)
+    if t is tuple or t is frozenset:
+        return (t, tuple(map(_key, v)))
+    name = _BUILTIN_VALUES.get(id(v))
+    if name is not None and SAFE_BUILTINS.get(name) is v:
+        return ("builtin", name)
+    raise _NotShared
+
+
+def _sharing(fn, fp, ns, name):
+    def call(*args, **kwargs):
+        trace = _SHARE_TRACE[0]
+        if trace is None or not args or args[0] is not trace:
+            return fn(*args, **kwargs)
+        left = _SHARE_LEFT.get(fp, 0)
+        if left < 1:
+            return fn(*args, **kwargs)
+        try:
+            key = (tuple(map(_key, args[1:])), tuple((k, _key(v)) for k, v in kwargs.items()))
+        except _NotShared:
+            return fn(*args, **kwargs)
+        cache = _SHARED.get(fp)
+        if cache is not None and key in cache:
+            if left == 1:
+                return cache.pop(key)  # the last detector that reaches it: the copy itself
+            return _copy(cache[key], {})
+        if left == 1:
+            return fn(*args, **kwargs)
+        c0 = _cpu_clock()
+        value = fn(*args, **kwargs)
+        c1 = _cpu_clock()
+        try:
+            snap = _copy(value, {})
+        except (_NotShared, RecursionError):
+            snap = _NotShared
+        c2 = _cpu_clock()
+        st = _SHARE_COST.get(fp)
+        if st is None:
+            st = _SHARE_COST[fp] = [0, 0.0, 0.0]
+        st[0] += 1
+        st[1] += c1 - c0
+        st[2] += c2 - c1
+        if snap is _NotShared or (not SHARE_ALWAYS and st[0] >= _SHARE_TRIAL
+                                  and (st[1] < st[0] * _SHARE_MIN_S or st[2] > _SHARE_MAX_COPY * st[1])):
+            # Not worth it (or not possible): this detector and every one compiled later call the
+            # helper itself.
+            _UNSHARED.add(fp)
+            ns[name] = fn
+            return value
+        _SHARED.setdefault(fp, {})[key] = snap
+        return value
+
+    call.__name__ = call.__qualname__ = fn.__name__
+    return call
+
+
+def _copy(v, memo):
+    """A copy of a helper's result that no other caller's changes can reach (see above); raises
+    _NotShared for a value that cannot be copied exactly."""
+    t = type(v)
+    if t in _AS_IS:
+        return v
+    if t is list or t is dict:
+        c = memo.get(id(v))
+        if c is not None:
+            return c
+        if t is list:
+            c = []
+            memo[id(v)] = c
+            # Type tests at C speed first: a list of constants and read-only dicts, or of tuples
+            # holding only those, is copied by one slice.
+            types = set(map(type, v))
+            if types <= _AS_IS or (types == _TUPLE and set(map(type, _chain(v))) <= _AS_IS):
+                c.extend(v)
+            else:
+                c.extend([x if type(x) in _AS_IS else _copy(x, memo) for x in v])
+        else:
+            c = {}
+            memo[id(v)] = c
+            for k, x in v.items():
+                if type(k) not in _ATOMS and not _constant(k):
+                    raise _NotShared
+                c[k] = x if type(x) in _AS_IS else _copy(x, memo)
+        return c
+    if t is tuple:
+        for x in v:
+            if type(x) not in _AS_IS:
+                items = [x if type(x) in _AS_IS else _copy(x, memo) for x in v]
+                return v if all(a is b for a, b in zip(items, v)) else tuple(items)
+        return v
+    if t is frozenset and _constant(v):
+        return v
+    raise _NotShared
+
+
+def share_begin(detector_ids):
+    """Before a run request: which helpers its detectors reach, and how many of them."""
+    share_end()
+    for i in detector_ids:
+        d = DETECTORS.get(i)
+        if d is not None:
+            for fp in d[2]:
+                _SHARE_LEFT[fp] = _SHARE_LEFT.get(fp, 0) + 1
+
+
+def share_after(fingerprints):
+    """After a sharing detector's call: one detector fewer left for each helper it reaches; a
+    helper's cached values go when none is."""
+    for fp in fingerprints:
+        left = _SHARE_LEFT.get(fp, 0) - 1
+        if left > 0:
+            _SHARE_LEFT[fp] = left
+        else:
+            _SHARE_LEFT.pop(fp, None)
+            _SHARED.pop(fp, None)
+
+
+def share_end():
+    _SHARED.clear()
+    _SHARE_LEFT.clear()
+    _SHARE_TRACE[0] = None
+
+
 TRACES = {}
 DETECTORS = {}
 _GC_FREEZE = getattr(gc, "freeze", None)
@@ -775,7 +1080,9 @@ def compile_detector(msg):
         return _error("no_find_pattern", "the code defines no function `find_pattern(trace)`")
     # Without the Python layer the code can reach anything: it gets every step built, as when it
     # may call dict's methods unbound.
-    DETECTORS[msg["id"]] = (fn, not PYTHON_GUARD or reads_dict_unbound(tree))
+    unbound = not PYTHON_GUARD or reads_dict_unbound(tree)
+    shared = share_helpers(tree, ns) if SHARE_HELPERS and not unbound else ()
+    DETECTORS[msg["id"]] = (fn, unbound, shared)
     return {"ok": True}
 
 
@@ -792,7 +1099,8 @@ def run_detector(detector_id, trace_key):
     trace = TRACES.get(trace_key)
     if detector is None or trace is None:
         return None, _error("internal", "detector or trace not loaded")
-    fn, unbound = detector
+    fn, unbound, shared = detector
+    _SHARE_TRACE[0] = trace if shared else None
     if unbound:
         # Before the timer: the eager build's cost is the load's, not the call's. Such a detector may
         # hold the type `dict` and call its methods unbound, which FrozenDict cannot refuse: it reads
@@ -814,6 +1122,8 @@ def run_detector(detector_id, trace_key):
                             _tb_line(e.__traceback__), exception=type(e).__name__)
     finally:
         _CPU["used"] = _cpu_clock()  # also after a failed call, for the next call's CPU limit
+        if shared:
+            share_after(shared)
     wall = time.perf_counter() - w0
     cpu = _CPU["used"] - c0
     timing = {"wall": wall, "cpu": cpu}
@@ -926,6 +1236,7 @@ def serve():
                 # Rust side waits call_timeout + flush for each write.
                 flush = float(msg.get("flush") or 0)
                 last = time.perf_counter()
+                share_begin(msg["detectors"])
                 for detector_id in msg["detectors"]:
                     if _OUTBOX and time.perf_counter() - last >= flush:
                         _flush()
@@ -939,6 +1250,7 @@ def serve():
                         last = time.perf_counter()
                         if err["error"].get("fatal"):
                             sys.exit(3)
+                share_end()
                 _flush()
             else:
                 _reply(_error("internal", "unknown message type %r" % kind))

@@ -30,6 +30,7 @@ mod run;
 mod s3;
 mod sandbox;
 mod shard;
+mod shared_helpers;
 mod simulate;
 mod snapshots_cli;
 mod sql_guard;

@@ -41,7 +41,7 @@ fn files(env: Env) -> Vec<(String, String)> {
 }
 
 /// The traces of one simulator, read by annotrace's importer.
-fn traces(env: Env) -> &'static [Trace] {
+pub(crate) fn traces(env: Env) -> &'static [Trace] {
     static CELLS: [OnceLock<Vec<Trace>>; 3] = [OnceLock::new(), OnceLock::new(), OnceLock::new()];
     let i = match env {
         Env::Pooltool => 0,
@@ -57,7 +57,7 @@ fn traces(env: Env) -> &'static [Trace] {
     })
 }
 
-fn blind(traces: &[Trace]) -> Vec<Trace> {
+pub(crate) fn blind(traces: &[Trace]) -> Vec<Trace> {
     traces
         .iter()
         .map(|t| Trace {

@@ -12,7 +12,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::builtin::Location;
-use crate::detect::{Library, SandboxLimits, WorkerPool};
+use crate::detect::{HelperSharing, Library, SandboxLimits, WorkerPool};
 use crate::pipeline::registry::BuildError;
 use crate::pipeline::spec::PipelineSpec;
 use crate::pipeline::stage::StageError;
@@ -101,10 +101,13 @@ impl DetectorSetup {
     /// `summarise`, `benchmark`, `optimise`, `synthesise`, `suggest_labels`), so its workers keep no
     /// trace after its run (`SandboxLimits::trace_cache` 0) and each is freed while it is still in
     /// the CPU's caches. The stages that run many detectors over the same traces in turn (`evolve`,
-    /// `ensemble`) start their own pools with a cache that holds their trace sets.
+    /// `ensemble`) start their own pools with a cache that holds their trace sets. The detectors of
+    /// a run request share their helpers' results (`HelperSharing::Measured`): these stages use the
+    /// patterns, not a call's own time.
     pub(crate) fn pool(&self) -> Result<WorkerPool, StageError> {
         WorkerPool::new(SandboxLimits {
             trace_cache: 0,
+            share_helpers: HelperSharing::Measured,
             ..self.limits.clone()
         })
         .map_err(StageError::Workers)
