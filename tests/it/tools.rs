@@ -64,6 +64,15 @@ fn worker_replay_records_annotates_requests_and_replays_them_with_the_same_repli
     }
     let again = replay_tool(&t, &["replay", "s.stream", "--passes", "1"]);
     assert_eq!(digest(&first), digest(again.ok()));
+    // With helper results shared between a request's detectors, as `annotate`'s workers run them:
+    // the same replies.
+    for share in ["always", "measured"] {
+        let shared = replay_tool(
+            &t,
+            &["replay", "s.stream", "--passes", "1", "--share", share],
+        );
+        assert_eq!(digest(&first), digest(shared.ok()), "--share {share}");
+    }
     // A stream cut inside a frame is refused with where it ends.
     let bytes = std::fs::read(t.path("s.stream")).unwrap();
     std::fs::write(t.path("cut.stream"), &bytes[..bytes.len() - 3]).unwrap();
