@@ -567,7 +567,8 @@ def _private_copy(v, memo):
 # read-only dicts, constants, and tuples that hold nothing else reused). A value holding anything else
 # (a set, whose iteration order a copy need not keep; a function; a generator) is not cached. Only
 # helpers that two or more detectors of the request reach are cached, and the last of them takes the
-# cached value itself. Detectors that may call dict's methods unbound (they read a private copy of
+# cached value itself; in "measured" mode a helper cheap to compute or dear to copy is called directly
+# again after its first results, as is one a detector keeps calling in ways that cannot be shared. Detectors that may call dict's methods unbound (they read a private copy of
 # the trace) share nothing. What is shared is never computed again, so `cpu` of a call counts the
 # helpers it computed, not those it was handed.
 
@@ -590,6 +591,7 @@ _UNSHARED = set()  # fingerprints found not worth sharing: cheap to compute, dea
 _SHARE_TRIAL = 3  # results computed before a helper's cost is judged
 _SHARE_MIN_S = 20e-6  # a helper computed in less (on average) is called, not shared
 _SHARE_MAX_COPY = 0.8  # nor one whose results take more than this share of its time to copy
+_SHARE_UNKEYED = 100  # calls a detector makes that cannot be shared before it calls the helper directly
 
 
 class _NotShared(Exception):
@@ -727,18 +729,28 @@ def _key(v):
 
 
 def _sharing(fn, fp, ns, name):
+    unshareable = [0]  # calls this detector made that could not be shared
+
+    def direct(args, kwargs):
+        # A detector that keeps calling the helper on something other than the trace, or with
+        # arguments that are not constants, calls it directly from then on.
+        unshareable[0] += 1
+        if unshareable[0] >= _SHARE_UNKEYED:
+            ns[name] = fn
+        return fn(*args, **kwargs)
+
     def call(*args, **kwargs):
         trace = _SHARE_TRACE[0]
         if trace is None or not args or args[0] is not trace:
-            return fn(*args, **kwargs)
+            return direct(args, kwargs)
         left = _SHARE_LEFT.get(fp, 0)
-        if left < 1:
-            return fn(*args, **kwargs)
+        cache = _SHARED.get(fp)
+        if left < 2 and not cache:
+            return fn(*args, **kwargs)  # no other detector of the request reaches it, or none is left
         try:
             key = (tuple(map(_key, args[1:])), tuple((k, _key(v)) for k, v in kwargs.items()))
         except _NotShared:
-            return fn(*args, **kwargs)
-        cache = _SHARED.get(fp)
+            return direct(args, kwargs)
         if cache is not None and key in cache:
             if left == 1:
                 return cache.pop(key)  # the last detector that reaches it: the copy itself

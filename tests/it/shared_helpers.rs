@@ -309,6 +309,10 @@ def find_pattern(trace):
     got.append(_echo(trace, 1, 2, k=(0.0,)))
     got.append(_echo(trace, 1, 2, k=(-0.0,)))
     got.append(_echo(trace, [1]))
+    # Calls that cannot be shared, past the point where the detector calls the helper directly.
+    got.append([_echo(trace, [i])[0] for i in range(150)][-1])
+    got.append([_echo({"timesteps": ()}, i)[0] for i in range(150)][-1])
+    got.append(_echo(trace, 2.5))
     try:
         _fails(trace)
     except KeyError as e:
