@@ -296,26 +296,46 @@ class ForbiddenError(Exception):
 
 
 def check_source(tree):
+    """Refuses what the Python layer forbids (ForbiddenError) and returns, from the same one walk over
+    the tree, what compiling the detector needs to know: whether it defines `find_pattern`; the plain
+    names it uses; whether its module-level bindings and its functions are fixed once the module has
+    run (no `global` statement, no attribute stored or deleted: see "Helper results shared"); and each
+    `except` clause's line with the names it catches (None unless they are plain names)."""
     has_find_pattern = False
+    names = set()
+    fixed = True
+    handlers = []
+    Name, Attribute, Load = ast.Name, ast.Attribute, ast.Load
     for node in ast.walk(tree):
-        if isinstance(node, (ast.Import, ast.ImportFrom)):
-            raise ForbiddenError("import statements are not allowed (detectors may use only the trace)", node)
-        if isinstance(node, ast.ClassDef):
-            raise ForbiddenError("class definitions are not allowed", node)
-        if isinstance(node, ast.Attribute):
+        t = type(node)
+        if t is Name:
+            i = node.id
+            if i.startswith("__") or i in FORBIDDEN_NAMES:
+                raise ForbiddenError("the name `%s` is not allowed" % i, node)
+            names.add(i)
+        elif t is Attribute:
             a = node.attr
             if a.startswith("_") or a in FORBIDDEN_ATTRS:
                 raise ForbiddenError("attribute access `.%s` is not allowed" % a, node)
-        if isinstance(node, ast.Name):
-            if node.id.startswith("__") or node.id in FORBIDDEN_NAMES:
-                raise ForbiddenError("the name `%s` is not allowed" % node.id, node)
-        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.name == "find_pattern":
-            has_find_pattern = True
-        if isinstance(node, ast.Global):
+            if type(node.ctx) is not Load:
+                fixed = False
+        elif t is ast.Import or t is ast.ImportFrom:
+            raise ForbiddenError("import statements are not allowed (detectors may use only the trace)", node)
+        elif t is ast.ClassDef:
+            raise ForbiddenError("class definitions are not allowed", node)
+        elif t is ast.FunctionDef or t is ast.AsyncFunctionDef:
+            if node.name == "find_pattern":
+                has_find_pattern = True
+        elif t is ast.Global:
             for n in node.names:
                 if n.startswith("__"):
                     raise ForbiddenError("the name `%s` is not allowed" % n, node)
-    return has_find_pattern
+            fixed = False
+        elif t is ast.ExceptHandler:
+            caught = node.type.elts if type(node.type) is ast.Tuple else (node.type,)
+            handlers.append((node.lineno, tuple(c.id for c in caught) if all(type(c) is Name for c in caught)
+                             else None))
+    return has_find_pattern, names, fixed, handlers
 
 
 _TYPE_TESTS = ("isinstance", "issubclass")
@@ -624,18 +644,6 @@ _CATCHABLE = frozenset((
 ))
 
 
-def _catches_only_catchable(node, ns):
-    """Whether every `except` in a function's source names builtin exceptions of `_CATCHABLE` only
-    (not rebound in the detector's namespace)."""
-    for h in ast.walk(node):
-        if isinstance(h, ast.ExceptHandler):
-            names = h.type.elts if isinstance(h.type, ast.Tuple) else (h.type,)
-            for n in names:
-                if not isinstance(n, ast.Name) or n.id not in _CATCHABLE or n.id in ns:
-                    return False
-    return True
-
-
 def _fingerprint(fn, ns, memo, safe):
     """The fingerprint of a shareable function of `ns` (a number, equal for two functions only when
     their code and everything they read are), or None (see above). `safe`: the (name, first line) of
@@ -670,27 +678,20 @@ def _fingerprint(fn, ns, memo, safe):
     return fp
 
 
-def _fixed_bindings(tree):
-    """Whether nothing in the code can rebind a module-level name or change a function after the
-    module has run: no `global` statement, no attribute stored or deleted."""
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Global):
-            return False
-        if isinstance(node, ast.Attribute) and not isinstance(node.ctx, ast.Load):
-            return False
-    return True
-
-
-def share_helpers(tree, ns):
+def share_helpers(tree, ns, handlers):
     """Replaces each shareable helper of a compiled detector's namespace by a sharing wrapper; returns
-    their fingerprints."""
-    if not PYTHON_GUARD or not _fixed_bindings(tree):
+    their fingerprints. `handlers`: the `except` clauses `check_source` found. Only for code whose
+    bindings are fixed (`check_source`)."""
+    if not PYTHON_GUARD:
         return ()
+    # The lines of `except` clauses that may catch more than `_CATCHABLE` (builtins not rebound).
+    wide = [line for line, caught in handlers
+            if caught is None or any(c not in _CATCHABLE or c in ns for c in caught)]
     found = []
     memo = {}
     safe = {(node.name, node.lineno) for node in tree.body
-            if isinstance(node, ast.FunctionDef) and not node.decorator_list
-            and _catches_only_catchable(node, ns)}
+            if type(node) is ast.FunctionDef and not node.decorator_list
+            and not any(node.lineno <= line <= node.end_lineno for line in wide)}
     for node in tree.body:
         if not isinstance(node, ast.FunctionDef) or node.decorator_list or node.name == "find_pattern":
             continue
@@ -1066,9 +1067,10 @@ def compile_detector(msg):
         return _error("syntax", e.msg, e.lineno, e.offset)
     except (ValueError, RecursionError, MemoryError) as e:
         return _error("syntax", str(e) or type(e).__name__)
+    names, fixed, handlers = (), False, ()
     if PYTHON_GUARD:
         try:
-            found = check_source(tree)
+            found, names, fixed, handlers = check_source(tree)
         except ForbiddenError as e:
             return _error("forbidden", e.what, e.line, e.column)
         if not found:
@@ -1092,8 +1094,8 @@ def compile_detector(msg):
         return _error("no_find_pattern", "the code defines no function `find_pattern(trace)`")
     # Without the Python layer the code can reach anything: it gets every step built, as when it
     # may call dict's methods unbound.
-    unbound = not PYTHON_GUARD or reads_dict_unbound(tree)
-    shared = share_helpers(tree, ns) if SHARE_HELPERS and not unbound else ()
+    unbound = not PYTHON_GUARD or ("dict" in names and reads_dict_unbound(tree))
+    shared = share_helpers(tree, ns, handlers) if SHARE_HELPERS and fixed and not unbound else ()
     DETECTORS[msg["id"]] = (fn, unbound, shared)
     return {"ok": True}
 
