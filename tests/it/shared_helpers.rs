@@ -51,6 +51,14 @@ fn alone(dets: &[Detector], traces: &[Trace]) -> Vec<Vec<Reply>> {
         .collect()
 }
 
+/// Every reply ran and gave valid output.
+fn all_ok(replies: &[Reply], what: &str) {
+    assert!(
+        replies.iter().all(|r| r.0 == CandidateStatus::Ok),
+        "{what}: {replies:?}"
+    );
+}
+
 fn library(env: Env) -> Library {
     Library::load(
         &crate::common::repo()
@@ -74,12 +82,7 @@ fn built_in_libraries_answer_alike_with_their_helpers_shared_on_the_originals_tr
         let always = together(HelperSharing::Always, &lib.detectors, &traces);
         let measured = together(HelperSharing::Measured, &lib.detectors, &traces);
         for (i, d) in lib.detectors.iter().enumerate() {
-            assert!(
-                off[i].iter().all(|r| r.0 == CandidateStatus::Ok),
-                "{env} {}: {:?}",
-                d.label,
-                off[i]
-            );
+            all_ok(&off[i], &format!("{env} {}", d.label));
             assert_eq!(always[i], off[i], "{env} {}: shared (always)", d.label);
             assert_eq!(measured[i], off[i], "{env} {}: shared (measured)", d.label);
         }
@@ -253,12 +256,7 @@ fn helpers_whose_results_may_differ_between_detectors_are_not_shared() {
     let got = together(HelperSharing::Always, &dets, &traces);
     let want = alone(&dets, &traces);
     for (i, d) in dets.iter().enumerate() {
-        assert!(
-            want[i].iter().all(|r| r.0 == CandidateStatus::Ok),
-            "{}: {:?}",
-            d.source,
-            want[i]
-        );
+        all_ok(&want[i], &d.source);
         assert_eq!(got[i], want[i], "{}", d.source);
     }
     // What sharing by name or by code alone would have got wrong is really different here.
