@@ -17,7 +17,8 @@ Two steps (standard library only; Linux):
       compiling detectors (`C`) and running them (`R`). Prints the best pass per kind in ms per trace
       and a SHA-256 of every reply's patterns (as the values they decode to) and printed text (timings
       left out), so a change to worker.py or to a library can be checked for the same output and timed
-      in one command.
+      in one command. `--share` replays as the workers of `annotate` run (helper results shared
+      between a request's detectors, `measured`), `--share always` shares whatever it costs.
 
 The replay runs the worker in this process, not behind the sandbox: only replay streams you captured
 from detectors you trust (the detector code is in the stream)."""

@@ -78,8 +78,8 @@ pub struct SandboxLimits {
     pub python_guard: bool,
     /// Whether the detectors of one run request share their helpers' results. Default
     /// [`HelperSharing::Off`]. On for the stages that run each trace once with all their detectors
-    /// (`DetectorSetup`); off where a call's own time is a measurement (`evolve`'s time penalty,
-    /// the search).
+    /// (`DetectorSetup`) and for `ensemble`; off where a call's own time is a measurement
+    /// (`evolve`'s time penalty, the search).
     pub share_helpers: HelperSharing,
 }
 
@@ -95,7 +95,8 @@ pub enum HelperSharing {
     Off,
     /// Helpers that can be shared are, while sharing pays: after its first three results, a helper
     /// that took under 20 µs to compute on average, or whose results took more than 0.8 of that time
-    /// to copy, is called by every detector again.
+    /// to copy, is called by every detector again, and a detector that has called a helper 100
+    /// times in ways that cannot be shared calls it directly.
     Measured,
     /// Every helper that can be shared is, whatever it costs (the tests hold sharing to the same
     /// output with it).

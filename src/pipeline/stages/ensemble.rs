@@ -1135,7 +1135,9 @@ fn label_f1(
     scores.get(g).map(|s| s.f1())
 }
 
-/// The stage's worker pool, started on first use (a fully resumed stage starts none).
+/// The stage's worker pool, started on first use (a fully resumed stage starts none). Its candidates
+/// and members carry the same preludes and the stage uses their patterns, not their calls' times:
+/// they share helper results (`HelperSharing::Measured`).
 fn ensure_pool<'p>(
     pool: &'p mut Option<WorkerPool>,
     limits: &crate::detect::SandboxLimits,
@@ -1144,6 +1146,7 @@ fn ensure_pool<'p>(
     if pool.is_none() {
         let mut l = limits.clone();
         l.trace_cache = l.trace_cache.max(cache);
+        l.share_helpers = crate::detect::HelperSharing::Measured;
         *pool = Some(WorkerPool::new(l)?);
     }
     Ok(pool.as_ref().expect("just started"))
