@@ -602,7 +602,7 @@ _AS_IS = _ATOMS | {FrozenDict, LazyStep}
 _TUPLE = {tuple}
 _chain = itertools.chain.from_iterable
 _BUILTIN_VALUES = {id(v): n for n, v in SAFE_BUILTINS.items() if n != "print"}
-_SHARED = {}  # fingerprint -> {argument key: cached value}
+_SHARED = {}  # fingerprint -> {argument key: (cached value, ids of its lists copied by a slice)}
 _SHARE_LEFT = {}  # fingerprint -> detectors of the request yet to run that reach it
 _SHARE_TRACE = [None]  # the cached trace while a sharing detector runs, else None
 _FINGERPRINTS = {}  # a function's code and what it reads -> its fingerprint, a number
@@ -754,15 +754,17 @@ def _sharing(fn, fp, ns, name):
             return direct(args, kwargs)
         if cache is not None and key in cache:
             if left == 1:
-                return cache.pop(key)  # the last detector that reaches it: the copy itself
-            return _copy(cache[key], {})
+                return cache.pop(key)[0]  # the last detector that reaches it: the copy itself
+            snap, flat = cache[key]
+            return _copy(snap, {}, flat)
         if left == 1:
             return fn(*args, **kwargs)
         c0 = _cpu_clock()
         value = fn(*args, **kwargs)
         c1 = _cpu_clock()
+        flat = set()
         try:
-            snap = _copy(value, {})
+            snap = _copy(value, {}, None, flat)
         except (_NotShared, RecursionError):
             snap = _NotShared
         c2 = _cpu_clock()
@@ -779,16 +781,20 @@ def _sharing(fn, fp, ns, name):
             _UNSHARED.add(fp)
             ns[name] = fn
             return value
-        _SHARED.setdefault(fp, {})[key] = snap
+        _SHARED.setdefault(fp, {})[key] = (snap, flat)
         return value
 
     call.__name__ = call.__qualname__ = fn.__name__
     return call
 
 
-def _copy(v, memo):
+def _copy(v, memo, known=None, found=None):
     """A copy of a helper's result that no other caller's changes can reach (see above); raises
-    _NotShared for a value that cannot be copied exactly."""
+    _NotShared for a value that cannot be copied exactly. A list that holds only constants and
+    read-only dicts, or tuples of only those, is copied by one slice after type tests at C speed;
+    `found` (when a cached value is taken) collects the ids of such lists in the copy, and `known`
+    (when a cached value is copied) names them, so they are sliced without the tests: a cached value
+    is never changed while it is cached."""
     t = type(v)
     if t in _AS_IS:
         return v
@@ -799,25 +805,28 @@ def _copy(v, memo):
         if t is list:
             c = []
             memo[id(v)] = c
-            # Type tests at C speed first: a list of constants and read-only dicts, or of tuples
-            # holding only those, is copied by one slice.
-            types = set(map(type, v))
-            if types <= _AS_IS or (types == _TUPLE and set(map(type, _chain(v))) <= _AS_IS):
+            if known is not None and id(v) in known:
                 c.extend(v)
             else:
-                c.extend([x if type(x) in _AS_IS else _copy(x, memo) for x in v])
+                types = set(map(type, v))
+                if types <= _AS_IS or (types == _TUPLE and set(map(type, _chain(v))) <= _AS_IS):
+                    c.extend(v)
+                    if found is not None:
+                        found.add(id(c))
+                else:
+                    c.extend([x if type(x) in _AS_IS else _copy(x, memo, known, found) for x in v])
         else:
             c = {}
             memo[id(v)] = c
             for k, x in v.items():
                 if type(k) not in _ATOMS and not _constant(k):
                     raise _NotShared
-                c[k] = x if type(x) in _AS_IS else _copy(x, memo)
+                c[k] = x if type(x) in _AS_IS else _copy(x, memo, known, found)
         return c
     if t is tuple:
         for x in v:
             if type(x) not in _AS_IS:
-                items = [x if type(x) in _AS_IS else _copy(x, memo) for x in v]
+                items = [x if type(x) in _AS_IS else _copy(x, memo, known, found) for x in v]
                 return v if all(a is b for a, b in zip(items, v)) else tuple(items)
         return v
     if t is frozenset and _constant(v):
