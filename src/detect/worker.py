@@ -619,12 +619,12 @@ class _NotShared(Exception):
 
 
 def _constant(v):
-    t = type(v)
-    if t in _ATOMS:
-        return True
-    if t is tuple or t is frozenset:
-        return all(map(_constant, v))
-    return id(v) in _BUILTIN_VALUES and SAFE_BUILTINS.get(_BUILTIN_VALUES[id(v)]) is v
+    """Whether `v` is a constant: a value `_key` can key."""
+    try:
+        _key(v)
+    except _NotShared:
+        return False
+    return True
 
 
 def _code_names(code, out):
@@ -680,10 +680,8 @@ def _fingerprint(fn, ns, memo, safe):
 
 def share_helpers(tree, ns, handlers):
     """Replaces each shareable helper of a compiled detector's namespace by a sharing wrapper; returns
-    their fingerprints. `handlers`: the `except` clauses `check_source` found. Only for code whose
-    bindings are fixed (`check_source`)."""
-    if not PYTHON_GUARD:
-        return ()
+    their fingerprints. `handlers`: the `except` clauses `check_source` found. Only for checked code
+    whose bindings are fixed (`check_source`)."""
     # The lines of `except` clauses that may catch more than `_CATCHABLE` (builtins not rebound).
     wide = [line for line, caught in handlers
             if caught is None or any(c not in _CATCHABLE or c in ns for c in caught)]
@@ -703,9 +701,8 @@ def share_helpers(tree, ns, handlers):
                 or fn.__code__.co_name != node.name:
             continue  # bound to something else by the end of the module
         fp = _fingerprint(fn, ns, memo, safe)
-        if fp is not None:
+        if fp is not None and fp not in _UNSHARED:
             found.append((node.name, fn, fp))
-    found = [x for x in found if x[2] not in _UNSHARED]
     for name, fn, fp in found:
         ns[name] = _sharing(fn, fp, ns, name)
     return tuple(fp for _, _, fp in found)
